@@ -1,0 +1,170 @@
+//! The one trait through which the core talks to geometry, and the ray and hit types.
+//!
+//! # Render space
+//! Every ray handed to a [`Geometry`] is in *render space*: world space translated so that the
+//! camera sits at the origin (no rotation, no scale). Backends build their data in render
+//! space (subtract [`RenderSpace::origin`] in f64 before converting to f32), so f32 keeps its
+//! precision near the camera however far the scene is from the world origin. Distances `t`
+//! are world units along unit-length directions.
+
+use glam::{DAffine3, DVec3, Vec3};
+use marchmesh_scene::{MaterialId, Scene};
+
+/// A ray in render space. `dir` is unit length; valid hits have `t_min <= t <= t_max`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ray {
+    /// Origin, render space.
+    pub origin: Vec3,
+    /// Unit direction.
+    pub dir: Vec3,
+    /// Smallest accepted hit distance (>= 0).
+    pub t_min: f32,
+    /// Largest accepted hit distance.
+    pub t_max: f32,
+}
+
+impl Ray {
+    /// Point at distance `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.origin + self.dir * t
+    }
+}
+
+/// A surface hit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray, world units.
+    pub t: f32,
+    /// Hit position, render space (a backend may compute it more precisely than `at(t)`).
+    pub position: Vec3,
+    /// Unit shading normal pointing out of the solid (for surfaces without an inside,
+    /// either side); the integrator flips it to face the ray.
+    pub normal: Vec3,
+    /// Material of the surface hit.
+    pub material: MaterialId,
+}
+
+/// Why a ray's traversal ended. Step exhaustion is a distinct outcome, never silently a miss.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[repr(u8)]
+pub enum Termination {
+    /// A surface was found within `[t_min, t_max]`.
+    Hit = 0,
+    /// Nothing was hit: the ray left the scene's bounds.
+    #[default]
+    Miss = 1,
+    /// An iterative method ran out of steps before deciding (counted as no hit).
+    MaxSteps = 2,
+    /// The ray reached `t_max` or the backend's maximum distance without a hit.
+    MaxDistance = 3,
+}
+
+/// Work done for one ray; backends fill what applies to them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RayWork {
+    /// Distance-field evaluations (sphere-tracing steps, root-finding iterations).
+    pub steps: u32,
+    /// BVH nodes visited.
+    pub node_visits: u32,
+    /// Primitive (triangle, shape) intersection tests.
+    pub primitive_tests: u32,
+}
+
+/// The result of a closest-hit query.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TraceResult {
+    /// The closest hit, if `termination == Hit`.
+    pub hit: Option<Hit>,
+    /// How the query ended.
+    pub termination: Termination,
+    /// Work done.
+    pub work: RayWork,
+}
+
+/// The result of an occlusion query.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct OcclusionResult {
+    /// Something lies within `[t_min, t_max]`. A query that ran out of steps counts as
+    /// not occluded (and says so in `termination`).
+    pub occluded: bool,
+    /// How the query ended.
+    pub termination: Termination,
+    /// Work done.
+    pub work: RayWork,
+}
+
+/// What a built geometry holds and what building it cost, for reports.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct GeometryReport {
+    /// Backend name, e.g. `"sdf"`.
+    pub backend: String,
+    /// Exact bytes of the representation (counted from lengths, not capacities).
+    pub memory_bytes: u64,
+    /// Build phases in order with their wall time in milliseconds (e.g. `("bvh_build", 3.2)`).
+    pub build_phases_ms: Vec<(String, f64)>,
+    /// Named counts (e.g. `("triangles", 3674.0)`, `("grid_cells", 262144.0)`).
+    pub counters: Vec<(String, f64)>,
+    /// Human-readable notes on conversions and approximations made (e.g. "plane clipped to
+    /// a 2000-unit quad", "mesh is open: sign from generalized winding number").
+    pub notes: Vec<String>,
+}
+
+/// Geometry that rays can be traced against. Implementations never shade.
+///
+/// The batch methods exist so a backend can trace rays together (packets, lockstep sphere
+/// tracing); their default implementations loop over the single-ray methods. `out` has the
+/// same length as `rays`; implementations may panic if it does not (a programming error).
+pub trait Geometry: Send + Sync {
+    /// The closest hit within `[ray.t_min, ray.t_max]`.
+    fn closest_hit(&self, ray: &Ray) -> TraceResult;
+
+    /// Whether anything lies within `[ray.t_min, ray.t_max]`; may stop at the first hit.
+    fn occluded(&self, ray: &Ray) -> OcclusionResult;
+
+    /// [`Geometry::closest_hit`] for many rays.
+    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+        assert_eq!(rays.len(), out.len(), "closest_hits: rays and out differ in length");
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.closest_hit(r);
+        }
+    }
+
+    /// [`Geometry::occluded`] for many rays.
+    fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
+        assert_eq!(rays.len(), out.len(), "occluded_many: rays and out differ in length");
+        for (r, o) in rays.iter().zip(out.iter_mut()) {
+            *o = self.occluded(r);
+        }
+    }
+
+    /// Memory, build phases and counts of the built representation.
+    fn report(&self) -> GeometryReport;
+}
+
+/// The translation between world space and render space for one scene.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSpace {
+    /// World-space position of the render-space origin (the camera position).
+    pub origin: DVec3,
+}
+
+impl RenderSpace {
+    /// The render space of `scene`: centred on its camera.
+    pub fn of(scene: &Scene) -> Self {
+        Self {
+            origin: scene.camera.position,
+        }
+    }
+
+    /// World point to render space (f64).
+    #[inline]
+    pub fn point(&self, world: DVec3) -> DVec3 {
+        world - self.origin
+    }
+
+    /// The world-to-render transform, to pre-multiply object-to-world transforms with.
+    pub fn from_world(&self) -> DAffine3 {
+        DAffine3::from_translation(-self.origin)
+    }
+}

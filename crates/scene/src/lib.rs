@@ -1,0 +1,110 @@
+//! The marchmesh scene model.
+//!
+//! A scene is a JSON file ([`format`]) that states only what it needs; [`load`] parses it,
+//! checks every value ([`validate`]) and returns the resolved [`Scene`] that backends build
+//! from. Errors name the file, the line and column (for syntax and type errors) and the JSON
+//! path of the offending value. The format is described for users in `scenes/README.md`;
+//! [`json_schema`] gives its machine-readable schema.
+
+pub mod format;
+pub mod resolved;
+pub mod validate;
+
+use std::path::{Path, PathBuf};
+
+pub use format::*;
+pub use resolved::*;
+pub use validate::Problem;
+
+/// Why a scene could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{}: cannot read scene file: {source}", path.display())]
+    Io {
+        /// The scene file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The JSON is malformed or a value has the wrong type or an unknown field.
+    #[error("{source_name}:{line}:{column}: at `{json_path}`: {message}")]
+    Parse {
+        /// The scene file (or `<string>`).
+        source_name: String,
+        /// 1-based line of the error.
+        line: usize,
+        /// 1-based column of the error.
+        column: usize,
+        /// JSON path of the value being read (`.` for the top level).
+        json_path: String,
+        /// serde's description.
+        message: String,
+    },
+    /// The JSON is well formed but values are out of range or inconsistent.
+    #[error("{source_name}: invalid scene:\n{}", problems.iter().map(|p| format!("  {p}")).collect::<Vec<_>>().join("\n"))]
+    Invalid {
+        /// The scene file (or `<string>`).
+        source_name: String,
+        /// Every problem found.
+        problems: Vec<Problem>,
+    },
+}
+
+/// Parses JSON text into the serde model, reporting the JSON path of any error.
+pub fn parse_file_format(text: &str, source_name: &str) -> Result<SceneFile, SceneError> {
+    let mut de = serde_json::Deserializer::from_str(text);
+    let parsed: Result<SceneFile, _> = serde_path_to_error::deserialize(&mut de);
+    let file = parsed.map_err(|e| {
+        let json_path = e.path().to_string();
+        let inner = e.into_inner();
+        SceneError::Parse {
+            source_name: source_name.to_string(),
+            line: inner.line(),
+            column: inner.column(),
+            json_path,
+            message: strip_position(&inner.to_string()),
+        }
+    })?;
+    // Trailing characters after the document.
+    de.end().map_err(|e| SceneError::Parse {
+        source_name: source_name.to_string(),
+        line: e.line(),
+        column: e.column(),
+        json_path: ".".into(),
+        message: strip_position(&e.to_string()),
+    })?;
+    Ok(file)
+}
+
+fn strip_position(msg: &str) -> String {
+    match msg.rfind(" at line ") {
+        Some(i) => msg[..i].to_string(),
+        None => msg.to_string(),
+    }
+}
+
+/// Parses and validates scene JSON. Relative mesh and image paths resolve against `base_dir`.
+pub fn parse_scene(text: &str, source_name: &str, base_dir: &Path) -> Result<Scene, SceneError> {
+    let file = parse_file_format(text, source_name)?;
+    validate::resolve(&file, base_dir, source_name).map_err(|problems| SceneError::Invalid {
+        source_name: source_name.to_string(),
+        problems,
+    })
+}
+
+/// Reads, parses and validates a scene file.
+pub fn load(path: &Path) -> Result<Scene, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    parse_scene(&text, &path.display().to_string(), base)
+}
+
+/// The JSON Schema of the scene format, pretty-printed.
+pub fn json_schema() -> String {
+    let schema = schemars::schema_for!(SceneFile);
+    serde_json::to_string_pretty(&schema).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+}

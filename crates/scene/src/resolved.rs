@@ -1,0 +1,322 @@
+//! The resolved scene: validated, in f64 glam types, with materials inherited down the tree
+//! and numbered, and mesh paths made absolute. Every backend builds from this, never from the
+//! serde types, so they all agree on material ids, transforms and defaults.
+
+use std::path::PathBuf;
+
+use glam::{DAffine3, DMat3, DQuat, DVec3};
+
+/// Index into [`Scene::materials`].
+pub type MaterialId = u32;
+
+/// Validated surface appearance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Material {
+    /// Diffuse colour, linear RGB in [0, 1].
+    pub color: DVec3,
+    /// Phong exponent; `None` for no specular term.
+    pub specular_exponent: Option<f64>,
+    /// Mirror reflectivity in [0, 1].
+    pub reflectivity: f64,
+}
+
+/// Validated pinhole camera; see [`crate::CameraSpec`] for the ray-generation formulas.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Eye position, world units.
+    pub position: DVec3,
+    /// Unit view direction.
+    pub forward: DVec3,
+    /// Unit right vector, `normalize(cross(forward, up))`.
+    pub right: DVec3,
+    /// Unit up vector orthogonal to both, `cross(right, forward)`.
+    pub up: DVec3,
+    /// Vertical field of view in radians.
+    pub vfov_rad: f64,
+    /// Image width in pixels (>= 1).
+    pub width: u32,
+    /// Image height in pixels (>= 1).
+    pub height: u32,
+}
+
+impl Camera {
+    /// Builds a camera; `None` if `look_at == position`, `up` is parallel to the view
+    /// direction, or any value is not finite.
+    pub fn look_at(
+        position: DVec3,
+        look_at: DVec3,
+        up: DVec3,
+        vfov_deg: f64,
+        width: u32,
+        height: u32,
+    ) -> Option<Self> {
+        let forward = (look_at - position).try_normalize()?;
+        let right = forward.cross(up).try_normalize()?;
+        if !position.is_finite() || !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+            return None;
+        }
+        Some(Self {
+            position,
+            forward,
+            right,
+            up: right.cross(forward),
+            vfov_rad: vfov_deg.to_radians(),
+            width,
+            height,
+        })
+    }
+
+    /// Unit direction (world space) through image-plane point `(px, py)` in pixel units,
+    /// `(0, 0)` being the top-left corner of the image.
+    pub fn direction(&self, px: f64, py: f64) -> DVec3 {
+        let half_h = (self.vfov_rad * 0.5).tan();
+        let half_w = half_h * self.width as f64 / self.height as f64;
+        let x = (2.0 * px / self.width as f64 - 1.0) * half_w;
+        let y = (1.0 - 2.0 * py / self.height as f64) * half_h;
+        (self.forward + x * self.right + y * self.up).normalize()
+    }
+
+    /// Angle in radians subtended by one pixel at the image centre (vertical). Tolerances
+    /// proportional to `pixel_angle * distance` are one pixel's footprint on screen.
+    pub fn pixel_angle(&self) -> f64 {
+        2.0 * (self.vfov_rad * 0.5).tan() / self.height as f64
+    }
+}
+
+/// A light with validated, world-space parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Light {
+    /// Unshadowed light from everywhere.
+    Ambient {
+        /// Intensity >= 0.
+        intensity: f64,
+    },
+    /// A point light (no falloff).
+    Point {
+        /// Position, world units.
+        position: DVec3,
+        /// Intensity >= 0.
+        intensity: f64,
+        /// Whether occlusion rays are traced.
+        casts_shadows: bool,
+    },
+    /// A light at infinity.
+    Directional {
+        /// Unit direction *towards* the light.
+        direction: DVec3,
+        /// Intensity >= 0.
+        intensity: f64,
+        /// Whether occlusion rays are traced.
+        casts_shadows: bool,
+    },
+}
+
+/// What rays that hit nothing see.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Background {
+    /// A constant linear RGB colour.
+    Color(DVec3),
+    /// An equirectangular image at an absolute path, scaled by `intensity`.
+    Environment {
+        /// Absolute (or scene-relative resolved) image path.
+        path: PathBuf,
+        /// Multiplier >= 0.
+        intensity: f64,
+    },
+}
+
+/// Validated integrator settings (see [`crate::RenderSpec`] for meanings).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    /// Samples per pixel >= 1.
+    pub samples_per_pixel: u32,
+    /// Maximum mirror bounces.
+    pub max_reflection_depth: u32,
+    /// Minimum path reflectivity for a reflection ray.
+    pub reflection_cutoff: f64,
+    /// Relative secondary-ray offset.
+    pub ray_offset: f64,
+    /// Maximum ray distance, world units.
+    pub max_distance: f64,
+}
+
+/// One node of the object tree, in its parent's frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    /// Object-to-parent transform (`translate * rotate * scale`).
+    pub transform: DAffine3,
+    /// The material of this node (inherited if the file gave none).
+    pub material: MaterialId,
+    /// The object's name, if given.
+    pub name: Option<String>,
+    /// JSON path of the object in its file (e.g. `objects[2].shape.union.children[0]`), for
+    /// error messages.
+    pub json_path: String,
+    /// What it is.
+    pub kind: NodeKind,
+}
+
+/// A node's shape, in the node's local frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NodeKind {
+    /// Sphere at the origin.
+    Sphere {
+        /// Radius > 0.
+        radius: f64,
+    },
+    /// Plane `dot(normal, p) = offset`, solid below.
+    Plane {
+        /// Unit normal.
+        normal: DVec3,
+        /// Offset along the normal.
+        offset: f64,
+    },
+    /// Two-sided triangle with non-collinear vertices.
+    Triangle {
+        /// Corners.
+        vertices: [DVec3; 3],
+    },
+    /// Box at the origin.
+    Box {
+        /// Half extents, all > 0.
+        half_extents: DVec3,
+    },
+    /// Ellipsoid at the origin.
+    Ellipsoid {
+        /// Semi-axes, all > 0.
+        radii: DVec3,
+    },
+    /// Capped cylinder along y.
+    Cylinder {
+        /// Radius > 0.
+        radius: f64,
+        /// Half the height > 0.
+        half_height: f64,
+    },
+    /// Torus around y.
+    Torus {
+        /// Major radius > 0.
+        major_radius: f64,
+        /// Minor radius in (0, major_radius].
+        minor_radius: f64,
+    },
+    /// Mesh file (existence is checked by the loader, not here).
+    Mesh {
+        /// Path resolved against the scene file's folder.
+        path: PathBuf,
+    },
+    /// Union of >= 1 children.
+    Union(Vec<Node>),
+    /// Intersection of >= 1 children.
+    Intersection(Vec<Node>),
+    /// First child minus the others.
+    Subtraction(Vec<Node>),
+    /// Smooth union of >= 1 children.
+    SmoothUnion {
+        /// Children.
+        children: Vec<Node>,
+        /// Blend radius > 0.
+        blend_radius: f64,
+    },
+    /// Domain repetition.
+    Repeat {
+        /// The repeated node.
+        child: Box<Node>,
+        /// Period per axis; 0 = not repeated on that axis.
+        period: DVec3,
+        /// Copies per axis on repeated axes; `None` = infinite.
+        count: [Option<u32>; 3],
+    },
+}
+
+impl Node {
+    /// True for CSG, smooth union and repetition nodes.
+    pub fn is_composite(&self) -> bool {
+        matches!(
+            self.kind,
+            NodeKind::Union(_)
+                | NodeKind::Intersection(_)
+                | NodeKind::Subtraction(_)
+                | NodeKind::SmoothUnion { .. }
+                | NodeKind::Repeat { .. }
+        )
+    }
+
+    /// Direct children (empty for leaves).
+    pub fn children(&self) -> &[Node] {
+        match &self.kind {
+            NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => c,
+            NodeKind::SmoothUnion { children, .. } => children,
+            NodeKind::Repeat { child, .. } => std::slice::from_ref(child),
+            _ => &[],
+        }
+    }
+
+    /// Calls `f` on this node and every descendant, parents first.
+    pub fn visit(&self, f: &mut impl FnMut(&Node)) {
+        f(self);
+        for c in self.children() {
+            c.visit(f);
+        }
+    }
+}
+
+/// A validated scene ready for backends.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scene {
+    /// Where the scene came from (file path or `<string>`), for messages.
+    pub source: String,
+    /// Camera.
+    pub camera: Camera,
+    /// Lights.
+    pub lights: Vec<Light>,
+    /// Background.
+    pub background: Background,
+    /// Material table; id 0 is the default material.
+    pub materials: Vec<Material>,
+    /// Top-level objects (an implicit union).
+    pub objects: Vec<Node>,
+    /// Integrator settings.
+    pub render: RenderSettings,
+}
+
+impl Scene {
+    /// Calls `f` on every node of every object, parents first.
+    pub fn visit_nodes(&self, mut f: impl FnMut(&Node)) {
+        for o in &self.objects {
+            o.visit(&mut f);
+        }
+    }
+
+    /// Every distinct mesh path the scene refers to, in first-use order.
+    pub fn mesh_paths(&self) -> Vec<PathBuf> {
+        let mut out: Vec<PathBuf> = Vec::new();
+        self.visit_nodes(|n| {
+            if let NodeKind::Mesh { path } = &n.kind
+                && !out.contains(path)
+            {
+                out.push(path.clone());
+            }
+        });
+        out
+    }
+
+    /// Replaces the image size (a CLI override); errors as in validation.
+    pub fn with_image_size(mut self, width: u32, height: u32) -> Result<Self, String> {
+        crate::validate::check_image_size(width, height)?;
+        self.camera.width = width;
+        self.camera.height = height;
+        Ok(self)
+    }
+}
+
+/// `translate * Rz Ry Rx * scale` with angles in degrees.
+pub fn compose_transform(translate: DVec3, rotate_deg: DVec3, scale: DVec3) -> DAffine3 {
+    let r = DQuat::from_rotation_z(rotate_deg.z.to_radians())
+        * DQuat::from_rotation_y(rotate_deg.y.to_radians())
+        * DQuat::from_rotation_x(rotate_deg.x.to_radians());
+    DAffine3 {
+        matrix3: DMat3::from_quat(r) * DMat3::from_diagonal(scale),
+        translation: translate,
+    }
+}

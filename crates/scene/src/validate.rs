@@ -1,0 +1,458 @@
+//! Validation of a parsed [`SceneFile`] and its conversion to the resolved [`Scene`].
+//!
+//! Every rejected value is reported with its JSON path and a reason; all problems in a file
+//! are collected, not just the first.
+
+use std::path::Path;
+
+use glam::DVec3;
+
+use crate::format::*;
+use crate::resolved::*;
+
+/// Largest accepted image side in pixels.
+pub const MAX_IMAGE_SIDE: u32 = 16_384;
+/// Largest accepted pixel count (width * height).
+pub const MAX_PIXELS: u64 = 64 * 1024 * 1024;
+/// Deepest accepted object nesting (CSG and repeat nodes).
+pub const MAX_NESTING_DEPTH: usize = 64;
+/// Most nodes accepted in one scene.
+pub const MAX_NODES: usize = 100_000;
+/// Largest accepted finite repetition count on one axis.
+pub const MAX_REPEAT_COUNT_PER_AXIS: u32 = 1_000_000;
+/// Largest accepted magnitude of any coordinate or length (world units).
+pub const MAX_COORDINATE: f64 = 1e12;
+
+/// One thing wrong with a scene.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    /// JSON path of the offending value, e.g. `objects[0].shape.sphere.radius`.
+    pub json_path: String,
+    /// Why it is rejected.
+    pub reason: String,
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "at `{}`: {}", self.json_path, self.reason)
+    }
+}
+
+/// Checks an image size against the limits.
+pub fn check_image_size(width: u32, height: u32) -> Result<(), String> {
+    if width == 0 || height == 0 {
+        return Err(format!("image size {width}x{height} is empty"));
+    }
+    if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE {
+        return Err(format!(
+            "image size {width}x{height} exceeds the limit of {MAX_IMAGE_SIDE} pixels per side"
+        ));
+    }
+    if width as u64 * height as u64 > MAX_PIXELS {
+        return Err(format!(
+            "image size {width}x{height} exceeds the limit of {MAX_PIXELS} pixels"
+        ));
+    }
+    Ok(())
+}
+
+struct Ctx<'a> {
+    base_dir: &'a Path,
+    problems: Vec<Problem>,
+    materials: Vec<Material>,
+    nodes: usize,
+}
+
+impl Ctx<'_> {
+    fn fail(&mut self, path: &str, reason: impl Into<String>) {
+        self.problems.push(Problem {
+            json_path: path.to_string(),
+            reason: reason.into(),
+        });
+    }
+
+    fn finite(&mut self, path: &str, v: f64) -> f64 {
+        if !v.is_finite() {
+            self.fail(path, format!("{v} is not a finite number"));
+            0.0
+        } else if v.abs() > MAX_COORDINATE {
+            self.fail(path, format!("{v:e} exceeds the magnitude limit {MAX_COORDINATE:e}"));
+            0.0
+        } else {
+            v
+        }
+    }
+
+    fn positive(&mut self, path: &str, v: f64) -> f64 {
+        let v = self.finite(path, v);
+        if v <= 0.0 {
+            self.fail(path, format!("must be > 0, got {v}"));
+        }
+        v
+    }
+
+    fn in_range(&mut self, path: &str, v: f64, lo: f64, hi: f64) -> f64 {
+        let v = self.finite(path, v);
+        if !(lo..=hi).contains(&v) {
+            self.fail(path, format!("must be in [{lo}, {hi}], got {v}"));
+        }
+        v
+    }
+
+    fn vec3(&mut self, path: &str, v: [f64; 3]) -> DVec3 {
+        DVec3::new(
+            self.finite(&format!("{path}[0]"), v[0]),
+            self.finite(&format!("{path}[1]"), v[1]),
+            self.finite(&format!("{path}[2]"), v[2]),
+        )
+    }
+
+    fn unit(&mut self, path: &str, v: [f64; 3]) -> DVec3 {
+        let d = self.vec3(path, v);
+        match d.try_normalize() {
+            Some(u) => u,
+            None => {
+                self.fail(path, "must not be the zero vector");
+                DVec3::Y
+            }
+        }
+    }
+
+    fn color(&mut self, path: &str, c: [f64; 3]) -> DVec3 {
+        DVec3::new(
+            self.in_range(&format!("{path}[0]"), c[0], 0.0, 1.0),
+            self.in_range(&format!("{path}[1]"), c[1], 0.0, 1.0),
+            self.in_range(&format!("{path}[2]"), c[2], 0.0, 1.0),
+        )
+    }
+
+    fn material(&mut self, path: &str, m: &MaterialSpec) -> MaterialId {
+        let color = self.color(&format!("{path}.color"), m.color);
+        let specular_exponent = m
+            .specular_exponent
+            .map(|s| self.positive(&format!("{path}.specular_exponent"), s));
+        let reflectivity = self.in_range(&format!("{path}.reflectivity"), m.reflectivity, 0.0, 1.0);
+        self.materials.push(Material {
+            color,
+            specular_exponent,
+            reflectivity,
+        });
+        (self.materials.len() - 1) as MaterialId
+    }
+
+    fn object(
+        &mut self,
+        path: &str,
+        o: &ObjectSpec,
+        inherited: MaterialId,
+        depth: usize,
+    ) -> Option<Node> {
+        self.nodes += 1;
+        if self.nodes > MAX_NODES {
+            if self.nodes == MAX_NODES + 1 {
+                self.fail(path, format!("the scene has more than {MAX_NODES} objects"));
+            }
+            return None;
+        }
+        if depth > MAX_NESTING_DEPTH {
+            self.fail(
+                path,
+                format!("objects nest deeper than the limit of {MAX_NESTING_DEPTH} levels"),
+            );
+            return None;
+        }
+        let material = match &o.material {
+            Some(m) => self.material(&format!("{path}.material"), m),
+            None => inherited,
+        };
+        let t = &o.transform;
+        let tp = format!("{path}.transform");
+        let translate = self.vec3(&format!("{tp}.translate"), t.translate);
+        let rotate = self.vec3(&format!("{tp}.rotate_deg"), t.rotate_deg);
+        let scale = match t.scale {
+            ScaleSpec::Uniform(s) => DVec3::splat(self.positive(&format!("{tp}.scale"), s)),
+            ScaleSpec::PerAxis(s) => DVec3::new(
+                self.positive(&format!("{tp}.scale[0]"), s[0]),
+                self.positive(&format!("{tp}.scale[1]"), s[1]),
+                self.positive(&format!("{tp}.scale[2]"), s[2]),
+            ),
+        };
+        let sp = format!("{path}.shape");
+        let kind = self.shape(&sp, &o.shape, material, depth)?;
+        Some(Node {
+            transform: compose_transform(translate, rotate, scale),
+            material,
+            name: o.name.clone(),
+            json_path: path.to_string(),
+            kind,
+        })
+    }
+
+    fn children(
+        &mut self,
+        path: &str,
+        children: &[ObjectSpec],
+        material: MaterialId,
+        depth: usize,
+    ) -> Vec<Node> {
+        if children.is_empty() {
+            self.fail(path, "needs at least one child");
+        }
+        children
+            .iter()
+            .enumerate()
+            .filter_map(|(i, c)| self.object(&format!("{path}[{i}]"), c, material, depth + 1))
+            .collect()
+    }
+
+    fn shape(
+        &mut self,
+        path: &str,
+        s: &ShapeSpec,
+        material: MaterialId,
+        depth: usize,
+    ) -> Option<NodeKind> {
+        Some(match s {
+            ShapeSpec::Sphere(s) => NodeKind::Sphere {
+                radius: self.positive(&format!("{path}.sphere.radius"), s.radius),
+            },
+            ShapeSpec::Plane(p) => NodeKind::Plane {
+                normal: self.unit(&format!("{path}.plane.normal"), p.normal),
+                offset: self.finite(&format!("{path}.plane.offset"), p.offset),
+            },
+            ShapeSpec::Triangle(t) => {
+                let p = format!("{path}.triangle.vertices");
+                let v = [
+                    self.vec3(&format!("{p}[0]"), t.vertices[0]),
+                    self.vec3(&format!("{p}[1]"), t.vertices[1]),
+                    self.vec3(&format!("{p}[2]"), t.vertices[2]),
+                ];
+                let n = (v[1] - v[0]).cross(v[2] - v[0]);
+                let scale = (v[1] - v[0]).length() * (v[2] - v[0]).length();
+                if !(n.length() > 1e-12 * scale) {
+                    self.fail(&p, "the vertices are collinear or coincide (zero area)");
+                }
+                NodeKind::Triangle { vertices: v }
+            }
+            ShapeSpec::Box(b) => {
+                let p = format!("{path}.box.half_extents");
+                NodeKind::Box {
+                    half_extents: DVec3::new(
+                        self.positive(&format!("{p}[0]"), b.half_extents[0]),
+                        self.positive(&format!("{p}[1]"), b.half_extents[1]),
+                        self.positive(&format!("{p}[2]"), b.half_extents[2]),
+                    ),
+                }
+            }
+            ShapeSpec::Ellipsoid(e) => {
+                let p = format!("{path}.ellipsoid.radii");
+                NodeKind::Ellipsoid {
+                    radii: DVec3::new(
+                        self.positive(&format!("{p}[0]"), e.radii[0]),
+                        self.positive(&format!("{p}[1]"), e.radii[1]),
+                        self.positive(&format!("{p}[2]"), e.radii[2]),
+                    ),
+                }
+            }
+            ShapeSpec::Cylinder(c) => NodeKind::Cylinder {
+                radius: self.positive(&format!("{path}.cylinder.radius"), c.radius),
+                half_height: 0.5 * self.positive(&format!("{path}.cylinder.height"), c.height),
+            },
+            ShapeSpec::Torus(t) => {
+                let major = self.positive(&format!("{path}.torus.major_radius"), t.major_radius);
+                let minor = self.positive(&format!("{path}.torus.minor_radius"), t.minor_radius);
+                if minor > major {
+                    self.fail(
+                        &format!("{path}.torus.minor_radius"),
+                        format!("must be <= major_radius ({major}), got {minor}"),
+                    );
+                }
+                NodeKind::Torus {
+                    major_radius: major,
+                    minor_radius: minor,
+                }
+            }
+            ShapeSpec::Mesh(m) => {
+                if m.path.trim().is_empty() {
+                    self.fail(&format!("{path}.mesh.path"), "must not be empty");
+                }
+                NodeKind::Mesh {
+                    path: self.base_dir.join(&m.path),
+                }
+            }
+            ShapeSpec::Union(c) => {
+                NodeKind::Union(self.children(&format!("{path}.union.children"), &c.children, material, depth))
+            }
+            ShapeSpec::Intersection(c) => NodeKind::Intersection(self.children(
+                &format!("{path}.intersection.children"),
+                &c.children,
+                material,
+                depth,
+            )),
+            ShapeSpec::Subtraction(c) => NodeKind::Subtraction(self.children(
+                &format!("{path}.subtraction.children"),
+                &c.children,
+                material,
+                depth,
+            )),
+            ShapeSpec::SmoothUnion(s) => NodeKind::SmoothUnion {
+                children: self.children(
+                    &format!("{path}.smooth_union.children"),
+                    &s.children,
+                    material,
+                    depth,
+                ),
+                blend_radius: self
+                    .positive(&format!("{path}.smooth_union.blend_radius"), s.blend_radius),
+            },
+            ShapeSpec::Repeat(r) => {
+                let p = format!("{path}.repeat");
+                let mut period = DVec3::ZERO;
+                for axis in 0..3 {
+                    let v = self.finite(&format!("{p}.period[{axis}]"), r.period[axis]);
+                    if v < 0.0 {
+                        self.fail(&format!("{p}.period[{axis}]"), format!("must be >= 0, got {v}"));
+                    }
+                    period[axis] = v.max(0.0);
+                    if let Some(n) = r.count[axis] {
+                        if n == 0 || n > MAX_REPEAT_COUNT_PER_AXIS {
+                            self.fail(
+                                &format!("{p}.count[{axis}]"),
+                                format!("must be in 1..={MAX_REPEAT_COUNT_PER_AXIS}, got {n}"),
+                            );
+                        }
+                    }
+                }
+                if period.max_element() <= 0.0 {
+                    self.fail(&format!("{p}.period"), "at least one axis needs a period > 0");
+                }
+                let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1)?;
+                NodeKind::Repeat {
+                    child: Box::new(child),
+                    period,
+                    count: r.count,
+                }
+            }
+        })
+    }
+}
+
+/// Validates `file` and converts it. `base_dir` resolves relative mesh and image paths;
+/// `source` names the scene in messages.
+pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene, Vec<Problem>> {
+    let mut cx = Ctx {
+        base_dir,
+        problems: Vec::new(),
+        materials: vec![Material {
+            color: DVec3::from_array(MaterialSpec::default().color),
+            specular_exponent: None,
+            reflectivity: 0.0,
+        }],
+        nodes: 0,
+    };
+
+    let c = &file.camera;
+    let position = cx.vec3("camera.position", c.position);
+    let look_at = cx.vec3("camera.look_at", c.look_at);
+    let up = cx.vec3("camera.up", c.up);
+    let vfov = cx.finite("camera.vfov_deg", c.vfov_deg);
+    if !(vfov > 0.0 && vfov < 180.0) {
+        cx.fail("camera.vfov_deg", format!("must be in (0, 180) degrees, got {vfov}"));
+    }
+    if let Err(e) = check_image_size(c.width, c.height) {
+        cx.fail("camera.width", e);
+    }
+    let forward = look_at - position;
+    let rel = forward.length() / position.length().max(look_at.length()).max(1e-300);
+    if forward.length() == 0.0 || rel < 1e-12 {
+        cx.fail("camera.look_at", "must differ from camera.position");
+    } else if up.length() == 0.0 {
+        cx.fail("camera.up", "must not be the zero vector");
+    } else if forward.normalize().cross(up.normalize()).length() < 1e-9 {
+        cx.fail("camera.up", "must not be parallel to the view direction (look_at - position)");
+    }
+    let camera = Camera::look_at(position, look_at, up, vfov, c.width, c.height);
+
+    let mut lights = Vec::new();
+    for (i, l) in file.lights.iter().enumerate() {
+        lights.push(match l {
+            LightSpec::Ambient(a) => Light::Ambient {
+                intensity: cx.in_range(&format!("lights[{i}].ambient.intensity"), a.intensity, 0.0, 1e6),
+            },
+            LightSpec::Point(p) => Light::Point {
+                position: cx.vec3(&format!("lights[{i}].point.position"), p.position),
+                intensity: cx.in_range(&format!("lights[{i}].point.intensity"), p.intensity, 0.0, 1e6),
+                casts_shadows: p.casts_shadows,
+            },
+            LightSpec::Directional(d) => Light::Directional {
+                direction: cx.unit(&format!("lights[{i}].directional.direction"), d.direction),
+                intensity: cx.in_range(
+                    &format!("lights[{i}].directional.intensity"),
+                    d.intensity,
+                    0.0,
+                    1e6,
+                ),
+                casts_shadows: d.casts_shadows,
+            },
+        });
+    }
+
+    let background = match &file.background {
+        BackgroundSpec::Color(c) => Background::Color(cx.color("background.color", *c)),
+        BackgroundSpec::Environment(e) => {
+            if e.path.trim().is_empty() {
+                cx.fail("background.environment.path", "must not be empty");
+            }
+            Background::Environment {
+                path: base_dir.join(&e.path),
+                intensity: cx.in_range("background.environment.intensity", e.intensity, 0.0, 1e6),
+            }
+        }
+    };
+
+    let r = &file.render;
+    if !(1..=1024).contains(&r.samples_per_pixel) {
+        cx.fail(
+            "render.samples_per_pixel",
+            format!("must be in 1..=1024, got {}", r.samples_per_pixel),
+        );
+    }
+    if r.max_reflection_depth > 64 {
+        cx.fail(
+            "render.max_reflection_depth",
+            format!("must be in 0..=64, got {}", r.max_reflection_depth),
+        );
+    }
+    let render = RenderSettings {
+        samples_per_pixel: r.samples_per_pixel,
+        max_reflection_depth: r.max_reflection_depth,
+        reflection_cutoff: cx.in_range("render.reflection_cutoff", r.reflection_cutoff, 0.0, 1.0),
+        ray_offset: cx.in_range("render.ray_offset", r.ray_offset, 0.0, 0.1),
+        max_distance: cx.positive("render.max_distance", r.max_distance),
+    };
+
+    let objects: Vec<Node> = file
+        .objects
+        .iter()
+        .enumerate()
+        .filter_map(|(i, o)| cx.object(&format!("objects[{i}]"), o, 0, 1))
+        .collect();
+
+    match camera {
+        Some(camera) if cx.problems.is_empty() => Ok(Scene {
+            source: source.to_string(),
+            camera,
+            lights,
+            background,
+            materials: cx.materials,
+            objects,
+            render,
+        }),
+        _ => {
+            if cx.problems.is_empty() {
+                cx.fail("camera", "does not define a valid view");
+            }
+            Err(cx.problems)
+        }
+    }
+}
