@@ -124,7 +124,11 @@ pub trait Geometry: Send + Sync {
 
     /// [`Geometry::closest_hit`] for many rays.
     fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
-        assert_eq!(rays.len(), out.len(), "closest_hits: rays and out differ in length");
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "closest_hits: rays and out differ in length"
+        );
         for (r, o) in rays.iter().zip(out.iter_mut()) {
             *o = self.closest_hit(r);
         }
@@ -132,7 +136,11 @@ pub trait Geometry: Send + Sync {
 
     /// [`Geometry::occluded`] for many rays.
     fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
-        assert_eq!(rays.len(), out.len(), "occluded_many: rays and out differ in length");
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "occluded_many: rays and out differ in length"
+        );
         for (r, o) in rays.iter().zip(out.iter_mut()) {
             *o = self.occluded(r);
         }

@@ -1,10 +1,20 @@
 //! The marchmesh ray-tracer core.
 //!
-//! The core owns everything but intersection: camera ray generation, the Phong integrator
-//! (ambient, diffuse, specular), hard shadows via occlusion rays, iterative reflections,
-//! Halton anti-aliasing, framebuffers with per-pixel AOVs, and image output. It talks to
-//! geometry only through [`Geometry`].
+//! The core owns everything but intersection: camera ray generation ([`camera`]), the Phong
+//! integrator with hard shadows, iterative reflections and Halton anti-aliasing
+//! ([`integrator`]), framebuffers with per-pixel AOVs ([`framebuffer`]), backgrounds and image
+//! output. It talks to geometry only through [`Geometry`]; backends never shade.
 
+pub mod background;
+pub mod camera;
+pub mod framebuffer;
 pub mod geometry;
+pub mod image_io;
+pub mod integrator;
+pub mod stats;
 
+pub use background::{BackgroundError, BackgroundSampler};
+pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
+pub use integrator::{RenderError, RenderOptions, RenderOutput, render};
+pub use stats::RenderStats;

@@ -76,7 +76,10 @@ impl Ctx<'_> {
             self.fail(path, format!("{v} is not a finite number"));
             0.0
         } else if v.abs() > MAX_COORDINATE {
-            self.fail(path, format!("{v:e} exceeds the magnitude limit {MAX_COORDINATE:e}"));
+            self.fail(
+                path,
+                format!("{v:e} exceeds the magnitude limit {MAX_COORDINATE:e}"),
+            );
             0.0
         } else {
             v
@@ -280,9 +283,12 @@ impl Ctx<'_> {
                     path: self.base_dir.join(&m.path),
                 }
             }
-            ShapeSpec::Union(c) => {
-                NodeKind::Union(self.children(&format!("{path}.union.children"), &c.children, material, depth))
-            }
+            ShapeSpec::Union(c) => NodeKind::Union(self.children(
+                &format!("{path}.union.children"),
+                &c.children,
+                material,
+                depth,
+            )),
             ShapeSpec::Intersection(c) => NodeKind::Intersection(self.children(
                 &format!("{path}.intersection.children"),
                 &c.children,
@@ -311,7 +317,10 @@ impl Ctx<'_> {
                 for axis in 0..3 {
                     let v = self.finite(&format!("{p}.period[{axis}]"), r.period[axis]);
                     if v < 0.0 {
-                        self.fail(&format!("{p}.period[{axis}]"), format!("must be >= 0, got {v}"));
+                        self.fail(
+                            &format!("{p}.period[{axis}]"),
+                            format!("must be >= 0, got {v}"),
+                        );
                     }
                     period[axis] = v.max(0.0);
                     if let Some(n) = r.count[axis] {
@@ -324,7 +333,10 @@ impl Ctx<'_> {
                     }
                 }
                 if period.max_element() <= 0.0 {
-                    self.fail(&format!("{p}.period"), "at least one axis needs a period > 0");
+                    self.fail(
+                        &format!("{p}.period"),
+                        "at least one axis needs a period > 0",
+                    );
                 }
                 let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1)?;
                 NodeKind::Repeat {
@@ -357,7 +369,10 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
     let up = cx.vec3("camera.up", c.up);
     let vfov = cx.finite("camera.vfov_deg", c.vfov_deg);
     if !(vfov > 0.0 && vfov < 180.0) {
-        cx.fail("camera.vfov_deg", format!("must be in (0, 180) degrees, got {vfov}"));
+        cx.fail(
+            "camera.vfov_deg",
+            format!("must be in (0, 180) degrees, got {vfov}"),
+        );
     }
     if let Err(e) = check_image_size(c.width, c.height) {
         cx.fail("camera.width", e);
@@ -369,7 +384,10 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
     } else if up.length() == 0.0 {
         cx.fail("camera.up", "must not be the zero vector");
     } else if forward.normalize().cross(up.normalize()).length() < 1e-9 {
-        cx.fail("camera.up", "must not be parallel to the view direction (look_at - position)");
+        cx.fail(
+            "camera.up",
+            "must not be parallel to the view direction (look_at - position)",
+        );
     }
     let camera = Camera::look_at(position, look_at, up, vfov, c.width, c.height);
 
@@ -377,11 +395,21 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
     for (i, l) in file.lights.iter().enumerate() {
         lights.push(match l {
             LightSpec::Ambient(a) => Light::Ambient {
-                intensity: cx.in_range(&format!("lights[{i}].ambient.intensity"), a.intensity, 0.0, 1e6),
+                intensity: cx.in_range(
+                    &format!("lights[{i}].ambient.intensity"),
+                    a.intensity,
+                    0.0,
+                    1e6,
+                ),
             },
             LightSpec::Point(p) => Light::Point {
                 position: cx.vec3(&format!("lights[{i}].point.position"), p.position),
-                intensity: cx.in_range(&format!("lights[{i}].point.intensity"), p.intensity, 0.0, 1e6),
+                intensity: cx.in_range(
+                    &format!("lights[{i}].point.intensity"),
+                    p.intensity,
+                    0.0,
+                    1e6,
+                ),
                 casts_shadows: p.casts_shadows,
             },
             LightSpec::Directional(d) => Light::Directional {

@@ -1,0 +1,285 @@
+//! `marchmesh`: render a scene with any backend, validate scenes, print the scene schema, and
+//! run benchmarks.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
+use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+
+#[derive(Parser)]
+#[command(
+    name = "marchmesh",
+    version,
+    about = "Sphere tracing vs BVH ray tracing, measured."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene to a PNG (and optional float AOVs).
+    Render(RenderArgs),
+    /// Check a scene file and print a summary, or every problem found.
+    Validate {
+        /// Scene files to check.
+        #[arg(required = true)]
+        scenes: Vec<PathBuf>,
+    },
+    /// Print the JSON Schema of the scene format.
+    Schema,
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// Scene file (JSON).
+    scene: PathBuf,
+    /// Geometry backend: reference (exact, f64), sdf (sphere tracing) or mesh (BVH).
+    #[arg(long, short, default_value = "reference")]
+    backend: String,
+    /// Backend option as key=value (repeatable); `--opt help` lists them.
+    #[arg(long = "opt", short = 'o', value_name = "KEY=VALUE")]
+    options: Vec<String>,
+    /// Output PNG path.
+    #[arg(long, default_value = "out.png")]
+    out: PathBuf,
+    /// Override the scene's image width in pixels.
+    #[arg(long)]
+    width: Option<u32>,
+    /// Override the scene's image height in pixels.
+    #[arg(long)]
+    height: Option<u32>,
+    /// Override the scene's samples per pixel.
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Worker threads (0 = one per logical core).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Also write float AOVs (depth, normal, mask, work, termination) as PFM into this folder.
+    #[arg(long, value_name = "DIR")]
+    aov: Option<PathBuf>,
+    /// Overwrite existing output files.
+    #[arg(long)]
+    force: bool,
+    /// Refuse renders whose buffers would exceed this many MiB.
+    #[arg(long, default_value_t = 4096)]
+    memory_limit_mib: u64,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => render(args),
+        Command::Validate { scenes } => validate(&scenes),
+        Command::Schema => {
+            println!("{}", marchmesh_scene::json_schema());
+            Ok(())
+        }
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn validate(paths: &[PathBuf]) -> Result<()> {
+    let mut failed = 0;
+    for p in paths {
+        match marchmesh_scene::load(p) {
+            Ok(s) => {
+                let mut nodes = 0;
+                s.visit_nodes(|_| nodes += 1);
+                println!(
+                    "{}: ok: {}x{} camera, {} lights, {} objects ({} nodes), {} meshes",
+                    p.display(),
+                    s.camera.width,
+                    s.camera.height,
+                    s.lights.len(),
+                    s.objects.len(),
+                    nodes,
+                    s.mesh_paths().len()
+                );
+                for m in s.mesh_paths() {
+                    if !m.exists() {
+                        println!("  warning: mesh file {} does not exist", m.display());
+                    }
+                }
+            }
+            Err(e) => {
+                failed += 1;
+                eprintln!("{e}");
+            }
+        }
+    }
+    if failed > 0 {
+        bail!("{failed} of {} scene(s) are invalid", paths.len());
+    }
+    Ok(())
+}
+
+/// Refuses to replace an existing file unless `force`.
+fn check_writable(path: &Path, force: bool) -> Result<()> {
+    if path.exists() && !force {
+        bail!(
+            "{} already exists (use --force to overwrite)",
+            path.display()
+        );
+    }
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && !dir.is_dir()
+    {
+        bail!(
+            "cannot write {}: folder {} does not exist",
+            path.display(),
+            dir.display()
+        );
+    }
+    Ok(())
+}
+
+fn render(args: RenderArgs) -> Result<()> {
+    let kind: BackendKind = args.backend.parse()?;
+    let options = args
+        .options
+        .iter()
+        .map(|s| backend::parse_option(s).map_err(anyhow::Error::msg))
+        .collect::<Result<Vec<_>>>()?;
+    check_writable(&args.out, args.force)?;
+    if let Some(dir) = &args.aov
+        && dir.join("depth.pfm").exists()
+        && !args.force
+    {
+        bail!(
+            "{} already holds AOVs (use --force to overwrite)",
+            dir.display()
+        );
+    }
+    let mut scene = marchmesh_scene::load(&args.scene)?;
+    let (w, h) = (
+        args.width.unwrap_or(scene.camera.width),
+        args.height.unwrap_or(scene.camera.height),
+    );
+    scene = scene
+        .with_image_size(w, h)
+        .map_err(anyhow::Error::msg)
+        .context("--width/--height")?;
+    if let Some(spp) = args.spp {
+        if !(1..=1024).contains(&spp) {
+            bail!("--spp must be in 1..=1024, got {spp}");
+        }
+        scene.render.samples_per_pixel = spp;
+    }
+    let background = BackgroundSampler::load(&scene.background)
+        .with_context(|| format!("scene {}", args.scene.display()))?;
+
+    let t0 = Instant::now();
+    let spec = BackendSpec {
+        kind: Some(kind),
+        options,
+    };
+    let geometry = backend::build(&scene, &spec)
+        .with_context(|| format!("building scene {}", args.scene.display()))?;
+    let build_time = t0.elapsed();
+
+    let bar = ProgressBar::with_draw_target(Some(h as u64), ProgressDrawTarget::hidden());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} rows, eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let shown = AtomicBool::new(false);
+    let start = Instant::now();
+    let on_row = || {
+        bar.inc(1);
+        if !shown.load(Ordering::Relaxed) && start.elapsed() > Duration::from_secs(1) {
+            shown.store(true, Ordering::Relaxed);
+            bar.set_draw_target(ProgressDrawTarget::stderr());
+        }
+    };
+    let opts = RenderOptions {
+        threads: args.threads,
+        memory_limit_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
+    };
+    let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
+    bar.finish_and_clear();
+
+    write_atomically(&args.out, |tmp| {
+        image_io::write_png(&out.framebuffer, tmp).map_err(anyhow::Error::from)
+    })?;
+    if let Some(dir) = &args.aov {
+        image_io::write_aovs(&out.framebuffer, dir)
+            .with_context(|| format!("writing AOVs to {}", dir.display()))?;
+    }
+    let report = geometry.report();
+    let s = &out.stats;
+    let secs = out.elapsed.as_secs_f64();
+    println!(
+        "{}: {}x{} {} spp, backend {}: build {:.1} ms, render {:.1} ms, {:.2} Mrays/s ({} rays), {} bytes of geometry",
+        args.out.display(),
+        w,
+        h,
+        scene.render.samples_per_pixel,
+        kind,
+        build_time.as_secs_f64() * 1e3,
+        secs * 1e3,
+        s.total_rays() as f64 / secs.max(1e-9) / 1e6,
+        s.total_rays(),
+        report.memory_bytes
+    );
+    if s.steps > 0 {
+        println!(
+            "  sdf steps: mean {:.1}, max {}",
+            s.mean_steps(),
+            s.max_steps_seen
+        );
+    }
+    if s.node_visits > 0 {
+        println!(
+            "  bvh node visits: mean {:.1}, max {}",
+            s.mean_node_visits(),
+            s.max_node_visits_seen
+        );
+    }
+    for note in &report.notes {
+        println!("  note: {note}");
+    }
+    let exhausted = s.closest_max_steps + s.occlusion_max_steps;
+    if exhausted > 0 {
+        eprintln!(
+            "warning: {exhausted} rays ({:.3}%) ran out of steps (drawn as misses); raise max_steps",
+            100.0 * s.step_exhaustion_rate()
+        );
+    }
+    if s.non_finite_hits + s.non_finite_pixels > 0 {
+        eprintln!(
+            "warning: {} non-finite hits and {} non-finite pixels",
+            s.non_finite_hits, s.non_finite_pixels
+        );
+    }
+    Ok(())
+}
+
+/// Writes via a temporary file in the same folder, renamed into place on success, so a failed
+/// write never leaves a half-written file where the user's file was.
+fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let file_name = path
+        .file_name()
+        .with_context(|| format!("{} is not a file path", path.display()))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(".tmp.png");
+    let tmp = path.with_file_name(tmp_name);
+    let result = write(&tmp).and_then(|()| {
+        std::fs::rename(&tmp, path)
+            .with_context(|| format!("moving {} to {}", tmp.display(), path.display()))
+    });
+    if result.is_err() {
+        std::fs::remove_file(&tmp).ok();
+    }
+    result.with_context(|| format!("writing {}", path.display()))
+}

@@ -1,0 +1,200 @@
+//! Writing images and float AOVs.
+//!
+//! Colour goes to 8-bit PNG. Float AOVs go to PFM (Portable Float Map): a text header
+//! `PF\n<width> <height>\n-1.0\n` (`Pf` for one channel) followed by little-endian f32 pixels,
+//! rows from the *bottom* of the image to the top, as the format requires. PFM is read by
+//! ImageMagick, GIMP, OpenCV and numpy in a few lines.
+
+use std::io::{BufWriter, Read, Write};
+use std::path::Path;
+
+use glam::Vec3;
+
+use crate::framebuffer::Framebuffer;
+use crate::geometry::Termination;
+
+/// Why an image could not be written or read.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageIoError {
+    /// File system error.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// Encoder error.
+    #[error("{}: {reason}", path.display())]
+    Encode {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The encoder's message.
+        reason: String,
+    },
+    /// A PFM file that does not follow the format.
+    #[error("{}: not a valid PFM file: {reason}", path.display())]
+    BadPfm {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ImageIoError + '_ {
+    move |source| ImageIoError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// Writes the colour buffer as an 8-bit PNG (see [`Framebuffer::to_rgb8`]).
+pub fn write_png(fb: &Framebuffer, path: &Path) -> Result<(), ImageIoError> {
+    fb.to_rgb8()
+        .save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| ImageIoError::Encode {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })
+}
+
+/// Writes `channels` (1 or 3) floats per pixel, `data` row-major from the top, as PFM.
+pub fn write_pfm(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: usize,
+    data: &[f32],
+) -> Result<(), ImageIoError> {
+    let tag = if channels == 1 { "Pf" } else { "PF" };
+    let f = std::fs::File::create(path).map_err(io_err(path))?;
+    let mut w = BufWriter::new(f);
+    let row = width as usize * channels;
+    write!(w, "{tag}\n{width} {height}\n-1.0\n").map_err(io_err(path))?;
+    for r in (0..height as usize).rev() {
+        for v in &data[r * row..(r + 1) * row] {
+            w.write_all(&v.to_le_bytes()).map_err(io_err(path))?;
+        }
+    }
+    w.flush().map_err(io_err(path))
+}
+
+/// A PFM image read back: `(width, height, channels, data row-major from the top)`.
+pub type PfmImage = (u32, u32, usize, Vec<f32>);
+
+/// Reads a PFM written by [`write_pfm`] (either endianness).
+pub fn read_pfm(path: &Path) -> Result<PfmImage, ImageIoError> {
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_to_end(&mut bytes))
+        .map_err(io_err(path))?;
+    let bad = |reason: &str| ImageIoError::BadPfm {
+        path: path.to_path_buf(),
+        reason: reason.to_string(),
+    };
+    // Header: three whitespace-separated lines.
+    let mut fields = Vec::new();
+    let mut pos = 0;
+    while fields.len() < 4 && pos < bytes.len() {
+        while pos < bytes.len() && bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        let start = pos;
+        while pos < bytes.len() && !bytes[pos].is_ascii_whitespace() {
+            pos += 1;
+        }
+        fields.push(String::from_utf8_lossy(&bytes[start..pos]).to_string());
+    }
+    pos += 1; // the single whitespace after the scale
+    if fields.len() < 4 {
+        return Err(bad("truncated header"));
+    }
+    let channels = match fields[0].as_str() {
+        "PF" => 3,
+        "Pf" => 1,
+        _ => return Err(bad("magic is neither PF nor Pf")),
+    };
+    let width: u32 = fields[1].parse().map_err(|_| bad("bad width"))?;
+    let height: u32 = fields[2].parse().map_err(|_| bad("bad height"))?;
+    let scale: f32 = fields[3].parse().map_err(|_| bad("bad scale"))?;
+    let n = width as usize * height as usize * channels;
+    let body = bytes
+        .get(pos..pos + 4 * n)
+        .ok_or_else(|| bad("truncated pixel data"))?;
+    let mut data = vec![0.0f32; n];
+    let row = width as usize * channels;
+    for (i, chunk) in body.chunks_exact(4).enumerate() {
+        let b = [chunk[0], chunk[1], chunk[2], chunk[3]];
+        let v = if scale < 0.0 {
+            f32::from_le_bytes(b)
+        } else {
+            f32::from_be_bytes(b)
+        };
+        let (r, c) = (i / row, i % row);
+        data[(height as usize - 1 - r) * row + c] = v;
+    }
+    Ok((width, height, channels, data))
+}
+
+/// Writes the AOVs of `fb` into `dir` (created if missing): `depth.pfm` (distance along the
+/// primary ray, +inf for no hit), `normal.pfm` (unit normal facing the camera, xyz),
+/// `mask.pfm` (1 hit, 0 no hit), `work.pfm` (steps, node visits, primitive tests) and
+/// `termination.pfm` (0 hit, 1 miss, 2 max steps, 3 max distance).
+pub fn write_aovs(fb: &Framebuffer, dir: &Path) -> Result<(), ImageIoError> {
+    std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let (w, h) = (fb.width, fb.height);
+    write_pfm(&dir.join("depth.pfm"), w, h, 1, &fb.depth)?;
+    let normals: Vec<f32> = fb.normal.iter().flat_map(|n: &Vec3| n.to_array()).collect();
+    write_pfm(&dir.join("normal.pfm"), w, h, 3, &normals)?;
+    let mask: Vec<f32> = fb
+        .depth
+        .iter()
+        .map(|d| if d.is_finite() { 1.0 } else { 0.0 })
+        .collect();
+    write_pfm(&dir.join("mask.pfm"), w, h, 1, &mask)?;
+    let work: Vec<f32> = fb
+        .work
+        .iter()
+        .flat_map(|w| {
+            [
+                w.steps as f32,
+                w.node_visits as f32,
+                w.primitive_tests as f32,
+            ]
+        })
+        .collect();
+    write_pfm(&dir.join("work.pfm"), w, h, 3, &work)?;
+    let term: Vec<f32> = fb
+        .termination
+        .iter()
+        .map(|t: &Termination| *t as u8 as f32)
+        .collect();
+    write_pfm(&dir.join("termination.pfm"), w, h, 1, &term)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pfm_round_trips_and_stores_bottom_row_first() {
+        let dir = std::env::temp_dir().join(format!("marchmesh-pfm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.pfm");
+        let data: Vec<f32> = (0..6).map(|i| i as f32 * 1.5).collect(); // 3x2, 1 channel
+        write_pfm(&p, 3, 2, 1, &data).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let header = b"Pf\n3 2\n-1.0\n";
+        assert_eq!(&bytes[..header.len()], header);
+        // First stored pixel is the bottom-left one (index 3).
+        let first = f32::from_le_bytes(bytes[header.len()..header.len() + 4].try_into().unwrap());
+        assert_eq!(first, 4.5);
+        let (w, h, c, back) = read_pfm(&p).unwrap();
+        assert_eq!((w, h, c), (3, 2, 1));
+        assert_eq!(back, data);
+        std::fs::write(&p, b"PF\n3 2\n-1.0\n\0\0").unwrap();
+        assert!(matches!(read_pfm(&p), Err(ImageIoError::BadPfm { .. })));
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}

@@ -1,0 +1,256 @@
+//! Integrator tests against a minimal analytic sphere geometry defined here, so the core is
+//! tested without any backend.
+
+use glam::Vec3;
+use marchmesh_core::{
+    BackgroundSampler, Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, RenderOptions,
+    Termination, TraceResult, render,
+};
+use marchmesh_scene::{Scene, parse_scene};
+
+/// Spheres (render-space centre, radius, material) intersected in closed form.
+struct Spheres(Vec<(Vec3, f32, u32)>);
+
+impl Spheres {
+    fn from_scene(scene: &Scene) -> Self {
+        let origin = scene.camera.position;
+        let mut v = Vec::new();
+        scene.visit_nodes(|n| {
+            if let marchmesh_scene::NodeKind::Sphere { radius } = n.kind {
+                let c = (n.transform.translation - origin).as_vec3();
+                v.push((c, radius as f32, n.material));
+            }
+        });
+        Spheres(v)
+    }
+}
+
+impl Geometry for Spheres {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        let mut best: Option<Hit> = None;
+        for &(c, r, m) in &self.0 {
+            let oc = ray.origin - c;
+            let b = oc.dot(ray.dir);
+            let disc = b * b - (oc.length_squared() - r * r);
+            if disc < 0.0 {
+                continue;
+            }
+            let s = disc.sqrt();
+            for t in [-b - s, -b + s] {
+                if t >= ray.t_min && t <= ray.t_max && best.is_none_or(|h| t < h.t) {
+                    let p = ray.at(t);
+                    best = Some(Hit {
+                        t,
+                        position: p,
+                        normal: (p - c) / r,
+                        material: m,
+                    });
+                    break;
+                }
+            }
+        }
+        TraceResult {
+            hit: best,
+            termination: if best.is_some() {
+                Termination::Hit
+            } else {
+                Termination::Miss
+            },
+            work: RayWork {
+                primitive_tests: self.0.len() as u32,
+                ..Default::default()
+            },
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        let r = self.closest_hit(ray);
+        OcclusionResult {
+            occluded: r.hit.is_some(),
+            termination: r.termination,
+            work: r.work,
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        GeometryReport {
+            backend: "test-spheres".into(),
+            ..Default::default()
+        }
+    }
+}
+
+fn scene(json: &str) -> Scene {
+    parse_scene(json, "<test>", std::path::Path::new(".")).expect("test scene is valid")
+}
+
+fn run(scene: &Scene, threads: usize) -> marchmesh_core::RenderOutput {
+    let g = Spheres::from_scene(scene);
+    let bg = BackgroundSampler::load(&scene.background).unwrap();
+    render(
+        scene,
+        &g,
+        &bg,
+        &RenderOptions {
+            threads,
+            ..Default::default()
+        },
+        &|| {},
+    )
+    .unwrap()
+}
+
+const ONE_SPHERE: &str = r#"{
+  "camera": {"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 30, "width": 33, "height": 33},
+  "background": {"color": [0.1, 0.2, 0.3]},
+  "lights": [{"ambient": {"intensity": 0.25}},
+             {"directional": {"direction": [0, 0, -1], "intensity": 0.5, "casts_shadows": false}}],
+  "objects": [{"shape": {"sphere": {"radius": 1}}, "material": {"color": [0.8, 0.4, 0.2]}}]
+}"#;
+
+#[test]
+fn diffuse_and_ambient_match_the_phong_formula_and_misses_show_the_background() {
+    let s = scene(ONE_SPHERE);
+    let out = run(&s, 1);
+    let fb = &out.framebuffer;
+    // Centre pixel looks straight at the sphere: n.l = 1 -> colour * (0.25 + 0.5).
+    let c = fb.color[16 * 33 + 16];
+    assert!(
+        (c - Vec3::new(0.8, 0.4, 0.2) * 0.75).length() < 1e-5,
+        "{c:?}"
+    );
+    assert!((fb.depth[16 * 33 + 16] - 4.0).abs() < 1e-5);
+    assert!((fb.normal[16 * 33 + 16] - Vec3::NEG_Z).length() < 1e-5);
+    // Corner pixel misses.
+    assert_eq!(fb.color[0], Vec3::new(0.1, 0.2, 0.3));
+    assert!(fb.depth[0].is_infinite());
+    assert_eq!(fb.termination[0], Termination::Miss);
+    // No shadow rays for a light that casts none, no reflection rays without reflectivity.
+    assert_eq!(out.stats.shadow_rays, 0);
+    assert_eq!(out.stats.reflection_rays, 0);
+    assert_eq!(out.stats.primary_rays, 33 * 33);
+}
+
+#[test]
+fn specular_highlight_adds_to_diffuse() {
+    let json = ONE_SPHERE.replace(
+        r#""material": {"color": [0.8, 0.4, 0.2]}"#,
+        r#""material": {"color": [0.8, 0.4, 0.2], "specular_exponent": 10}"#,
+    );
+    let out = run(&scene(&json), 1);
+    // At the centre r = n = v, so r.v = 1 and specular = intensity 0.5: colour * (0.75 + 0.5).
+    let c = out.framebuffer.color[16 * 33 + 16];
+    assert!(
+        (c - Vec3::new(0.8, 0.4, 0.2) * 1.25).length() < 1e-5,
+        "{c:?}"
+    );
+}
+
+#[test]
+fn shadows_block_direct_light_but_not_ambient() {
+    // A small sphere, out of the camera's view, between a point light and a big sphere.
+    let json = r#"{
+      "camera": {"position": [0, 0, -10], "look_at": [0, 0, 0], "vfov_deg": 20, "width": 21, "height": 21},
+      "lights": [{"ambient": {"intensity": 0.1}},
+                 {"point": {"position": [5, 0, -9], "intensity": 0.9}}],
+      "objects": [
+        {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 3]}, "material": {"color": [1, 1, 1]}},
+        {"shape": {"sphere": {"radius": 0.3}}, "transform": {"translate": [2.46, 0, -2.91]}, "material": {"color": [1, 0, 0]}}
+      ]
+    }"#;
+    let s = scene(json);
+    let out = run(&s, 1);
+    assert!(out.stats.shadow_rays > 0);
+    let fb = &out.framebuffer;
+    // The small sphere is outside the image.
+    assert!(fb.material.iter().all(|&m| m != 2));
+    // Some pixel of the big sphere must be in the small sphere's shadow: only ambient (0.1).
+    let shadowed = (0..fb.len())
+        .filter(|&i| fb.material[i] == 1 && (fb.color[i] - Vec3::splat(0.1)).length() < 1e-4)
+        .count();
+    assert!(shadowed > 0, "no shadowed pixel on the big sphere");
+}
+
+#[test]
+fn mirror_sphere_reflects_background_and_obeys_depth_limit() {
+    let json = r#"{
+      "camera": {"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 30, "width": 9, "height": 9},
+      "background": {"color": [0.2, 0.6, 1.0]},
+      "lights": [],
+      "objects": [{"shape": {"sphere": {"radius": 1}}, "material": {"color": [1, 1, 1], "reflectivity": 1}}],
+      "render": {"max_reflection_depth": 1}
+    }"#;
+    let out = run(&scene(json), 1);
+    let c = out.framebuffer.color[4 * 9 + 4];
+    assert!((c - Vec3::new(0.2, 0.6, 1.0)).length() < 1e-6, "{c:?}");
+    assert!(out.stats.reflection_rays > 0);
+    let none = json.replace(
+        r#""max_reflection_depth": 1"#,
+        r#""max_reflection_depth": 0"#,
+    );
+    let out = run(&scene(&none), 1);
+    assert_eq!(out.stats.reflection_rays, 0);
+    // No lights, no reflection: black.
+    assert_eq!(out.framebuffer.color[4 * 9 + 4], Vec3::ZERO);
+}
+
+#[test]
+fn antialiasing_smooths_edges_but_aovs_stay_at_the_pixel_centre() {
+    let s1 = scene(ONE_SPHERE);
+    let mut s8 = s1.clone();
+    s8.render.samples_per_pixel = 8;
+    let a = run(&s1, 1);
+    let b = run(&s8, 1);
+    assert_eq!(b.stats.primary_rays, 8 * 33 * 33);
+    assert_eq!(a.framebuffer.depth, b.framebuffer.depth);
+    // Some edge pixel gets a colour strictly between background and surface.
+    let bg = Vec3::new(0.1, 0.2, 0.3);
+    let mixed = a
+        .framebuffer
+        .color
+        .iter()
+        .zip(&b.framebuffer.color)
+        .filter(|(x, y)| (**x - **y).length() > 1e-3)
+        .count();
+    assert!(mixed > 0);
+    assert!(
+        b.framebuffer
+            .color
+            .iter()
+            .all(|c| c.is_finite() && c.min_element() >= 0.0)
+    );
+    assert!(
+        b.framebuffer
+            .color
+            .iter()
+            .any(|c| (*c - bg).length() < 1e-6)
+    );
+}
+
+#[test]
+fn thread_count_does_not_change_the_image() {
+    let s = scene(ONE_SPHERE);
+    let a = run(&s, 1);
+    let b = run(&s, 2);
+    assert_eq!(a.framebuffer, b.framebuffer);
+    assert_eq!(a.stats, b.stats);
+}
+
+#[test]
+fn render_refuses_buffers_over_the_memory_limit() {
+    let s = scene(ONE_SPHERE);
+    let g = Spheres::from_scene(&s);
+    let bg = BackgroundSampler::load(&s.background).unwrap();
+    let err = render(
+        &s,
+        &g,
+        &bg,
+        &RenderOptions {
+            threads: 1,
+            memory_limit_bytes: 1000,
+        },
+        &|| {},
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("over the limit"), "{err}");
+}
