@@ -14,8 +14,9 @@ use crate::resolved::*;
 pub const MAX_IMAGE_SIDE: u32 = 16_384;
 /// Largest accepted pixel count (width * height).
 pub const MAX_PIXELS: u64 = 64 * 1024 * 1024;
-/// Deepest accepted object nesting (CSG and repeat nodes).
-pub const MAX_NESTING_DEPTH: usize = 64;
+/// Deepest accepted object nesting (CSG and repeat nodes). JSON itself stops at 128 levels
+/// (serde_json's recursion limit, about 31 object levels), with a parse error.
+pub const MAX_NESTING_DEPTH: usize = 24;
 /// Most nodes accepted in one scene.
 pub const MAX_NODES: usize = 100_000;
 /// Largest accepted finite repetition count on one axis.
