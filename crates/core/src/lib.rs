@@ -7,6 +7,7 @@
 
 pub mod background;
 pub mod camera;
+pub mod compare;
 pub mod framebuffer;
 pub mod geometry;
 pub mod image_io;
@@ -14,6 +15,7 @@ pub mod integrator;
 pub mod stats;
 
 pub use background::{BackgroundError, BackgroundSampler};
+pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{RenderError, RenderOptions, RenderOutput, render};
