@@ -1,0 +1,367 @@
+//! The backend conformance suite.
+//!
+//! Every backend runs the same small scenes (64x64) and compares its AOVs with the exact
+//! reference pixel by pixel (`marchmesh_core::compare`). A backend's test file instantiates
+//! the suite with [`conformance_suite!`], giving a builder for itself, a builder for the
+//! reference, and its tolerances per case (the way `fidget` runs one test suite on every
+//! evaluator):
+//!
+//! ```ignore
+//! marchmesh_conformance::conformance_suite!(
+//!     backend = |scene| marchmesh_sdf::build(scene, &Default::default()).map(|g| Box::new(g) as _),
+//!     reference = |scene| marchmesh_reference::build(scene, &Default::default()).map(|g| Box::new(g) as _),
+//!     tolerance = |case| marchmesh_conformance::Tolerance::default(),
+//! );
+//! ```
+//!
+//! To add a case: add it to [`CASES`] and a line to the macro's list below.
+
+use std::path::{Path, PathBuf};
+
+use marchmesh_core::{
+    Accuracy, BackgroundSampler, Geometry, RenderOptions, RenderStats, compare, render,
+};
+use marchmesh_scene::Scene;
+
+/// Image side of every conformance render, pixels.
+pub const SIDE: u32 = 64;
+
+/// What a backend must meet on one case.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Tolerance {
+    /// Largest share of pixels hit by exactly one of the backend and the reference, %.
+    pub silhouette_mismatch_pct: f64,
+    /// Largest 95th-percentile depth error relative to the reference depth.
+    pub depth_rel_p95: f64,
+    /// Largest mean normal angle error, degrees.
+    pub normal_deg_mean: f64,
+    /// Largest share of pixels (hit by both) showing a different material, %.
+    pub material_mismatch_pct: f64,
+    /// Largest share of rays that may end by step exhaustion, %.
+    pub step_exhaustion_pct: f64,
+}
+
+impl Default for Tolerance {
+    /// Tight defaults meant for an accurate backend: 1.5% silhouette pixels, 0.2% relative
+    /// depth, 1 degree mean normal error, 1% material, no step exhaustion.
+    fn default() -> Self {
+        Self {
+            silhouette_mismatch_pct: 1.5,
+            depth_rel_p95: 2e-3,
+            normal_deg_mean: 1.0,
+            material_mismatch_pct: 1.0,
+            step_exhaustion_pct: 0.0,
+        }
+    }
+}
+
+/// A conformance scene: a name and its JSON (camera size is forced to 64x64).
+pub struct Case {
+    /// Test name.
+    pub name: &'static str,
+    /// Scene JSON; relative mesh paths resolve against `scenes/` of the repository.
+    pub json: &'static str,
+}
+
+macro_rules! cam {
+    () => {
+        r#""camera": {"position": [0, 1.5, -5], "look_at": [0, 0, 0], "vfov_deg": 40}"#
+    };
+}
+
+/// Every case, each a small scene exercising one shape, operator or numerical situation.
+pub const CASES: &[Case] = &[
+    Case {
+        name: "sphere",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"sphere": {"radius": 1}}}]}"#
+        ),
+    },
+    Case {
+        name: "box_rotated",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"box": {"half_extents": [0.8, 0.5, 0.6]}}, "transform": {"rotate_deg": [20, 35, 10]}}]}"#
+        ),
+    },
+    Case {
+        name: "ellipsoid",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"ellipsoid": {"radii": [1.3, 0.6, 0.8]}}, "transform": {"rotate_deg": [0, 30, 0]}}]}"#
+        ),
+    },
+    Case {
+        name: "cylinder",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"cylinder": {"radius": 0.7, "height": 1.6}}, "transform": {"rotate_deg": [25, 0, 15]}}]}"#
+        ),
+    },
+    Case {
+        name: "torus",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"torus": {"major_radius": 1.1, "minor_radius": 0.35}}, "transform": {"rotate_deg": [-40, 0, 0]}}]}"#
+        ),
+    },
+    Case {
+        name: "plane_and_sphere_shadow",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}},
+                {"shape": {"sphere": {"radius": 0.8}}, "transform": {"translate": [0, -0.2, 0]}}]}"#
+        ),
+    },
+    Case {
+        name: "triangle",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"triangle": {"vertices": [[-1.2, -0.8, 0.3], [1.3, -0.6, -0.2], [0.1, 1.2, 0.1]]}}}]}"#
+        ),
+    },
+    Case {
+        name: "nonuniform_scale",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"scale": [1.5, 0.5, 0.8], "rotate_deg": [0, 0, 20]}}]}"#
+        ),
+    },
+    Case {
+        name: "union",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"union": {"children": [
+                {"shape": {"box": {"half_extents": [0.6, 0.6, 0.6]}}},
+                {"shape": {"sphere": {"radius": 0.75}}, "transform": {"translate": [0.4, 0.4, -0.4]}, "material": {"color": [1, 0, 0]}}]}}}]}"#
+        ),
+    },
+    Case {
+        name: "intersection",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"intersection": {"children": [
+                {"shape": {"box": {"half_extents": [0.8, 0.8, 0.8]}}},
+                {"shape": {"sphere": {"radius": 1.05}}, "material": {"color": [1, 0, 0]}}]}}, "transform": {"rotate_deg": [0, 30, 0]}}]}"#
+        ),
+    },
+    Case {
+        name: "subtraction",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"subtraction": {"children": [
+                {"shape": {"box": {"half_extents": [0.8, 0.8, 0.8]}}},
+                {"shape": {"sphere": {"radius": 0.9}}, "transform": {"translate": [0, 0.5, -0.5]}, "material": {"color": [1, 0, 0]}}]}}, "transform": {"rotate_deg": [0, -25, 0]}}]}"#
+        ),
+    },
+    Case {
+        name: "smooth_union",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"smooth_union": {"blend_radius": 0.4, "children": [
+                {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [-0.5, 0, 0]}},
+                {"shape": {"sphere": {"radius": 0.6}}, "transform": {"translate": [0.6, 0.1, 0]}}]}}}]}"#
+        ),
+    },
+    Case {
+        name: "repeat_finite",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"repeat": {"period": [1, 0, 1], "count": [3, null, 2],
+                "child": {"shape": {"sphere": {"radius": 0.35}}}}}}]}"#
+        ),
+    },
+    Case {
+        name: "repeat_infinite",
+        json: r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50},
+            "objects": [{"shape": {"repeat": {"period": [2, 0, 2],
+                "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}],
+            "render": {"max_distance": 40}}"#,
+    },
+    Case {
+        name: "tiny_scale",
+        json: r#"{"camera": {"position": [0, 1.5e-3, -5e-3], "look_at": [0, 0, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"torus": {"major_radius": 1.1e-3, "minor_radius": 0.35e-3}}, "transform": {"rotate_deg": [-40, 0, 0]}},
+                        {"shape": {"box": {"half_extents": [3e-3, 1e-4, 3e-3]}}, "transform": {"translate": [0, -1e-3, 0]}}],
+            "render": {"max_distance": 1}}"#,
+    },
+    Case {
+        name: "huge_scale",
+        json: r#"{"camera": {"position": [0, 1.5e3, -5e3], "look_at": [0, 0, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"torus": {"major_radius": 1.1e3, "minor_radius": 0.35e3}}, "transform": {"rotate_deg": [-40, 0, 0]}},
+                        {"shape": {"box": {"half_extents": [3e3, 1e2, 3e3]}}, "transform": {"translate": [0, -1e3, 0]}}],
+            "render": {"max_distance": 1e5}}"#,
+    },
+    Case {
+        name: "far_from_origin",
+        json: r#"{"camera": {"position": [1e5, 1e5, 1e5], "look_at": [1e5, 1e5, 1.00005e5]},
+            "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [1e5, 1e5, 1.00005e5]}}]}"#,
+    },
+    Case {
+        name: "bunny",
+        json: r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": 0.25}}]}"#,
+    },
+];
+
+/// The repository's `scenes/` folder (mesh paths in cases resolve against it).
+pub fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+}
+
+/// Parses case `name` at 64x64.
+pub fn case_scene(name: &str) -> Scene {
+    let case = CASES
+        .iter()
+        .find(|c| c.name == name)
+        .unwrap_or_else(|| panic!("no conformance case named {name}"));
+    marchmesh_scene::parse_scene(case.json, case.name, &scenes_dir())
+        .and_then(|s| s.with_image_size(SIDE, SIDE).map_err(|e| panic!("{e}")))
+        .unwrap_or_else(|e| panic!("conformance case {name} is invalid: {e}"))
+}
+
+/// The outcome of one case.
+#[derive(Debug, Clone)]
+pub struct CaseResult {
+    /// Accuracy against the reference.
+    pub accuracy: Accuracy,
+    /// The backend's render counters.
+    pub stats: RenderStats,
+}
+
+/// A function that builds a geometry for a scene.
+pub type Builder<'a, E> = &'a dyn Fn(&Scene) -> Result<Box<dyn Geometry>, E>;
+
+/// Renders case `name` with both builders and compares.
+pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
+    name: &str,
+    backend: Builder<'_, E1>,
+    reference: Builder<'_, E2>,
+) -> CaseResult {
+    let scene = case_scene(name);
+    let bg = BackgroundSampler::load(&scene.background).expect("colour background");
+    let opts = RenderOptions {
+        threads: 1,
+        ..Default::default()
+    };
+    let g = backend(&scene).unwrap_or_else(|e| panic!("{name}: backend failed to build: {e}"));
+    let r = reference(&scene).unwrap_or_else(|e| panic!("{name}: reference failed to build: {e}"));
+    let test = render(&scene, g.as_ref(), &bg, &opts, &|| {}).expect("render");
+    let truth = render(&scene, r.as_ref(), &bg, &opts, &|| {}).expect("reference render");
+    let accuracy = compare(&test.framebuffer, &truth.framebuffer).expect("same size");
+    assert!(
+        truth.framebuffer.depth.iter().any(|d| d.is_finite()),
+        "{name}: the reference hit nothing; the case is broken"
+    );
+    CaseResult {
+        accuracy,
+        stats: test.stats,
+    }
+}
+
+/// Panics with every violated bound of `tol`.
+pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
+    let a = &r.accuracy;
+    let mut failures = Vec::new();
+    let material_pct = 100.0 * a.material_mismatch as f64 / a.both_hit.max(1) as f64;
+    let exhaustion_pct = 100.0 * r.stats.step_exhaustion_rate();
+    if a.non_finite > 0 || r.stats.non_finite_hits > 0 || r.stats.non_finite_pixels > 0 {
+        failures.push(format!(
+            "non-finite values: {} pixels, {} hits",
+            a.non_finite, r.stats.non_finite_hits
+        ));
+    }
+    if a.silhouette_mismatch_pct > tol.silhouette_mismatch_pct {
+        failures.push(format!(
+            "silhouette mismatch {:.2}% > {:.2}%",
+            a.silhouette_mismatch_pct, tol.silhouette_mismatch_pct
+        ));
+    }
+    if a.depth_rel_p95 > tol.depth_rel_p95 {
+        failures.push(format!(
+            "relative depth error p95 {:.2e} > {:.2e}",
+            a.depth_rel_p95, tol.depth_rel_p95
+        ));
+    }
+    if a.normal_deg_mean > tol.normal_deg_mean {
+        failures.push(format!(
+            "mean normal error {:.3} deg > {:.3} deg",
+            a.normal_deg_mean, tol.normal_deg_mean
+        ));
+    }
+    if material_pct > tol.material_mismatch_pct {
+        failures.push(format!(
+            "material mismatch {material_pct:.2}% > {:.2}%",
+            tol.material_mismatch_pct
+        ));
+    }
+    if exhaustion_pct > tol.step_exhaustion_pct {
+        failures.push(format!(
+            "step exhaustion {exhaustion_pct:.3}% > {:.3}%",
+            tol.step_exhaustion_pct
+        ));
+    }
+    assert!(
+        failures.is_empty(),
+        "conformance case `{name}` failed:\n  {}\naccuracy: {a:#?}",
+        failures.join("\n  ")
+    );
+}
+
+/// Instantiates one `#[test]` per conformance case for a backend.
+///
+/// `backend` and `reference` are closures `Fn(&Scene) -> Result<Box<dyn Geometry>, E>`;
+/// `tolerance` is a closure `Fn(&str) -> Tolerance` giving the bounds for each case name.
+#[macro_export]
+macro_rules! conformance_suite {
+    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr $(,)?) => {
+        $crate::conformance_suite!(@cases $backend, $reference, $tol;
+            sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
+            nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
+            repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny);
+    };
+    (@cases $backend:expr, $reference:expr, $tol:expr; $($name:ident),* $(,)?) => {
+        $(
+            #[test]
+            fn $name() {
+                let name = stringify!($name);
+                let backend = $backend;
+                let reference = $reference;
+                let tol: fn(&str) -> $crate::Tolerance = $tol;
+                let r = $crate::run_case(name, &backend, &reference);
+                $crate::check(name, &r, &tol(name));
+            }
+        )*
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_case_parses_and_is_listed_in_the_macro() {
+        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny";
+        let names: Vec<&str> = listed.split(", ").collect();
+        assert_eq!(names.len(), CASES.len());
+        for c in CASES {
+            assert!(names.contains(&c.name), "{} not in the macro list", c.name);
+            let s = case_scene(c.name);
+            assert_eq!((s.camera.width, s.camera.height), (SIDE, SIDE));
+        }
+    }
+}
