@@ -1,0 +1,108 @@
+//! Wavefront OBJ loading through `tobj`.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use glam::Vec3;
+
+use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh};
+
+/// Reads every model of an OBJ file (materials ignored) into one raw mesh.
+pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
+    let file = File::open(path).map_err(|source| MeshLoadError::Io {
+        path: path.to_path_buf(),
+        action: "cannot read",
+        source,
+    })?;
+    let mut reader = BufReader::new(file);
+    let options = tobj::LoadOptions {
+        single_index: true,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    // Materials do not matter to geometry: never open .mtl files.
+    let (models, _materials) = tobj::load_obj_buf(&mut reader, &options, |_| {
+        Err(tobj::LoadError::OpenFileFailed)
+    })
+    .map_err(|e| MeshLoadError::Malformed {
+        path: path.to_path_buf(),
+        format: "OBJ",
+        reason: e.to_string(),
+    })?;
+
+    let mut report = LoadReport {
+        source: path.to_path_buf(),
+        format: MeshFormat::Obj,
+        ..LoadReport::default()
+    };
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut all_have_normals = true;
+    let mut triangles = Vec::new();
+    for model in &models {
+        let m = &model.mesh;
+        let base = u32::try_from(positions.len()).map_err(|_| too_large(path))?;
+        let count = m.positions.len() / 3;
+        positions.extend(
+            m.positions
+                .chunks_exact(3)
+                .map(|c| Vec3::new(c[0], c[1], c[2])),
+        );
+        if m.normals.len() == m.positions.len() && !m.normals.is_empty() {
+            normals.extend(
+                m.normals
+                    .chunks_exact(3)
+                    .map(|c| Vec3::new(c[0], c[1], c[2])),
+            );
+        } else if count > 0 {
+            if all_have_normals && !m.normals.is_empty() {
+                report.notes.push(format!(
+                    "normals dropped: model {:?} has {} normal components for {} vertices",
+                    model.name,
+                    m.normals.len(),
+                    count
+                ));
+            } else if all_have_normals && !normals.is_empty() {
+                report
+                    .notes
+                    .push(format!("normals dropped: model {:?} has none", model.name));
+            }
+            all_have_normals = false;
+        }
+        if !m.indices.len().is_multiple_of(3) {
+            return Err(MeshLoadError::Malformed {
+                path: path.to_path_buf(),
+                format: "OBJ",
+                reason: format!(
+                    "model {:?}: {} face indices is not a multiple of 3 after triangulation",
+                    model.name,
+                    m.indices.len()
+                ),
+            });
+        }
+        for t in m.indices.chunks_exact(3) {
+            let mut tri = [0u32; 3];
+            for (k, &i) in t.iter().enumerate() {
+                tri[k] = base.checked_add(i).ok_or_else(|| too_large(path))?;
+            }
+            triangles.push(tri);
+        }
+    }
+    u32::try_from(positions.len()).map_err(|_| too_large(path))?;
+    let normals = (all_have_normals && !positions.is_empty()).then_some(normals);
+    Ok(RawMesh {
+        report,
+        positions,
+        normals,
+        triangles,
+    })
+}
+
+fn too_large(path: &Path) -> MeshLoadError {
+    MeshLoadError::TooLarge {
+        path: path.to_path_buf(),
+        reason: "more than 2^32 vertices".into(),
+    }
+}
