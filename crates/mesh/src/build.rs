@@ -1,0 +1,437 @@
+//! Scene walk: placements of shapes with their object-to-render transforms, repetition
+//! expansion, bounds, and the per-shape tessellation budget.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use glam::{DAffine3, DMat3, DVec3};
+use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
+
+use crate::MeshError;
+use crate::options::{MeshOptions, Tessellation};
+use crate::tessellate::Detail;
+
+/// What a placed shape is; equal keys share one BLAS.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub(crate) enum ShapeKey {
+    /// An analytic shape: discriminant and parameter bits.
+    Analytic(u8, [u64; 9]),
+    /// A mesh file.
+    Mesh(PathBuf),
+    /// A CSG / smooth-union subtree, by node address (stable while the scene is borrowed).
+    Composite(usize),
+}
+
+/// One shape placed in render space.
+#[derive(Debug, Clone)]
+pub(crate) struct Placement<'a> {
+    pub node: &'a Node,
+    pub key: ShapeKey,
+    pub to_render: DAffine3,
+    pub material: MaterialId,
+}
+
+/// Everything the walk found.
+#[derive(Debug, Default)]
+pub(crate) struct Walk<'a> {
+    pub placements: Vec<Placement<'a>>,
+    pub planes: Vec<(&'a Node, DAffine3)>,
+    pub notes: Vec<String>,
+    pub repeat_cells: u64,
+}
+
+/// Local bounds of a node in its parent's frame (its transform applied); `None` when
+/// unbounded (planes, infinite repetition).
+pub(crate) fn node_bounds(
+    node: &Node,
+    mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
+) -> Option<(DVec3, DVec3)> {
+    let local = local_bounds(node, mesh_bounds)?;
+    Some(transform_bounds(&node.transform, local))
+}
+
+/// Bounds of a node in its own frame (before its transform).
+pub(crate) fn local_bounds(
+    node: &Node,
+    mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
+) -> Option<(DVec3, DVec3)> {
+    let sym = |h: DVec3| Some((-h, h));
+    match &node.kind {
+        NodeKind::Sphere { radius } => sym(DVec3::splat(*radius)),
+        NodeKind::Ellipsoid { radii } => sym(*radii),
+        NodeKind::Box { half_extents } => sym(*half_extents),
+        NodeKind::Cylinder {
+            radius,
+            half_height,
+        } => sym(DVec3::new(*radius, *half_height, *radius)),
+        NodeKind::Torus {
+            major_radius,
+            minor_radius,
+        } => {
+            let r = major_radius + minor_radius;
+            sym(DVec3::new(r, *minor_radius, r))
+        }
+        NodeKind::Triangle { vertices } => Some((
+            vertices[0].min(vertices[1]).min(vertices[2]),
+            vertices[0].max(vertices[1]).max(vertices[2]),
+        )),
+        NodeKind::Plane { .. } => None,
+        NodeKind::Mesh { path } => mesh_bounds.get(path).copied(),
+        NodeKind::Union(children) => {
+            union_all(children.iter().map(|c| node_bounds(c, mesh_bounds)))
+        }
+        NodeKind::SmoothUnion {
+            children,
+            blend_radius,
+        } => union_all(children.iter().map(|c| node_bounds(c, mesh_bounds)))
+            .map(|(lo, hi)| (lo - blend_radius * 0.25, hi + blend_radius * 0.25)),
+        NodeKind::Intersection(children) => {
+            let mut out: Option<(DVec3, DVec3)> = None;
+            let mut any_bounded = false;
+            for c in children {
+                if let Some((lo, hi)) = node_bounds(c, mesh_bounds) {
+                    any_bounded = true;
+                    out = Some(match out {
+                        Some((a, b)) => (a.max(lo), b.min(hi)),
+                        None => (lo, hi),
+                    });
+                }
+            }
+            if any_bounded { out } else { None }
+        }
+        NodeKind::Subtraction(children) => {
+            children.first().and_then(|c| node_bounds(c, mesh_bounds))
+        }
+        NodeKind::Repeat {
+            child,
+            period,
+            count,
+        } => {
+            let (lo, hi) = node_bounds(child, mesh_bounds)?;
+            let mut lo = lo;
+            let mut hi = hi;
+            for axis in 0..3 {
+                if period[axis] > 0.0 {
+                    let n = count[axis]?;
+                    let half_span = f64::from(n.saturating_sub(1)) * 0.5 * period[axis];
+                    lo[axis] -= half_span;
+                    hi[axis] += half_span;
+                }
+            }
+            Some((lo, hi))
+        }
+    }
+}
+
+fn union_all(items: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Option<(DVec3, DVec3)> {
+    let mut out: Option<(DVec3, DVec3)> = None;
+    for b in items {
+        let (lo, hi) = b?;
+        out = Some(match out {
+            Some((a, c)) => (a.min(lo), c.max(hi)),
+            None => (lo, hi),
+        });
+    }
+    out
+}
+
+/// The axis-aligned bounds of a transformed box.
+pub(crate) fn transform_bounds(m: &DAffine3, (lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
+    let centre = m.transform_point3((lo + hi) * 0.5);
+    let half = (hi - lo) * 0.5;
+    let a = m.matrix3;
+    let extent = DVec3::new(
+        a.row(0).abs().dot(half),
+        a.row(1).abs().dot(half),
+        a.row(2).abs().dot(half),
+    );
+    (centre - extent, centre + extent)
+}
+
+/// Distance from the render-space origin (the camera) to a box; 0 inside.
+pub(crate) fn distance_to_box((lo, hi): (DVec3, DVec3)) -> f64 {
+    let d = (lo.max(DVec3::ZERO) - DVec3::ZERO).max(DVec3::ZERO - hi);
+    d.max(DVec3::ZERO).length()
+}
+
+/// Largest singular value of a 3x3 matrix (power iteration on `M^T M`), slightly rounded up.
+pub(crate) fn max_stretch(m: &DMat3) -> f64 {
+    let mtm = m.transpose() * *m;
+    let mut v = DVec3::new(0.577, 0.5774, 0.5773);
+    let mut lambda = 0.0;
+    for _ in 0..64 {
+        let w = mtm * v;
+        let len = w.length();
+        if !(len > 0.0) {
+            break;
+        }
+        lambda = len;
+        v = w / len;
+    }
+    // Power iteration approaches from below; the Frobenius norm is a hard upper bound.
+    let frobenius =
+        (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
+    (lambda.sqrt() * 1.001)
+        .min(frobenius)
+        .max(f64::MIN_POSITIVE)
+}
+
+/// Walks the scene tree. `mesh_bounds` must hold every mesh path.
+pub(crate) fn walk<'a>(
+    scene: &'a Scene,
+    options: &MeshOptions,
+    from_world: DAffine3,
+    mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
+) -> Result<Walk<'a>, MeshError> {
+    let mut w = Walk::default();
+    let ctx = Ctx {
+        options,
+        max_distance: scene.render.max_distance,
+        mesh_bounds,
+    };
+    for object in &scene.objects {
+        visit(object, from_world, &ctx, &mut w)?;
+    }
+    Ok(w)
+}
+
+struct Ctx<'b> {
+    options: &'b MeshOptions,
+    max_distance: f64,
+    mesh_bounds: &'b HashMap<PathBuf, (DVec3, DVec3)>,
+}
+
+fn analytic_key(kind: &NodeKind) -> Option<ShapeKey> {
+    let b = |v: f64| v.to_bits();
+    let v3 = |v: DVec3| [b(v.x), b(v.y), b(v.z)];
+    let mut p = [0u64; 9];
+    let tag = match kind {
+        NodeKind::Sphere { radius } => {
+            p[0] = b(*radius);
+            0
+        }
+        NodeKind::Ellipsoid { radii } => {
+            p[..3].copy_from_slice(&v3(*radii));
+            1
+        }
+        NodeKind::Box { half_extents } => {
+            p[..3].copy_from_slice(&v3(*half_extents));
+            2
+        }
+        NodeKind::Cylinder {
+            radius,
+            half_height,
+        } => {
+            p[0] = b(*radius);
+            p[1] = b(*half_height);
+            3
+        }
+        NodeKind::Torus {
+            major_radius,
+            minor_radius,
+        } => {
+            p[0] = b(*major_radius);
+            p[1] = b(*minor_radius);
+            4
+        }
+        NodeKind::Triangle { vertices } => {
+            for (k, v) in vertices.iter().enumerate() {
+                p[3 * k..3 * k + 3].copy_from_slice(&v3(*v));
+            }
+            5
+        }
+        _ => return None,
+    };
+    Some(ShapeKey::Analytic(tag, p))
+}
+
+fn visit<'a>(
+    node: &'a Node,
+    parent: DAffine3,
+    ctx: &Ctx,
+    w: &mut Walk<'a>,
+) -> Result<(), MeshError> {
+    let m = parent * node.transform;
+    match &node.kind {
+        NodeKind::Plane { .. } => w.planes.push((node, m)),
+        NodeKind::Mesh { path } => w.placements.push(Placement {
+            node,
+            key: ShapeKey::Mesh(path.clone()),
+            to_render: m,
+            material: node.material,
+        }),
+        NodeKind::Union(children) => {
+            // Tracing the children's surfaces gives the union's first hit for rays starting
+            // outside every child (only rays starting inside see inner faces).
+            for c in children {
+                visit(c, m, ctx, w)?;
+            }
+        }
+        NodeKind::Intersection(_) | NodeKind::Subtraction(_) | NodeKind::SmoothUnion { .. } => {
+            w.placements.push(Placement {
+                node,
+                key: ShapeKey::Composite(node as *const Node as usize),
+                to_render: m,
+                material: node.material,
+            })
+        }
+        NodeKind::Repeat {
+            child,
+            period,
+            count,
+        } => {
+            let offsets = repeat_offsets(node, child, *period, *count, m, ctx, w)?;
+            for o in offsets {
+                visit(child, m * DAffine3::from_translation(o), ctx, w)?;
+            }
+        }
+        kind => {
+            let key = analytic_key(kind).ok_or_else(|| MeshError::Unsupported {
+                json_path: node.json_path.clone(),
+                reason: "unknown shape".into(),
+            })?;
+            w.placements.push(Placement {
+                node,
+                key,
+                to_render: m,
+                material: node.material,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Cell offsets (repeat node's frame) of a repetition: all cells of finite axes; on infinite
+/// axes the cells whose copy of the child comes within `max_distance` of the camera.
+fn repeat_offsets(
+    node: &Node,
+    child: &Node,
+    period: DVec3,
+    count: [Option<u32>; 3],
+    m: DAffine3,
+    ctx: &Ctx,
+    w: &mut Walk,
+) -> Result<Vec<DVec3>, MeshError> {
+    let child_bounds = node_bounds(child, ctx.mesh_bounds);
+    let infinite = (0..3).any(|a| period[a] > 0.0 && count[a].is_none());
+    let Some((clo, chi)) = child_bounds.or(if infinite {
+        None
+    } else {
+        Some((DVec3::ZERO, DVec3::ZERO))
+    }) else {
+        return Err(MeshError::Unsupported {
+            json_path: node.json_path.clone(),
+            reason:
+                "infinite repetition of an unbounded child (a plane?) has no finite tessellation"
+                    .into(),
+        });
+    };
+    // Clipping check: the SDF semantics clip each copy to its cell.
+    for a in 0..3 {
+        if period[a] > 0.0
+            && child_bounds.is_some()
+            && (clo[a] < -period[a] * 0.5 - 1e-12 || chi[a] > period[a] * 0.5 + 1e-12)
+        {
+            w.notes.push(format!(
+                "{}: the child exceeds its repetition cell on axis {a}; the mesh backend instances whole copies (no clipping at cell borders)",
+                node.json_path
+            ));
+            break;
+        }
+    }
+    // Camera position and reach in the repeat node's frame.
+    let inverse = m.inverse();
+    let camera = inverse.transform_point3(DVec3::ZERO);
+    let stretch_inv = max_stretch(&inverse.matrix3);
+    let reach = ctx.max_distance * stretch_inv;
+    let mut ranges: [(i64, i64); 3] = [(0, 0); 3];
+    let mut centre = DVec3::ZERO;
+    let mut total: u128 = 1;
+    for a in 0..3 {
+        let s = period[a];
+        if s <= 0.0 {
+            continue;
+        }
+        match count[a] {
+            Some(n) => {
+                ranges[a] = (0, i64::from(n) - 1);
+                centre[a] = (f64::from(n) - 1.0) * 0.5;
+            }
+            None => {
+                let lo_k = ((camera[a] - reach - chi[a]) / s).floor();
+                let hi_k = ((camera[a] + reach - clo[a]) / s).ceil();
+                let clamp = |k: f64| k.clamp(-9.0e15, 9.0e15) as i64;
+                ranges[a] = (clamp(lo_k), clamp(hi_k));
+            }
+        }
+        total = total.saturating_mul((ranges[a].1 - ranges[a].0 + 1).max(0) as u128);
+    }
+    if total > u128::from(ctx.options.max_instances) {
+        return Err(MeshError::TooManyInstances {
+            json_path: node.json_path.clone(),
+            cells: total.min(u128::from(u64::MAX)) as u64,
+            limit: ctx.options.max_instances,
+        });
+    }
+    let mut out = Vec::new();
+    for i in ranges[0].0..=ranges[0].1 {
+        for j in ranges[1].0..=ranges[1].1 {
+            for k in ranges[2].0..=ranges[2].1 {
+                let idx = DVec3::new(i as f64, j as f64, k as f64);
+                let o = (idx - centre) * period;
+                if infinite {
+                    // Cull copies entirely beyond max_distance (in render space).
+                    let b = transform_bounds(&(m * DAffine3::from_translation(o)), (clo, chi));
+                    if distance_to_box(b) > ctx.max_distance {
+                        continue;
+                    }
+                }
+                out.push(o);
+            }
+        }
+    }
+    if infinite {
+        w.notes.push(format!(
+            "{}: infinite repetition bounded to the {} cells whose copy comes within max_distance = {} of the camera (index ranges x {:?}, y {:?}, z {:?})",
+            node.json_path,
+            out.len(),
+            ctx.max_distance,
+            ranges[0],
+            ranges[1],
+            ranges[2]
+        ));
+    }
+    w.repeat_cells += out.len() as u64;
+    Ok(out)
+}
+
+/// Tessellation detail (shape-local) a placement needs under `options.tessellation`.
+pub(crate) fn placement_detail(
+    p: &Placement,
+    local: (DVec3, DVec3),
+    pixel_angle: f64,
+    tessellation: Tessellation,
+) -> Detail {
+    let stretch = max_stretch(&p.to_render.matrix3);
+    match tessellation {
+        Tessellation::FixedLevel(level) => Detail::Level(level.min(12)),
+        Tessellation::ChordError { world } => Detail::ChordError(world / stretch),
+        Tessellation::ScreenError { pixels } => {
+            let world_box = transform_bounds(&p.to_render, local);
+            let size = (world_box.1 - world_box.0).length();
+            // The camera inside the bounds would ask for infinite detail: floor the distance
+            // at 1/1000 of the object's size (segment counts are capped as well).
+            let distance = distance_to_box(world_box).max(size * 1e-3);
+            Detail::ChordError(pixels * pixel_angle * distance / stretch)
+        }
+    }
+}
+
+/// The finer of two details.
+pub(crate) fn finer(a: Detail, b: Detail) -> Detail {
+    match (a, b) {
+        (Detail::ChordError(x), Detail::ChordError(y)) => Detail::ChordError(x.min(y)),
+        (Detail::Level(x), Detail::Level(y)) => Detail::Level(x.max(y)),
+        (x, _) => x,
+    }
+}

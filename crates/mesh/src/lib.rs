@@ -1,0 +1,759 @@
+//! The mesh backend of marchmesh: every object becomes triangles in obvhs BVHs.
+//!
+//! * Analytic shapes are tessellated to an error budget ([`Tessellation`]): by default the
+//!   chord error, seen from the shape's nearest distance to the camera, stays under a quarter
+//!   of a pixel. Planes become a finite quad grid covering `render.max_distance` around the
+//!   camera's foot point.
+//! * Meshes load through `marchmesh-meshio` (OBJ, glTF/.glb).
+//! * CSG intersections, subtractions and smooth unions have no exact triangle form: their
+//!   surface is extracted from the shared distance field (`marchmesh-field`) with surface
+//!   nets, restricted to the object's bounds. Plain unions need no extraction: their
+//!   children are traced directly (same first hit for rays starting outside the solid).
+//! * Shapes placed more than once (repetition, a mesh used twice) are built once as a
+//!   bottom-level BVH and instanced under a top-level BVH with object-to-render transforms;
+//!   everything placed once is flattened into one render-space BVH. Infinite repetition is
+//!   bounded to the cells within `max_distance` of the camera (reported in the notes).
+//! * Shading normals interpolate vertex normals with barycentrics where the surface has
+//!   them (tessellations, meshes with normals), geometric normals otherwise.
+//!
+//! All data is in render space (world minus camera position, in f64 before converting to
+//! f32), as the [`marchmesh_core::Geometry`] contract requires.
+
+mod blas;
+mod build;
+mod extract;
+mod options;
+pub mod tessellate;
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use glam::{Affine3A, DAffine3, DVec3, Vec3, Vec3A};
+use marchmesh_core::{
+    Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
+    TraceResult,
+};
+use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh};
+use marchmesh_scene::{MaterialId, NodeKind, Scene};
+use obvhs::ray::Ray as ObRay;
+
+use blas::{Blas, BlasInput, Tree};
+use build::{Placement, ShapeKey};
+
+pub use options::{BuildQuality, BvhKind, MeshOptions, Tessellation};
+use tessellate::{Detail, LocalMesh};
+
+/// Why the mesh backend could not build a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum MeshError {
+    /// A mesh file could not be loaded (the message names the file and the reason).
+    #[error("{json_path}: {source}")]
+    Load {
+        /// The scene object that uses the mesh.
+        json_path: String,
+        /// What went wrong.
+        source: MeshLoadError,
+    },
+    /// The scene uses something this backend cannot turn into triangles.
+    #[error("{json_path}: not supported by the mesh backend: {reason}")]
+    Unsupported {
+        /// The offending object.
+        json_path: String,
+        /// Why.
+        reason: String,
+    },
+    /// An infinite repetition reaches more cells than `MeshOptions::max_instances`.
+    #[error(
+        "{json_path}: infinite repetition would need {cells} cells within max_distance (limit {limit}); lower render.max_distance or raise max_instances"
+    )]
+    TooManyInstances {
+        /// The repeat node.
+        json_path: String,
+        /// Cells needed.
+        cells: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// An option is out of range.
+    #[error("invalid mesh backend option: {0}")]
+    InvalidOption(String),
+}
+
+/// One placement of a BLAS: the render-to-local transform and the fallback material.
+#[derive(Debug, Clone, Copy)]
+struct Instance {
+    to_local: Affine3A,
+    blas: u32,
+    material: MaterialId,
+}
+
+/// Where a closest hit was found.
+#[derive(Debug, Clone, Copy)]
+enum HitSource {
+    Flat,
+    Instance(u32),
+}
+
+/// The built mesh backend: a render-space BVH of everything placed once, plus instanced
+/// BLASes under a TLAS. Implements [`Geometry`].
+#[derive(Clone)]
+pub struct MeshGeometry {
+    flat: Option<Blas>,
+    flat_materials_default: MaterialId,
+    blases: Vec<Blas>,
+    instances: Vec<Instance>,
+    tlas: Option<Tree>,
+    max_distance: f32,
+    report: GeometryReport,
+}
+
+/// Builds the mesh representation of `scene`.
+///
+/// Errors: an unreadable or invalid mesh file, an infinite repetition of an unbounded
+/// child or with more cells than `options.max_instances`, a CSG object when the distance
+/// field cannot be evaluated, or an out-of-range option.
+pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshError> {
+    check_options(options)?;
+    let mut report = GeometryReport {
+        backend: "mesh".into(),
+        ..GeometryReport::default()
+    };
+    let space = RenderSpace::of(scene);
+    let pixel_angle = scene.camera.pixel_angle();
+    let params = options.build_quality.params();
+
+    // Phase 1: load every mesh file once.
+    let t0 = Instant::now();
+    let mut meshes: HashMap<PathBuf, TriangleMesh> = HashMap::new();
+    let mut load_error = None;
+    scene.visit_nodes(|n| {
+        if let NodeKind::Mesh { path } = &n.kind
+            && !meshes.contains_key(path)
+            && load_error.is_none()
+        {
+            match load_mesh(path) {
+                Ok(m) => {
+                    let r = &m.report;
+                    if r.degenerate_skipped + r.duplicate_skipped > 0 {
+                        report.notes.push(format!(
+                            "{}: skipped {} degenerate and {} duplicate triangles of {}",
+                            path.display(),
+                            r.degenerate_skipped,
+                            r.duplicate_skipped,
+                            r.triangles_read
+                        ));
+                    }
+                    report
+                        .notes
+                        .extend(r.notes.iter().map(|s| format!("{}: {s}", path.display())));
+                    meshes.insert(path.clone(), m);
+                }
+                Err(source) => {
+                    load_error = Some(MeshError::Load {
+                        json_path: n.json_path.clone(),
+                        source,
+                    })
+                }
+            }
+        }
+    });
+    if let Some(e) = load_error {
+        return Err(e);
+    }
+    let mesh_bounds: HashMap<PathBuf, (DVec3, DVec3)> = meshes
+        .iter()
+        .map(|(p, m)| {
+            let (lo, hi) = m.bounds();
+            (p.clone(), (lo.as_dvec3(), hi.as_dvec3()))
+        })
+        .collect();
+    let load_ms = ms(t0.elapsed());
+
+    // Phase 2: walk the scene, group placements by shape.
+    let t1 = Instant::now();
+    let walk = build::walk(scene, options, space.from_world(), &mesh_bounds)?;
+    report.notes.extend(walk.notes.iter().cloned());
+    let mut groups: Vec<(ShapeKey, Vec<&Placement>)> = Vec::new();
+    let mut group_of: HashMap<ShapeKey, usize> = HashMap::new();
+    for p in &walk.placements {
+        let g = *group_of.entry(p.key.clone()).or_insert_with(|| {
+            groups.push((p.key.clone(), Vec::new()));
+            groups.len() - 1
+        });
+        groups[g].1.push(p);
+    }
+
+    // Tessellate analytic shapes at the finest detail any of their placements needs.
+    let mut local_meshes: Vec<Option<LocalMesh>> = Vec::with_capacity(groups.len());
+    let mut extract_time = Duration::ZERO;
+    for (key, placements) in &groups {
+        let node = placements[0].node;
+        match key {
+            ShapeKey::Analytic(..) => {
+                let local =
+                    build::local_bounds(node, &mesh_bounds).unwrap_or((DVec3::ZERO, DVec3::ZERO));
+                let detail = placements
+                    .iter()
+                    .map(|p| build::placement_detail(p, local, pixel_angle, options.tessellation))
+                    .reduce(build::finer)
+                    .unwrap_or(Detail::Level(0));
+                let mesh =
+                    tessellate::tessellate(&node.kind, detail, options.max_segments_per_turn)
+                        .ok_or_else(|| MeshError::Unsupported {
+                            json_path: node.json_path.clone(),
+                            reason: "shape has no tessellation".into(),
+                        })?;
+                if !mesh.segments.is_empty() {
+                    let capped = mesh
+                        .segments
+                        .iter()
+                        .any(|&s| s >= options.max_segments_per_turn);
+                    report.notes.push(format!(
+                        "{}: {} triangles, segments per turn {:?}{}{}",
+                        node.json_path,
+                        mesh.triangles.len(),
+                        mesh.segments,
+                        match detail {
+                            Detail::ChordError(e) => format!(", local chord budget {e:.3e}"),
+                            Detail::Level(l) => format!(", level {l}"),
+                        },
+                        if capped {
+                            " (capped by max_segments_per_turn)"
+                        } else {
+                            ""
+                        }
+                    ));
+                }
+                local_meshes.push(Some(mesh));
+            }
+            ShapeKey::Composite(_) => {
+                let te = Instant::now();
+                let local = build::local_bounds(node, &mesh_bounds);
+                let mesh = extract::extract(node, local, options.surface_resolution)?;
+                report.notes.push(format!(
+                    "{}: surface extracted from the distance field, {} triangles at resolution {}",
+                    node.json_path,
+                    mesh.triangles.len(),
+                    options.surface_resolution
+                ));
+                local_meshes.push(Some(mesh));
+                extract_time += te.elapsed();
+            }
+            ShapeKey::Mesh(_) => local_meshes.push(None),
+        }
+    }
+    let tessellate_ms = ms(t1.elapsed().saturating_sub(extract_time));
+    let extract_ms = ms(extract_time);
+
+    // Phase 3: assemble flat and instanced geometry and build the BVHs.
+    let t2 = Instant::now();
+    let mut flat = FlatBuilder::default();
+    let mut blases: Vec<Blas> = Vec::new();
+    let mut instances: Vec<Instance> = Vec::new();
+    let mut instance_boxes: Vec<obvhs::aabb::Aabb> = Vec::new();
+    for ((key, placements), local) in groups.iter().zip(&local_meshes) {
+        let source: SourceMesh = match (key, local) {
+            (ShapeKey::Mesh(path), _) => match meshes.get(path) {
+                Some(m) => SourceMesh::File(m),
+                None => continue,
+            },
+            (_, Some(l)) => SourceMesh::Local(l),
+            _ => continue,
+        };
+        let composite = matches!(key, ShapeKey::Composite(_));
+        if options.instancing && placements.len() > 1 {
+            let input = source.blas_input();
+            if input.triangles.is_empty() {
+                continue;
+            }
+            let local_box = positions_bounds(&input.positions);
+            let blas_index = blases.len() as u32;
+            blases.push(Blas::build(input, options.bvh, params));
+            for p in placements {
+                instance_boxes.push(render_box(&p.to_render, local_box));
+                instances.push(Instance {
+                    to_local: p.to_render.inverse().as_affine3a_checked(),
+                    blas: blas_index,
+                    material: p.material,
+                });
+            }
+        } else {
+            for p in placements {
+                flat.append(&source, &p.to_render, p.material, composite);
+            }
+        }
+    }
+    for (node, m) in &walk.planes {
+        if let NodeKind::Plane { normal, offset } = node.kind {
+            let quads =
+                flat.append_plane(normal, offset, m, scene.render.max_distance, node.material);
+            report.notes.push(format!(
+                "{}: plane clipped to a {:.6}-unit square around the camera's foot point ({quads} cells)",
+                node.json_path,
+                2.0 * scene.render.max_distance
+            ));
+        }
+    }
+    let flat_triangles = flat.triangles.len();
+    let flat_blas =
+        (!flat.triangles.is_empty()).then(|| Blas::build(flat.into_input(), options.bvh, params));
+    let tlas = if instances.is_empty() {
+        None
+    } else {
+        let boxes = instance_boxes;
+        let mut t = Duration::default();
+        let mut tlas = obvhs::bvh2::builder::build_bvh2(&boxes, params, &mut t);
+        tlas.primitives_to_nodes = Vec::new();
+        tlas.parents = Vec::new();
+        tlas.primitive_indices_freelist = Vec::new();
+        tlas.nodes.shrink_to_fit();
+        Some(Tree::Bvh2(tlas))
+    };
+    let bvh_ms = ms(t2.elapsed());
+
+    report.build_phases_ms = vec![
+        ("load".into(), load_ms),
+        ("tessellate".into(), tessellate_ms),
+        ("extract".into(), extract_ms),
+        ("bvh".into(), bvh_ms),
+    ];
+    let blas_triangles: usize = blases.iter().map(|b| b.triangle_count).sum();
+    let instance_bytes = (instances.len() * size_of::<Instance>()) as u64;
+    let memory = flat_blas.as_ref().map_or(0, Blas::memory_bytes)
+        + blases.iter().map(Blas::memory_bytes).sum::<u64>()
+        + instance_bytes
+        + tlas.as_ref().map_or(0, Tree::memory_bytes);
+    report.memory_bytes = memory;
+    let rendered_triangles: u64 = flat_triangles as u64
+        + instances
+            .iter()
+            .map(|i| blases[i.blas as usize].triangle_count as u64)
+            .sum::<u64>();
+    report.counters = vec![
+        ("flat_triangles".into(), flat_triangles as f64),
+        ("blas_count".into(), blases.len() as f64),
+        ("blas_triangles".into(), blas_triangles as f64),
+        ("instances".into(), instances.len() as f64),
+        ("repeat_cells".into(), walk.repeat_cells as f64),
+        ("instanced_triangles".into(), rendered_triangles as f64),
+        (
+            "bvh_nodes".into(),
+            (flat_blas.as_ref().map_or(0, |b| b.tree.node_count())
+                + blases.iter().map(|b| b.tree.node_count()).sum::<usize>()) as f64,
+        ),
+        (
+            "tlas_nodes".into(),
+            tlas.as_ref().map_or(0, Tree::node_count) as f64,
+        ),
+        ("instance_bytes".into(), instance_bytes as f64),
+    ];
+    report.notes.push(format!(
+        "bvh: {:?} with {:?} preset; instancing {}",
+        options.bvh,
+        options.build_quality,
+        if options.instancing { "on" } else { "off" }
+    ));
+    Ok(MeshGeometry {
+        flat: flat_blas,
+        flat_materials_default: 0,
+        blases,
+        instances,
+        tlas,
+        max_distance: scene.render.max_distance as f32,
+        report,
+    })
+}
+
+fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
+    match o.tessellation {
+        Tessellation::ScreenError { pixels } if !(pixels > 0.0 && pixels.is_finite()) => {
+            return Err(MeshError::InvalidOption(format!(
+                "ScreenError pixels must be > 0, got {pixels}"
+            )));
+        }
+        Tessellation::ChordError { world } if !(world > 0.0 && world.is_finite()) => {
+            return Err(MeshError::InvalidOption(format!(
+                "ChordError world must be > 0, got {world}"
+            )));
+        }
+        Tessellation::FixedLevel(l) if l > 12 => {
+            return Err(MeshError::InvalidOption(format!(
+                "FixedLevel must be <= 12, got {l}"
+            )));
+        }
+        _ => {}
+    }
+    if o.surface_resolution < 8 || o.surface_resolution > 2048 {
+        return Err(MeshError::InvalidOption(format!(
+            "surface_resolution must be in 8..=2048, got {}",
+            o.surface_resolution
+        )));
+    }
+    if o.max_segments_per_turn < 8 {
+        return Err(MeshError::InvalidOption(
+            "max_segments_per_turn must be >= 8".into(),
+        ));
+    }
+    Ok(())
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// f64 affine to f32 (render-space magnitudes are bounded by max_distance).
+trait AsAffine3A {
+    fn as_affine3a_checked(&self) -> Affine3A;
+}
+
+impl AsAffine3A for DAffine3 {
+    fn as_affine3a_checked(&self) -> Affine3A {
+        Affine3A::from_mat3_translation(self.matrix3.as_mat3(), self.translation.as_vec3())
+    }
+}
+
+/// Bounds of f32 positions, in f64.
+fn positions_bounds(positions: &[Vec3]) -> (DVec3, DVec3) {
+    let mut lo = Vec3::INFINITY;
+    let mut hi = Vec3::NEG_INFINITY;
+    for p in positions {
+        lo = lo.min(*p);
+        hi = hi.max(*p);
+    }
+    (lo.as_dvec3(), hi.as_dvec3())
+}
+
+/// Render-space box of a placed local box, widened by a relative epsilon so that f32
+/// rounding never cuts a copy.
+fn render_box(to_render: &DAffine3, local: (DVec3, DVec3)) -> obvhs::aabb::Aabb {
+    let (lo, hi) = build::transform_bounds(to_render, local);
+    let pad = (hi - lo).max_element() * 1e-5 + lo.abs().max(hi.abs()).max_element() * 1e-6;
+    obvhs::aabb::Aabb::new((lo - pad).as_vec3().into(), (hi + pad).as_vec3().into())
+}
+
+/// A shape's triangles before placement.
+enum SourceMesh<'a> {
+    File(&'a TriangleMesh),
+    Local(&'a LocalMesh),
+}
+
+impl SourceMesh<'_> {
+    fn vertex_count(&self) -> usize {
+        match self {
+            SourceMesh::File(m) => m.positions.len(),
+            SourceMesh::Local(m) => m.positions.len(),
+        }
+    }
+    fn triangles(&self) -> &[[u32; 3]] {
+        match self {
+            SourceMesh::File(m) => &m.triangles,
+            SourceMesh::Local(m) => &m.triangles,
+        }
+    }
+    fn position(&self, i: usize) -> DVec3 {
+        match self {
+            SourceMesh::File(m) => m.positions[i].as_dvec3(),
+            SourceMesh::Local(m) => m.positions[i],
+        }
+    }
+    fn normal(&self, i: usize) -> Option<DVec3> {
+        match self {
+            SourceMesh::File(m) => m.normals.as_ref().map(|n| n[i].as_dvec3()),
+            SourceMesh::Local(m) => m.normals.as_ref().map(|n| n[i]),
+        }
+    }
+    fn has_normals(&self) -> bool {
+        match self {
+            SourceMesh::File(m) => m.normals.is_some(),
+            SourceMesh::Local(m) => m.normals.is_some(),
+        }
+    }
+    fn materials(&self) -> Option<&[MaterialId]> {
+        match self {
+            SourceMesh::File(_) => None,
+            SourceMesh::Local(m) => m.materials.as_deref(),
+        }
+    }
+    /// The mesh in its own frame, as a BLAS input.
+    fn blas_input(&self) -> BlasInput {
+        let n = self.vertex_count();
+        BlasInput {
+            positions: (0..n).map(|i| self.position(i).as_vec3()).collect(),
+            normals: self.has_normals().then(|| {
+                (0..n)
+                    .map(|i| self.normal(i).unwrap_or(DVec3::ZERO).as_vec3())
+                    .collect()
+            }),
+            triangles: self.triangles().to_vec(),
+            materials: self.materials().map(<[u32]>::to_vec).unwrap_or_default(),
+        }
+    }
+}
+
+/// Accumulates render-space triangles of everything placed once.
+#[derive(Default)]
+struct FlatBuilder {
+    positions: Vec<Vec3>,
+    normals: Vec<Vec3>,
+    any_normals: bool,
+    triangles: Vec<[u32; 3]>,
+    materials: Vec<MaterialId>,
+}
+
+impl FlatBuilder {
+    fn append(
+        &mut self,
+        source: &SourceMesh,
+        to_render: &DAffine3,
+        material: MaterialId,
+        _composite: bool,
+    ) {
+        let base = self.positions.len() as u32;
+        let normal_matrix = to_render.matrix3.inverse().transpose();
+        let mirrored = to_render.matrix3.determinant() < 0.0;
+        for i in 0..source.vertex_count() {
+            self.positions
+                .push(to_render.transform_point3(source.position(i)).as_vec3());
+            let n = source.normal(i).map_or(Vec3::ZERO, |n| {
+                (normal_matrix * n).normalize_or_zero().as_vec3()
+            });
+            self.normals.push(n);
+        }
+        self.any_normals |= source.has_normals();
+        let per_triangle = source.materials();
+        for (k, t) in source.triangles().iter().enumerate() {
+            let [a, b, c] = t.map(|i| base + i);
+            self.triangles
+                .push(if mirrored { [a, c, b] } else { [a, b, c] });
+            self.materials.push(
+                per_triangle
+                    .and_then(|m| m.get(k).copied())
+                    .unwrap_or(material),
+            );
+        }
+    }
+
+    /// Appends the plane `dot(normal, p) = offset` (in the frame `m`) as a grid of quads
+    /// around the camera's foot point covering every point within `max_distance` of the
+    /// camera, cells growing geometrically away from the foot so that triangles near the
+    /// camera stay small (f32 precision). Returns the number of cells.
+    fn append_plane(
+        &mut self,
+        normal: DVec3,
+        offset: f64,
+        m: &DAffine3,
+        max_distance: f64,
+        material: MaterialId,
+    ) -> usize {
+        let n_local = normal.normalize();
+        let point = m.transform_point3(n_local * offset);
+        let n = (m.matrix3.inverse().transpose() * n_local).normalize();
+        let height = point.dot(n);
+        let foot = n * height;
+        let u = n.any_orthonormal_vector();
+        let v = n.cross(u);
+        // Coordinates 0, +-D 2^-k for k = K..0.
+        let d = max_distance;
+        let smallest = height.abs().max(d * 1e-4);
+        let levels = ((d / smallest).log2().ceil().clamp(0.0, 12.0)) as i32;
+        let mut coords: Vec<f64> = vec![0.0];
+        for k in 0..=levels {
+            let c = d * 0.5f64.powi(k);
+            coords.push(c);
+            coords.push(-c);
+        }
+        coords.sort_by(f64::total_cmp);
+        let base = self.positions.len() as u32;
+        let side = coords.len() as u32;
+        for &y in &coords {
+            for &x in &coords {
+                self.positions.push((foot + u * x + v * y).as_vec3());
+                self.normals.push(Vec3::ZERO);
+            }
+        }
+        for j in 0..side - 1 {
+            for i in 0..side - 1 {
+                let a = base + j * side + i;
+                let b = a + 1;
+                let c = a + side + 1;
+                let dd = a + side;
+                // u x v = n: (a, b, c) runs counter-clockwise around n.
+                self.triangles.push([a, b, c]);
+                self.triangles.push([a, c, dd]);
+                self.materials.push(material);
+                self.materials.push(material);
+            }
+        }
+        ((side - 1) * (side - 1)) as usize
+    }
+
+    fn into_input(self) -> BlasInput {
+        BlasInput {
+            positions: self.positions,
+            normals: self.any_normals.then_some(self.normals),
+            triangles: self.triangles,
+            materials: self.materials,
+        }
+    }
+}
+
+impl std::fmt::Debug for MeshGeometry {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MeshGeometry")
+            .field("triangles", &self.triangle_count())
+            .field("blases", &self.blases.len())
+            .field("instances", &self.instances.len())
+            .field("memory_bytes", &self.report.memory_bytes)
+            .finish()
+    }
+}
+
+impl MeshGeometry {
+    /// Distinct triangles held (flat plus one copy per BLAS).
+    pub fn triangle_count(&self) -> u64 {
+        (self.flat.as_ref().map_or(0, |b| b.triangle_count)
+            + self.blases.iter().map(|b| b.triangle_count).sum::<usize>()) as u64
+    }
+
+    /// Number of instances under the TLAS.
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    fn ob_ray(&self, ray: &Ray) -> ObRay {
+        ObRay::new(
+            Vec3A::from(ray.origin),
+            Vec3A::from(ray.dir),
+            ray.t_min,
+            ray.t_max.min(self.max_distance),
+        )
+    }
+
+    fn local_ray(inst: &Instance, r: &ObRay) -> ObRay {
+        ObRay::new(
+            inst.to_local.transform_point3a(r.origin),
+            inst.to_local.transform_vector3a(r.direction),
+            r.tmin,
+            r.tmax,
+        )
+    }
+}
+
+impl Geometry for MeshGeometry {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        let mut work = RayWork::default();
+        let mut r = self.ob_ray(ray);
+        if !(r.tmax >= r.tmin) {
+            return TraceResult {
+                hit: None,
+                termination: Termination::Miss,
+                work,
+            };
+        }
+        let mut best: Option<(HitSource, u32)> = None;
+        if let Some(flat) = &self.flat
+            && let Some(h) = flat.closest(&mut r, &mut work)
+        {
+            best = Some((HitSource::Flat, h.slot));
+        }
+        if let Some(tlas) = &self.tlas {
+            let mut inner = RayWork::default();
+            let prims = tlas.primitive_indices();
+            tlas.traverse(&mut r, &mut work, |r, slot| {
+                let Some(&i) = prims.get(slot as usize) else {
+                    return true;
+                };
+                let inst = &self.instances[i as usize];
+                let mut local = Self::local_ray(inst, r);
+                if let Some(h) = self.blases[inst.blas as usize].closest(&mut local, &mut inner) {
+                    r.tmax = h.t;
+                    best = Some((HitSource::Instance(i), h.slot));
+                }
+                true
+            });
+            work.node_visits += inner.node_visits;
+            work.primitive_tests += inner.primitive_tests;
+        }
+        let Some((source, slot)) = best else {
+            return TraceResult {
+                hit: None,
+                termination: Termination::Miss,
+                work,
+            };
+        };
+        let t = r.tmax;
+        let (normal, material) = match source {
+            HitSource::Flat => match &self.flat {
+                Some(flat) => (
+                    flat.normal(&r, slot),
+                    flat.material(slot).unwrap_or(self.flat_materials_default),
+                ),
+                None => (Vec3::Z, 0),
+            },
+            HitSource::Instance(i) => {
+                let inst = &self.instances[i as usize];
+                let blas = &self.blases[inst.blas as usize];
+                let local = Self::local_ray(inst, &r);
+                let n_local = Vec3A::from(blas.normal(&local, slot));
+                let n = inst.to_local.matrix3.transpose() * n_local;
+                (
+                    Vec3::from(n).try_normalize().unwrap_or(Vec3::Z),
+                    blas.material(slot).unwrap_or(inst.material),
+                )
+            }
+        };
+        TraceResult {
+            hit: Some(Hit {
+                t,
+                position: ray.origin + ray.dir * t,
+                normal,
+                material,
+            }),
+            termination: Termination::Hit,
+            work,
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        let mut work = RayWork::default();
+        let mut r = self.ob_ray(ray);
+        let mut occluded = false;
+        if r.tmax >= r.tmin {
+            if let Some(flat) = &self.flat {
+                occluded = flat.any(&mut r, &mut work);
+            }
+            if !occluded && let Some(tlas) = &self.tlas {
+                let mut inner = RayWork::default();
+                let prims = tlas.primitive_indices();
+                tlas.traverse(&mut r, &mut work, |r, slot| {
+                    let Some(&i) = prims.get(slot as usize) else {
+                        return true;
+                    };
+                    let inst = &self.instances[i as usize];
+                    let mut local = Self::local_ray(inst, r);
+                    if self.blases[inst.blas as usize].any(&mut local, &mut inner) {
+                        occluded = true;
+                        return false;
+                    }
+                    true
+                });
+                work.node_visits += inner.node_visits;
+                work.primitive_tests += inner.primitive_tests;
+            }
+        }
+        OcclusionResult {
+            occluded,
+            termination: if occluded {
+                Termination::Hit
+            } else {
+                Termination::Miss
+            },
+            work,
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        self.report.clone()
+    }
+}

@@ -1,0 +1,135 @@
+//! Build options of the mesh backend: BVH kind and build preset, tessellation budget,
+//! surface-extraction resolution, instancing.
+
+use obvhs::BvhBuildParams;
+
+/// Which obvhs BVH layout the triangles are traversed in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BvhKind {
+    /// Binary BVH (`obvhs::bvh2::Bvh2`), 48-byte nodes, up to 8 triangles per leaf (per preset).
+    Bvh2,
+    /// Compressed 8-wide BVH (`obvhs::cwbvh::CwBvh`, Ylitie et al. 2017), 80-byte nodes,
+    /// SIMD node tests, up to 3 triangles per leaf.
+    CwBvh,
+}
+
+/// obvhs build presets (`BvhBuildParams::*_build()`), from fastest build to best traversal.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum BuildQuality {
+    /// `fastest_build`: PLOC with minimal search, no reinsertion, one triangle per leaf.
+    Fastest,
+    /// `very_fast_build`.
+    VeryFast,
+    /// `fast_build`.
+    Fast,
+    /// `medium_build`: about Embree's build time with faster traversal.
+    Medium,
+    /// `slow_build`: spatial pre-splits, wider PLOC search.
+    Slow,
+    /// `very_slow_build`: full reinsertion pass.
+    VerySlow,
+}
+
+impl BuildQuality {
+    /// The obvhs parameters of this preset.
+    pub const fn params(self) -> BvhBuildParams {
+        match self {
+            Self::Fastest => BvhBuildParams::fastest_build(),
+            Self::VeryFast => BvhBuildParams::very_fast_build(),
+            Self::Fast => BvhBuildParams::fast_build(),
+            Self::Medium => BvhBuildParams::medium_build(),
+            Self::Slow => BvhBuildParams::slow_build(),
+            Self::VerySlow => BvhBuildParams::very_slow_build(),
+        }
+    }
+}
+
+/// How finely analytic shapes are tessellated.
+///
+/// The chord error is the largest distance between the exact surface and its triangles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Tessellation {
+    /// Chord error, projected on screen from the shape's nearest distance to the camera,
+    /// stays below `pixels` pixels: world error `pixels * camera.pixel_angle() * distance`.
+    /// Shapes far away get few triangles, near ones many. `pixels` must be > 0.
+    ScreenError {
+        /// Screen-space budget in pixels (e.g. 0.25).
+        pixels: f64,
+    },
+    /// A fixed chord error in world units (> 0), whatever the distance.
+    ChordError {
+        /// World-space budget.
+        world: f64,
+    },
+    /// A fixed subdivision: `8 * 2^level` segments per full turn (half that per half turn,
+    /// e.g. sphere latitudes), independent of size and camera. `level <= 12`.
+    FixedLevel(u32),
+}
+
+/// Options of [`crate::build`]. Build one with [`MeshOptions::DEFAULT`] or a preset and
+/// change fields.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MeshOptions {
+    /// BVH layout. Default [`BvhKind::CwBvh`].
+    pub bvh: BvhKind,
+    /// Build preset. Default [`BuildQuality::Medium`].
+    pub build_quality: BuildQuality,
+    /// Tessellation of analytic shapes. Default `ScreenError { pixels: 0.25 }`.
+    pub tessellation: Tessellation,
+    /// Surface-nets grid cells along the longest side of a CSG / smooth-union object's
+    /// bounds (>= 8). Default 128.
+    pub surface_resolution: u32,
+    /// Instance shapes used more than once (repetition, a mesh placed twice) from one BLAS
+    /// under a TLAS. `false` flattens everything into one BVH (same image, more memory).
+    /// Default `true`.
+    pub instancing: bool,
+    /// Largest number of instances an infinite repetition may expand to (cells within
+    /// `render.max_distance` of the camera). Exceeding it is an error. Default 4,194,304.
+    pub max_instances: u64,
+    /// Cap on segments per full turn of any parametric direction (bounds triangle counts
+    /// when the camera touches a shape). Default 4096.
+    pub max_segments_per_turn: u32,
+}
+
+impl MeshOptions {
+    /// The documented defaults.
+    pub const DEFAULT: Self = Self {
+        bvh: BvhKind::CwBvh,
+        build_quality: BuildQuality::Medium,
+        tessellation: Tessellation::ScreenError { pixels: 0.25 },
+        surface_resolution: 128,
+        instancing: true,
+        max_instances: 1 << 22,
+        max_segments_per_turn: 4096,
+    };
+
+    /// Defaults with a fast build: Bvh2, `fast_build`, 1-pixel tessellation error, 64-cell
+    /// surface extraction. For previews and tests.
+    pub const fn fast() -> Self {
+        Self {
+            bvh: BvhKind::Bvh2,
+            build_quality: BuildQuality::Fast,
+            tessellation: Tessellation::ScreenError { pixels: 1.0 },
+            surface_resolution: 64,
+            ..Self::DEFAULT
+        }
+    }
+
+    /// Defaults with a high-quality build: CwBvh, `slow_build`, 0.1-pixel tessellation error,
+    /// 256-cell surface extraction.
+    pub const fn quality() -> Self {
+        Self {
+            bvh: BvhKind::CwBvh,
+            build_quality: BuildQuality::Slow,
+            tessellation: Tessellation::ScreenError { pixels: 0.1 },
+            surface_resolution: 256,
+            ..Self::DEFAULT
+        }
+    }
+}
+
+impl Default for MeshOptions {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}

@@ -1,0 +1,86 @@
+//! Helpers shared by the mesh backend's integration tests.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+
+use glam::{DVec3, Vec3};
+use marchmesh_core::Ray;
+use marchmesh_scene::Scene;
+
+/// The repository's `scenes/` folder.
+pub fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+}
+
+/// Parses a scene given as JSON (mesh paths relative to `scenes/`).
+pub fn scene(json: &str) -> Scene {
+    marchmesh_scene::parse_scene(json, "test", &scenes_dir()).expect("valid test scene")
+}
+
+/// Primary rays (render space) through an `n x n` grid of pixel centres of the scene camera.
+pub fn camera_rays(scene: &Scene, n: u32) -> Vec<Ray> {
+    let cam = &scene.camera;
+    let mut rays = Vec::new();
+    for j in 0..n {
+        for i in 0..n {
+            let px = (f64::from(i) + 0.5) / f64::from(n) * f64::from(cam.width);
+            let py = (f64::from(j) + 0.5) / f64::from(n) * f64::from(cam.height);
+            rays.push(Ray {
+                origin: Vec3::ZERO,
+                dir: cam.direction(px, py).as_vec3(),
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            });
+        }
+    }
+    rays
+}
+
+/// Closest f64 Möller–Trumbore hit over all triangles (no acceleration structure).
+pub fn brute_force_hit(
+    positions: &[DVec3],
+    triangles: &[[u32; 3]],
+    origin: DVec3,
+    dir: DVec3,
+) -> Option<f64> {
+    let mut best: Option<f64> = None;
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        let e1 = b - a;
+        let e2 = c - a;
+        let p = dir.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-300 {
+            continue;
+        }
+        let inv = 1.0 / det;
+        let s = origin - a;
+        let u = s.dot(p) * inv;
+        if !(0.0..=1.0).contains(&u) {
+            continue;
+        }
+        let q = s.cross(e1);
+        let v = dir.dot(q) * inv;
+        if v < 0.0 || u + v > 1.0 {
+            continue;
+        }
+        let t = e2.dot(q) * inv;
+        if t > 0.0 && best.is_none_or(|b| t < b) {
+            best = Some(t);
+        }
+    }
+    best
+}
+
+/// Exact ray-sphere entry distance (f64), if any.
+pub fn ray_sphere(origin: DVec3, dir: DVec3, centre: DVec3, radius: f64) -> Option<f64> {
+    let oc = origin - centre;
+    let b = oc.dot(dir);
+    let c = oc.length_squared() - radius * radius;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let t = -b - disc.sqrt();
+    (t > 0.0).then_some(t)
+}
