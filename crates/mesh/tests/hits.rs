@@ -70,3 +70,312 @@ fn sphere_hits_match_the_analytic_sphere_within_the_chord_budget() {
     }
     assert!(hits > 300, "{hits}");
 }
+
+const BUNNY: &str = r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40, "width": 64, "height": 64},
+    "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": 0.25, "rotate_deg": [0, 30, 0]}}]}"#;
+
+#[test]
+fn bunny_hits_match_a_brute_force_f64_ray_caster() {
+    let s = scene(BUNNY);
+    let mesh = marchmesh_meshio::load_mesh(&scenes_dir().join("meshes/bunny.obj")).expect("bunny");
+    let to_render = marchmesh_core::RenderSpace::of(&s).from_world() * s.objects[0].transform;
+    let positions: Vec<DVec3> = mesh
+        .positions
+        .iter()
+        .map(|p| to_render.transform_point3(p.as_dvec3()))
+        .collect();
+    for kind in [BvhKind::Bvh2, BvhKind::CwBvh] {
+        let g = build(
+            &s,
+            &MeshOptions {
+                bvh: kind,
+                ..MeshOptions::DEFAULT
+            },
+        )
+        .expect("build");
+        let (mut hits, mut mismatches) = (0, 0);
+        for ray in camera_rays(&s, 64) {
+            let r = g.closest_hit(&ray);
+            let truth =
+                brute_force_hit(&positions, &mesh.triangles, DVec3::ZERO, ray.dir.as_dvec3());
+            match (r.hit, truth) {
+                (Some(h), Some(t)) => {
+                    hits += 1;
+                    assert!(
+                        (f64::from(h.t) - t).abs() < 1e-5 * t,
+                        "{kind:?}: t {} vs {t}",
+                        h.t
+                    );
+                    assert!(r.work.node_visits > 0 && r.work.primitive_tests > 0);
+                }
+                (None, None) => {}
+                _ => mismatches += 1,
+            }
+        }
+        assert!(hits > 500, "{kind:?}: only {hits} hits");
+        // f32 versus f64 may disagree on rays grazing an edge; no more than a handful.
+        assert!(
+            mismatches <= 2,
+            "{kind:?}: {mismatches} hit/miss disagreements"
+        );
+    }
+}
+
+/// Compares two geometries ray by ray (hit, t, normal, material).
+fn assert_same_hits(
+    a: &dyn Geometry,
+    b: &dyn Geometry,
+    rays: &[marchmesh_core::Ray],
+    label: &str,
+) -> usize {
+    let mut hits = 0;
+    for ray in rays {
+        let (ra, rb) = (a.closest_hit(ray), b.closest_hit(ray));
+        match (ra.hit, rb.hit) {
+            (Some(x), Some(y)) => {
+                hits += 1;
+                assert!(
+                    (x.t - y.t).abs() <= 1e-4 * x.t.max(1.0),
+                    "{label}: t {} vs {}",
+                    x.t,
+                    y.t
+                );
+                assert!(
+                    x.normal.dot(y.normal) > 0.999,
+                    "{label}: normals {:?} vs {:?}",
+                    x.normal,
+                    y.normal
+                );
+                assert_eq!(x.material, y.material, "{label}: material");
+            }
+            (None, None) => {}
+            (x, y) => panic!("{label}: hit {x:?} vs {y:?}"),
+        }
+        let shadow = marchmesh_core::Ray { t_max: 3.0, ..*ray };
+        assert_eq!(
+            a.occluded(&shadow).occluded,
+            b.occluded(&shadow).occluded,
+            "{label}: occlusion"
+        );
+    }
+    hits
+}
+
+#[test]
+fn instancing_gives_the_same_hits_as_flattened_geometry() {
+    let scenes = [
+        r#"{"camera": {"position": [0, 1.5, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 64, "height": 64},
+            "objects": [{"shape": {"repeat": {"period": [1, 0, 1], "count": [3, null, 2],
+                "child": {"shape": {"union": {"children": [
+                    {"shape": {"sphere": {"radius": 0.35}}},
+                    {"shape": {"box": {"half_extents": [0.1, 0.45, 0.1]}}, "material": {"color": [1, 0, 0]}}]}}}}},
+                "transform": {"rotate_deg": [0, 20, 0], "scale": [1, 1.2, 0.9]}}]}"#,
+        r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50, "width": 64, "height": 64},
+            "objects": [{"shape": {"repeat": {"period": [2, 0, 2],
+                "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}],
+            "render": {"max_distance": 40}}"#,
+        r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 50, "width": 64, "height": 64},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": 0.25, "translate": [-1, 0, 0]}},
+                        {"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": [0.2, 0.3, 0.25], "translate": [1.2, 0, 0], "rotate_deg": [0, 90, 0]}, "material": {"color": [0, 1, 0]}},
+                        {"shape": {"plane": {}}}]}"#,
+    ];
+    for (k, json) in scenes.iter().enumerate() {
+        let s = scene(json);
+        let inst = build(&s, &MeshOptions::DEFAULT).expect("instanced");
+        let flat = build(
+            &s,
+            &MeshOptions {
+                instancing: false,
+                ..MeshOptions::DEFAULT
+            },
+        )
+        .expect("flat");
+        assert!(inst.instance_count() >= 2, "scene {k}: nothing instanced");
+        assert_eq!(flat.instance_count(), 0);
+        assert!(
+            inst.report().memory_bytes < flat.report().memory_bytes,
+            "scene {k}: instancing {} bytes vs flat {}",
+            inst.report().memory_bytes,
+            flat.report().memory_bytes
+        );
+        let hits = assert_same_hits(&inst, &flat, &camera_rays(&s, 64), &format!("scene {k}"));
+        assert!(hits > 200, "scene {k}: {hits} hits");
+    }
+}
+
+#[test]
+fn bvh2_and_cwbvh_and_every_preset_agree() {
+    let s = scene(BUNNY);
+    let reference = build(
+        &s,
+        &MeshOptions {
+            bvh: BvhKind::Bvh2,
+            ..MeshOptions::DEFAULT
+        },
+    )
+    .expect("bvh2");
+    for quality in [
+        marchmesh_mesh::BuildQuality::Fastest,
+        marchmesh_mesh::BuildQuality::Slow,
+    ] {
+        for bvh in [BvhKind::Bvh2, BvhKind::CwBvh] {
+            let g = build(
+                &s,
+                &MeshOptions {
+                    bvh,
+                    build_quality: quality,
+                    ..MeshOptions::DEFAULT
+                },
+            )
+            .expect("build");
+            assert_same_hits(
+                &g,
+                &reference,
+                &camera_rays(&s, 32),
+                &format!("{bvh:?} {quality:?}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn glb_export_of_the_bunny_renders_identically_to_the_obj() {
+    let mesh = marchmesh_meshio::load_mesh(&scenes_dir().join("meshes/bunny.obj")).expect("bunny");
+    let dir = std::env::temp_dir().join(format!("marchmesh-mesh-glb-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let glb = dir.join("bunny.glb");
+    marchmesh_meshio::write_glb(&mesh, &glb).expect("write glb");
+    let obj_scene = scene(BUNNY);
+    let glb_json = BUNNY.replace(
+        "meshes/bunny.obj",
+        &glb.display().to_string().replace('\\', "/"),
+    );
+    let glb_scene = scene(&glb_json);
+    let a = build(&obj_scene, &MeshOptions::DEFAULT).expect("obj");
+    let b = build(&glb_scene, &MeshOptions::DEFAULT).expect("glb");
+    for ray in camera_rays(&obj_scene, 64) {
+        assert_eq!(a.closest_hit(&ray), b.closest_hit(&ray));
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn nan_and_degenerate_meshes_are_handled_with_clear_messages() {
+    let dir = std::env::temp_dir().join(format!("marchmesh-mesh-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let nan = dir.join("nan.obj");
+    std::fs::write(&nan, "v 0 0 0\nv 1 0 0\nv 0 NaN 0\nf 1 2 3\n").expect("write");
+    let json = |p: &std::path::Path| {
+        format!(
+            r#"{{"camera": {{"position": [0, 0, -3], "width": 16, "height": 16}}, "objects": [{{"name": "bad", "shape": {{"mesh": {{"path": "{}"}}}}}}]}}"#,
+            p.display().to_string().replace('\\', "/")
+        )
+    };
+    let err = build(&scene(&json(&nan)), &MeshOptions::DEFAULT).expect_err("NaN vertex");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("nan.obj") && msg.contains("vertex 2") && msg.contains("objects[0]"),
+        "{msg}"
+    );
+
+    let degenerate = dir.join("degenerate.obj");
+    std::fs::write(
+        &degenerate,
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n",
+    )
+    .expect("write");
+    let g = build(&scene(&json(&degenerate)), &MeshOptions::DEFAULT)
+        .expect("degenerate triangles are skipped");
+    assert_eq!(g.triangle_count(), 1);
+    let notes = g.report().notes.join("\n");
+    assert!(notes.contains("skipped 2 degenerate"), "{notes}");
+
+    let missing = dir.join("missing.obj");
+    let msg = build(&scene(&json(&missing)), &MeshOptions::DEFAULT)
+        .expect_err("missing")
+        .to_string();
+    assert!(msg.contains("missing.obj"), "{msg}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn planes_cover_max_distance_and_are_exact() {
+    let s = scene(
+        r#"{"camera": {"position": [3, 2, -4], "look_at": [0, 0, 0], "width": 16, "height": 16},
+            "objects": [{"shape": {"plane": {"normal": [0, 1, 0.2], "offset": -0.5}}}],
+            "render": {"max_distance": 500}}"#,
+    );
+    let g = build(&s, &MeshOptions::DEFAULT).expect("plane");
+    let n = DVec3::new(0.0, 1.0, 0.2).normalize();
+    let cam = s.camera.position;
+    let height = cam.dot(n) + 0.5;
+    let mut checked = 0;
+    for k in 0..200 {
+        let a = k as f64 * 0.37;
+        // Directions towards the plane, some nearly grazing.
+        let d = (DVec3::new(a.cos(), 0.0, a.sin()) * (1.0 + (k % 7) as f64 * 3.0) - n).normalize();
+        let denom = d.dot(n);
+        let t = -height / denom;
+        let ray = marchmesh_core::Ray {
+            origin: glam::Vec3::ZERO,
+            dir: d.as_vec3(),
+            t_min: 0.0,
+            t_max: f32::INFINITY,
+        };
+        let r = g.closest_hit(&ray);
+        if t > 0.0 && t < 499.0 {
+            let h = r.hit.expect("plane hit within max_distance");
+            assert!(
+                (f64::from(h.t) - t).abs() < 1e-5 * t.max(1.0),
+                "t {} vs {t}",
+                h.t
+            );
+            assert!(h.normal.as_dvec3().dot(n) > 0.99999);
+            checked += 1;
+        } else if t > 501.0 || t < 0.0 {
+            assert!(
+                r.hit.is_none(),
+                "hit behind the camera or beyond max_distance at {t}"
+            );
+        }
+    }
+    assert!(checked > 50);
+}
+
+#[test]
+fn infinite_repetition_is_bounded_and_reported() {
+    let s = scene(
+        r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50, "width": 32, "height": 32},
+            "objects": [{"shape": {"repeat": {"period": [2, 0, 2],
+                "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}],
+            "render": {"max_distance": 40}}"#,
+    );
+    let g = build(&s, &MeshOptions::DEFAULT).expect("build");
+    let report = g.report();
+    let cells = report
+        .counters
+        .iter()
+        .find(|(k, _)| k == "repeat_cells")
+        .expect("counter")
+        .1;
+    // Cells within 40 of the camera on a 2-unit grid: about pi 20^2, less the near-plane rows.
+    assert!(cells > 1000.0 && cells < 1400.0, "{cells}");
+    assert!(
+        report
+            .notes
+            .iter()
+            .any(|n| n.contains("infinite repetition bounded")),
+        "{:?}",
+        report.notes
+    );
+    assert_eq!(g.instance_count() as f64, cells);
+    let err = build(
+        &s,
+        &MeshOptions {
+            max_instances: 100,
+            ..MeshOptions::DEFAULT
+        },
+    )
+    .expect_err("limit");
+    assert!(err.to_string().contains("max_instances"), "{err}");
+}
