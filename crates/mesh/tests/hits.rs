@@ -379,3 +379,48 @@ fn infinite_repetition_is_bounded_and_reported() {
     .expect_err("limit");
     assert!(err.to_string().contains("max_instances"), "{err}");
 }
+
+#[test]
+fn depth_error_against_the_analytic_sphere_falls_as_the_screen_budget_shrinks() {
+    let s = scene(
+        r#"{"camera": {"position": [0, 1.5, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 128, "height": 128},
+            "objects": [{"shape": {"sphere": {"radius": 1}}}]}"#,
+    );
+    let centre = -s.camera.position;
+    let mut previous = f64::INFINITY;
+    let mut triangles_before = 0;
+    for pixels in [4.0, 1.0, 0.25, 0.0625] {
+        let g = build(
+            &s,
+            &MeshOptions {
+                tessellation: Tessellation::ScreenError { pixels },
+                ..MeshOptions::DEFAULT
+            },
+        )
+        .expect("build");
+        let mut worst: f64 = 0.0;
+        for ray in camera_rays(&s, 64) {
+            if let (Some(h), Some(_)) = (
+                g.closest_hit(&ray).hit,
+                ray_sphere(DVec3::ZERO, ray.dir.as_dvec3(), centre, 1.0),
+            ) {
+                // The hit point's distance from the exact sphere (the chord error; depth
+                // differences along grazing rays are larger and not what the budget bounds).
+                worst = worst.max(((h.position.as_dvec3() - centre).length() - 1.0).abs());
+            }
+        }
+        // The budget: pixels x pixel angle x nearest distance (4 units here).
+        let budget = pixels * s.camera.pixel_angle() * (s.camera.position.length() - 1.0);
+        assert!(
+            worst <= budget * 1.05 + 1e-6,
+            "{pixels} px: error {worst} over budget {budget}"
+        );
+        assert!(
+            worst < previous,
+            "{pixels} px: error {worst} did not fall below {previous}"
+        );
+        assert!(g.triangle_count() > triangles_before);
+        triangles_before = g.triangle_count();
+        previous = worst;
+    }
+}
