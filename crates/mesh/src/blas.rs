@@ -123,17 +123,8 @@ fn traverse_bvh2<S: FastStack<u32>>(
     if root.aabb().intersect_ray(ray) >= ray.tmax {
         return;
     }
-    let leaf_node =
-        |node: &Bvh2Node, ray: &mut Ray, leaf: &mut dyn FnMut(&mut Ray, u32) -> bool| {
-            for slot in node.first_index..node.first_index + node.prim_count {
-                if !leaf(ray, slot) {
-                    return false;
-                }
-            }
-            true
-        };
     if root.is_leaf() {
-        leaf_node(root, ray, leaf);
+        visit_leaf(root, ray, leaf);
         return;
     }
     let mut current = root.first_index;
@@ -153,14 +144,14 @@ fn traverse_bvh2<S: FastStack<u32>>(
         }
         let mut go_near = t_near < ray.tmax;
         if go_near && near.is_leaf() {
-            if !leaf_node(near, ray, leaf) {
+            if !visit_leaf(near, ray, leaf) {
                 return;
             }
             go_near = false;
         }
         let mut go_far = t_far < ray.tmax;
         if go_far && far.is_leaf() {
-            if !leaf_node(far, ray, leaf) {
+            if !visit_leaf(far, ray, leaf) {
                 return;
             }
             go_far = false;
@@ -180,6 +171,21 @@ fn traverse_bvh2<S: FastStack<u32>>(
     }
 }
 
+/// Tests every primitive slot of a Bvh2 leaf; `false` when `leaf` asked to stop.
+#[inline(always)]
+fn visit_leaf(
+    node: &Bvh2Node,
+    ray: &mut Ray,
+    leaf: &mut impl FnMut(&mut Ray, u32) -> bool,
+) -> bool {
+    for slot in node.first_index..node.first_index + node.prim_count {
+        if !leaf(ray, slot) {
+            return false;
+        }
+    }
+    true
+}
+
 /// CwBvh traversal through obvhs' `traverse!` macro, counting node tests.
 #[inline(always)]
 fn traverse_cwbvh(
@@ -194,20 +200,23 @@ fn traverse_cwbvh(
     let mut state = bvh.new_traversal(ray.direction);
     let mut node;
     let mut visits = 0u32;
-    obvhs::traverse!(
-        bvh,
-        node,
-        state,
-        {
-            visits += 1;
-            node.intersect_ray(ray, state.oct_inv4)
-        },
-        {
-            if !leaf(ray, state.primitive_id) {
-                break;
+    // The primitive block runs inside an inner loop of the macro: stopping needs a label.
+    'traversal: {
+        obvhs::traverse!(
+            bvh,
+            node,
+            state,
+            {
+                visits += 1;
+                node.intersect_ray(ray, state.oct_inv4)
+            },
+            {
+                if !leaf(ray, state.primitive_id) {
+                    break 'traversal;
+                }
             }
-        }
-    );
+        );
+    }
     work.node_visits += visits;
     // The macro names UVec2 unqualified; keep the import used.
     let _ = UVec2::ZERO;

@@ -162,7 +162,7 @@ pub(crate) fn max_stretch(m: &DMat3) -> f64 {
     for _ in 0..64 {
         let w = mtm * v;
         let len = w.length();
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             break;
         }
         lambda = len;

@@ -367,7 +367,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
 
 fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
     match o.tessellation {
-        Tessellation::ScreenError { pixels } if !(pixels > 0.0 && pixels.is_finite()) => {
+        Tessellation::ScreenError { pixels } if !(pixels.is_finite() && pixels > 0.0) => {
             return Err(MeshError::InvalidOption(format!(
                 "ScreenError pixels must be > 0, got {pixels}"
             )));
@@ -644,7 +644,7 @@ impl Geometry for MeshGeometry {
     fn closest_hit(&self, ray: &Ray) -> TraceResult {
         let mut work = RayWork::default();
         let mut r = self.ob_ray(ray);
-        if !(r.tmax >= r.tmin) {
+        if r.tmax.is_nan() || r.tmax < r.tmin {
             return TraceResult {
                 hit: None,
                 termination: Termination::Miss,

@@ -53,7 +53,7 @@ pub fn segments(
     let max = ((f64::from(max_per_turn) * fraction).ceil() as u32).max(min);
     let n = match detail {
         Detail::ChordError(e) => {
-            if !(e > 0.0) || !(curvature_bound > 0.0) {
+            if e.is_nan() || e <= 0.0 || curvature_bound.is_nan() || curvature_bound <= 0.0 {
                 return max;
             }
             // Half the budget per direction: M h^2 / 8 <= e / 2  =>  h = 2 sqrt(e / M).

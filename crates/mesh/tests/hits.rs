@@ -332,7 +332,7 @@ fn planes_cover_max_distance_and_are_exact() {
             );
             assert!(h.normal.as_dvec3().dot(n) > 0.99999);
             checked += 1;
-        } else if t > 501.0 || t < 0.0 {
+        } else if !(0.0..=501.0).contains(&t) {
             assert!(
                 r.hit.is_none(),
                 "hit behind the camera or beyond max_distance at {t}"
