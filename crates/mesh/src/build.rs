@@ -405,30 +405,21 @@ fn repeat_offsets(
     Ok(out)
 }
 
-/// Tessellation detail (shape-local) a placement needs under `options.tessellation`.
-pub(crate) fn placement_detail(
-    p: &Placement,
-    local: (DVec3, DVec3),
-    pixel_angle: f64,
-    tessellation: Tessellation,
-) -> Detail {
-    let stretch = max_stretch(&p.to_render.matrix3);
+/// Tessellation detail (shape-local) a placement needs under a fixed level or world chord
+/// error (screen budgets are built per band, see `ScreenBudget`).
+pub(crate) fn placement_detail(p: &Placement, tessellation: Tessellation) -> Detail<'static> {
     match tessellation {
         Tessellation::FixedLevel(level) => Detail::Level(level.min(12)),
-        Tessellation::ChordError { world } => Detail::ChordError(world / stretch),
-        Tessellation::ScreenError { pixels } => {
-            let world_box = transform_bounds(&p.to_render, local);
-            let size = (world_box.1 - world_box.0).length();
-            // The camera inside the bounds would ask for infinite detail: floor the distance
-            // at 1/1000 of the object's size (segment counts are capped as well).
-            let distance = distance_to_box(world_box).max(size * 1e-3);
-            Detail::ChordError(pixels * pixel_angle * distance / stretch)
+        Tessellation::ChordError { world } => {
+            Detail::ChordError(world / max_stretch(&p.to_render.matrix3))
         }
+        // Not used for screen budgets; the coarsest level as a harmless fallback.
+        Tessellation::ScreenError { .. } => Detail::Level(0),
     }
 }
 
 /// The finer of two details.
-pub(crate) fn finer(a: Detail, b: Detail) -> Detail {
+pub(crate) fn finer<'a>(a: Detail<'a>, b: Detail<'a>) -> Detail<'a> {
     match (a, b) {
         (Detail::ChordError(x), Detail::ChordError(y)) => Detail::ChordError(x.min(y)),
         (Detail::Level(x), Detail::Level(y)) => Detail::Level(x.max(y)),

@@ -42,7 +42,7 @@ use blas::{Blas, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
 pub use options::{BuildQuality, BvhKind, MeshOptions, Tessellation};
-use tessellate::{Detail, LocalMesh};
+use tessellate::{Detail, LocalMesh, ScreenBudget};
 
 /// Why the mesh backend could not build a scene.
 #[derive(Debug, thiserror::Error)]
@@ -193,11 +193,18 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             ShapeKey::Analytic(..) => {
                 let local =
                     build::local_bounds(node, &mesh_bounds).unwrap_or((DVec3::ZERO, DVec3::ZERO));
-                let detail = placements
-                    .iter()
-                    .map(|p| build::placement_detail(p, local, pixel_angle, options.tessellation))
-                    .reduce(build::finer)
-                    .unwrap_or(Detail::Level(0));
+                let screen_budget;
+                let detail = match options.tessellation {
+                    Tessellation::ScreenError { pixels } => {
+                        screen_budget = screen_budget_for(placements, local, pixels * pixel_angle);
+                        Detail::Screen(&screen_budget)
+                    }
+                    other => placements
+                        .iter()
+                        .map(|p| build::placement_detail(p, other))
+                        .reduce(build::finer)
+                        .unwrap_or(Detail::Level(0)),
+                };
                 let mesh =
                     tessellate::tessellate(&node.kind, detail, options.max_segments_per_turn)
                         .ok_or_else(|| MeshError::Unsupported {
@@ -217,6 +224,11 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
                         match detail {
                             Detail::ChordError(e) => format!(", local chord budget {e:.3e}"),
                             Detail::Level(l) => format!(", level {l}"),
+                            Detail::Screen(_) => match options.tessellation {
+                                Tessellation::ScreenError { pixels } =>
+                                    format!(", screen budget {pixels} px per band"),
+                                _ => String::new(),
+                            },
                         },
                         if capped {
                             " (capped by max_segments_per_turn)"
@@ -363,6 +375,39 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         max_distance: scene.render.max_distance as f32,
         report,
     })
+}
+
+/// Most placements a screen budget considers (the nearest ones; farther copies of a shape
+/// almost never need a finer band than the nearest).
+const MAX_BUDGET_PLACEMENTS: usize = 512;
+
+/// The screen-space budget of a shape from its placements (the nearest
+/// [`MAX_BUDGET_PLACEMENTS`]), distances floored at 1/1000 of the shape's size.
+fn screen_budget_for(
+    placements: &[&Placement],
+    local: (DVec3, DVec3),
+    error_per_distance: f64,
+) -> ScreenBudget {
+    let mut by_distance: Vec<(f64, f64, DAffine3)> = placements
+        .iter()
+        .map(|p| {
+            let world = build::transform_bounds(&p.to_render, local);
+            (
+                build::distance_to_box(world),
+                (world.1 - world.0).length(),
+                p.to_render,
+            )
+        })
+        .collect();
+    by_distance.sort_by(|a, b| a.0.total_cmp(&b.0));
+    by_distance.truncate(MAX_BUDGET_PLACEMENTS);
+    let min_distance = by_distance
+        .iter()
+        .map(|(_, size, _)| size * 1e-3)
+        .fold(f64::INFINITY, f64::min)
+        .max(f64::MIN_POSITIVE);
+    let transforms: Vec<DAffine3> = by_distance.iter().map(|(_, _, m)| *m).collect();
+    ScreenBudget::new(&transforms, error_per_distance, min_distance)
 }
 
 fn check_options(o: &MeshOptions) -> Result<(), MeshError> {

@@ -1,15 +1,19 @@
 //! Tessellation of the analytic shapes into indexed triangle meshes in the shape's local frame.
 //!
 //! Curved shapes are surfaces of revolution (sphere, cylinder, torus) or a scaled sphere
-//! (ellipsoid) sampled on a uniform parameter grid. The number of segments per direction comes
+//! (ellipsoid) sampled on a tensor-product parameter grid. The step in each direction comes
 //! from the chord-error bound of linear interpolation: a curve with `|p''| <= M` per unit
 //! parameter, sampled every `h`, deviates from its chords by at most `M h^2 / 8`; each grid
 //! direction gets half the budget, so a triangle's error stays within the whole budget.
+//! With a constant budget the grid is uniform; with a screen-space budget
+//! ([`Detail::Screen`]) each band of the grid gets the budget of its own nearest distance to
+//! the camera, so the grid is dense near the camera and sparse far away (a tensor grid stays
+//! watertight: no T-junctions).
 //! Closed shapes come out watertight (every edge shared by two triangles once vertices at the
 //! same position are identified; caps and sides keep separate vertices for their normals),
 //! counter-clockwise seen from outside.
 
-use std::f64::consts::TAU;
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use glam::DVec3;
 use marchmesh_scene::NodeKind;
@@ -33,11 +37,103 @@ pub struct LocalMesh {
 
 /// How fine a tessellation must be, in the shape's local frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Detail {
-    /// Largest chord error in local units (> 0).
+pub enum Detail<'a> {
+    /// Largest chord error in local units (> 0), everywhere.
     ChordError(f64),
     /// `8 * 2^level` segments per full turn.
     Level(u32),
+    /// A chord error that depends on where a part of the surface is: see [`ScreenBudget`].
+    Screen(&'a ScreenBudget),
+}
+
+/// A screen-space error budget: a part of the surface inside a local region may deviate by
+/// `error_per_distance * max(distance(camera, region), min_distance) / stretch` local units,
+/// the smallest over every placement of the shape, where distances are world units (render
+/// space, camera at the origin) bounded below by the local distance times the placement's
+/// smallest stretch, and `stretch` is its largest.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScreenBudget {
+    placements: Vec<Placed>,
+    error_per_distance: f64,
+    min_distance: f64,
+}
+
+/// One placement as the budget needs it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Placed {
+    /// The camera in the shape's local frame.
+    camera: DVec3,
+    /// Smallest and largest singular values of the object-to-render linear part.
+    stretch_min: f64,
+    stretch_max: f64,
+}
+
+impl ScreenBudget {
+    /// A budget for a shape placed by `placements` (object-to-render transforms), allowing
+    /// `error_per_distance` (`pixels * camera.pixel_angle()`) world units of chord error per
+    /// unit of camera distance, distances floored at `min_distance` (world units).
+    pub fn new(placements: &[glam::DAffine3], error_per_distance: f64, min_distance: f64) -> Self {
+        Self {
+            placements: placements
+                .iter()
+                .map(|m| {
+                    let inverse = m.inverse();
+                    Placed {
+                        camera: inverse.transform_point3(DVec3::ZERO),
+                        stretch_min: 1.0 / crate::build::max_stretch(&inverse.matrix3),
+                        stretch_max: crate::build::max_stretch(&m.matrix3),
+                    }
+                })
+                .collect(),
+            error_per_distance,
+            min_distance,
+        }
+    }
+
+    /// The same budget in a frame where local points are `scale * p` (e.g. a unit sphere
+    /// standing for an ellipsoid): errors come out in that frame's units.
+    pub fn scaled(&self, scale: DVec3) -> Self {
+        let (lo, hi) = (scale.min_element(), scale.max_element());
+        Self {
+            placements: self
+                .placements
+                .iter()
+                .map(|p| Placed {
+                    camera: p.camera / scale,
+                    stretch_min: p.stretch_min * lo,
+                    stretch_max: p.stretch_max * hi,
+                })
+                .collect(),
+            ..self.clone()
+        }
+    }
+
+    fn error_at(&self, local_distance: impl Fn(DVec3) -> f64) -> f64 {
+        self.placements
+            .iter()
+            .map(|p| {
+                let d = (local_distance(p.camera) * p.stretch_min).max(self.min_distance);
+                self.error_per_distance * d / p.stretch_max
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The local chord error allowed for the part of the surface inside `local_box`
+    /// (infinite when there is no placement).
+    pub fn local_error(&self, (lo, hi): (DVec3, DVec3)) -> f64 {
+        self.error_at(|c| (lo - c).max(c - hi).max(DVec3::ZERO).length())
+    }
+
+    /// The local chord error allowed for the part of the surface inside the solid of
+    /// revolution about y with radius in `radial` and height in `y`.
+    fn ring_error(&self, radial: (f64, f64), y: (f64, f64)) -> f64 {
+        self.error_at(|c| {
+            let rho = glam::DVec2::new(c.x, c.z).length();
+            let dr = (radial.0 - rho).max(rho - radial.1).max(0.0);
+            let dy = (y.0 - c.y).max(c.y - y.1).max(0.0);
+            (dr * dr + dy * dy).sqrt()
+        })
+    }
 }
 
 /// Segments for a direction spanning `fraction` of a full turn whose points move with
@@ -52,6 +148,8 @@ pub fn segments(
 ) -> u32 {
     let max = ((f64::from(max_per_turn) * fraction).ceil() as u32).max(min);
     let n = match detail {
+        // The coarsest screen budget is the one of the whole shape.
+        Detail::Screen(_) => return min,
         Detail::ChordError(e) => {
             if e.is_nan() || e <= 0.0 || curvature_bound.is_nan() || curvature_bound <= 0.0 {
                 return max;
@@ -84,14 +182,12 @@ struct ProfilePoint {
     pole: bool,
 }
 
-/// Revolves profile polylines about the y axis with `n` segments (counter-clockwise from
-/// outside when each polyline runs so that `(-dy, dr)` points outward). A `closed` polyline
-/// connects its last point back to its first.
-fn revolve(pieces: &[(Vec<ProfilePoint>, bool)], n: u32, mesh: &mut LocalMesh) {
-    let n = n.max(3);
-    let (sin, cos): (Vec<f64>, Vec<f64>) = (0..n)
-        .map(|j| (TAU * f64::from(j) / f64::from(n)).sin_cos())
-        .unzip();
+/// Revolves profile polylines about the y axis at the angles `phi` (increasing, in
+/// `[0, 2 pi)`, at least 3), counter-clockwise from outside when each polyline runs so that
+/// `(-dy, dr)` points outward. A `closed` polyline connects its last point back to its first.
+fn revolve(pieces: &[(Vec<ProfilePoint>, bool)], phi: &[f64], mesh: &mut LocalMesh) {
+    let n = phi.len() as u32;
+    let (sin, cos): (Vec<f64>, Vec<f64>) = phi.iter().map(|a| a.sin_cos()).unzip();
     let normals = mesh.normals.get_or_insert_with(Vec::new);
     for (profile, closed) in pieces {
         // First vertex index of each profile row.
@@ -140,43 +236,246 @@ fn revolve(pieces: &[(Vec<ProfilePoint>, bool)], n: u32, mesh: &mut LocalMesh) {
     }
 }
 
-/// A UV sphere of radius 1 with `n_lon` segments around y and `n_lat` from pole to pole.
-fn unit_sphere(n_lon: u32, n_lat: u32) -> LocalMesh {
-    let n_lat = n_lat.max(2);
-    let profile: Vec<ProfilePoint> = (0..=n_lat)
-        .map(|k| {
-            let theta = std::f64::consts::PI * f64::from(k) / f64::from(n_lat);
-            let (s, c) = theta.sin_cos();
-            let pole = k == 0 || k == n_lat;
+/// `(min, max)` of `f` over `[a, b]`, `f` being a sinusoid with its extremes at
+/// `phase + k pi`.
+fn trig_range(a: f64, b: f64, f: fn(f64) -> f64, phase: f64) -> (f64, f64) {
+    let mut lo = f(a).min(f(b));
+    let mut hi = f(a).max(f(b));
+    let mut k = ((a - phase) / PI).ceil();
+    while phase + k * PI <= b {
+        let v = f(phase + k * PI);
+        lo = lo.min(v);
+        hi = hi.max(v);
+        k += 1.0;
+    }
+    (lo, hi)
+}
+
+fn cos_range(a: f64, b: f64) -> (f64, f64) {
+    trig_range(a, b, f64::cos, 0.0)
+}
+
+fn sin_range(a: f64, b: f64) -> (f64, f64) {
+    trig_range(a, b, f64::sin, FRAC_PI_2)
+}
+
+/// Range of the product of two intervals.
+fn mul_range((a, b): (f64, f64), (c, d): (f64, f64)) -> (f64, f64) {
+    let p = [a * c, a * d, b * c, b * d];
+    (
+        p.iter().copied().fold(f64::INFINITY, f64::min),
+        p.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+    )
+}
+
+/// Local box of the wedge `phi in [a, b]` of a surface of revolution with radial range
+/// `radial` and height range `y`.
+fn wedge_box(a: f64, b: f64, radial: (f64, f64), y: (f64, f64)) -> (DVec3, DVec3) {
+    let x = mul_range(radial, cos_range(a, b));
+    let z = mul_range(radial, sin_range(a, b));
+    (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
+}
+
+/// Parameter samples from `start` to `end` (both included). Constant budgets give a
+/// uniform grid whose step keeps `curvature_bound h^2 / 8` within half the budget; a screen
+/// budget marches with `max_step(a, b)`, the largest step allowed for the interval `[a, b]`.
+/// Steps never go below `2 pi / max_per_turn`; at least `min` segments.
+fn sample_span(
+    detail: Detail,
+    (start, end): (f64, f64),
+    curvature_bound: f64,
+    min: u32,
+    max_per_turn: u32,
+    max_step: impl Fn(f64, f64) -> f64,
+) -> Vec<f64> {
+    let span = end - start;
+    let uniform = |n: u32| -> Vec<f64> {
+        let n = n.max(1);
+        (0..=n)
+            .map(|i| {
+                if i == n {
+                    end
+                } else {
+                    start + span * f64::from(i) / f64::from(n)
+                }
+            })
+            .collect()
+    };
+    if !matches!(detail, Detail::Screen(_)) {
+        return uniform(segments(
+            detail,
+            curvature_bound,
+            span / TAU,
+            min,
+            max_per_turn,
+        ));
+    }
+    let h_min = TAU / f64::from(max_per_turn.max(1));
+    let allowed = |a: f64, b: f64| {
+        let h = max_step(a, b);
+        if h.is_nan() { h_min } else { h.max(h_min) }
+    };
+    let mut out = vec![start];
+    let mut s = start;
+    while s < end {
+        let remaining = end - s;
+        // Guess from a thin interval, then re-check the interval the guess spans (its
+        // distance can only be smaller, so the second step is the safe one).
+        let guess = allowed(s, (s + h_min).min(end)).min(remaining);
+        let h = allowed(s, s + guess).min(guess);
+        s = if remaining - h <= remaining * 1e-9 {
+            end
+        } else {
+            s + h
+        };
+        out.push(s);
+    }
+    if out.len() <= min as usize {
+        return uniform(min);
+    }
+    out
+}
+
+/// The step allowed by a chord budget `e` for a curve with second derivative at most `m`:
+/// `m h^2 / 8 <= e / 2`.
+fn step_for(e: f64, m: f64) -> f64 {
+    if m <= 0.0 || e.is_infinite() {
+        f64::INFINITY
+    } else {
+        2.0 * (e.max(0.0) / m).sqrt()
+    }
+}
+
+/// A band of a revolution profile between two samples: radial and height ranges.
+#[derive(Debug, Clone, Copy)]
+struct Band {
+    radial: (f64, f64),
+    y: (f64, f64),
+}
+
+/// Merges consecutive bands so that at most `max` remain (conservative unions).
+fn coarsen(bands: Vec<Band>, max: usize) -> Vec<Band> {
+    if bands.len() <= max {
+        return bands;
+    }
+    let per = bands.len().div_ceil(max);
+    bands
+        .chunks(per)
+        .map(|c| {
+            c.iter().fold(
+                Band {
+                    radial: (f64::INFINITY, f64::NEG_INFINITY),
+                    y: (f64::INFINITY, f64::NEG_INFINITY),
+                },
+                |acc, b| Band {
+                    radial: (acc.radial.0.min(b.radial.0), acc.radial.1.max(b.radial.1)),
+                    y: (acc.y.0.min(b.y.0), acc.y.1.max(b.y.1)),
+                },
+            )
+        })
+        .collect()
+}
+
+/// Angles of a full turn for a surface of revolution made of `bands`, each band's wedge
+/// getting the budget of its own distance: the step must hold for every band, whose points
+/// move by at most `radial` per radian squared.
+fn revolution_angles(detail: Detail, bands: &[Band], min: u32, max_per_turn: u32) -> Vec<f64> {
+    let radial_max = bands.iter().map(|b| b.radial.1).fold(0.0, f64::max);
+    let bands = coarsen(bands.to_vec(), 64);
+    turn(sample_span(
+        detail,
+        (0.0, TAU),
+        radial_max,
+        min,
+        max_per_turn,
+        |a, b| {
+            let Detail::Screen(budget) = detail else {
+                return f64::INFINITY;
+            };
+            bands
+                .iter()
+                .map(|band| {
+                    step_for(
+                        budget.local_error(wedge_box(a, b, band.radial, band.y)),
+                        band.radial.1,
+                    )
+                })
+                .fold(f64::INFINITY, f64::min)
+        },
+    ))
+}
+
+/// Angles `phi` of a full turn (without the closing `2 pi`).
+fn turn(samples: Vec<f64>) -> Vec<f64> {
+    let mut s = samples;
+    s.pop();
+    s
+}
+
+/// An ellipsoid with semi-axes `radii` (a sphere when they are equal) as a latitude-longitude
+/// grid with single-vertex poles.
+fn lat_long(radii: DVec3, detail: Detail, max_per_turn: u32) -> LocalMesh {
+    // Work on the unit sphere (second derivatives <= 1 per radian in both directions), with
+    // budgets converted to its frame.
+    let scaled_budget;
+    let detail = match detail {
+        Detail::ChordError(e) => Detail::ChordError(e / radii.max_element()),
+        Detail::Screen(b) => {
+            scaled_budget = b.scaled(radii);
+            Detail::Screen(&scaled_budget)
+        }
+        level => level,
+    };
+    let theta = sample_span(detail, (0.0, PI), 1.0, 2, max_per_turn, |a, b| {
+        let Detail::Screen(budget) = detail else {
+            return f64::INFINITY;
+        };
+        step_for(budget.ring_error(sin_range(a, b), cos_range(a, b)), 1.0)
+    });
+    let bands: Vec<Band> = theta
+        .windows(2)
+        .map(|w| Band {
+            radial: sin_range(w[0], w[1]),
+            y: cos_range(w[0], w[1]),
+        })
+        .collect();
+    let phi = revolution_angles(detail, &bands, 3, max_per_turn);
+    let last = theta.len() - 1;
+    let profile: Vec<ProfilePoint> = theta
+        .iter()
+        .enumerate()
+        .map(|(k, &t)| {
+            let pole = k == 0 || k == last;
+            let (s, c) = t.sin_cos();
+            let y = if k == 0 {
+                1.0
+            } else if k == last {
+                -1.0
+            } else {
+                c
+            };
             ProfilePoint {
                 radial: if pole { 0.0 } else { s },
-                y: if k == 0 {
-                    1.0
-                } else if k == n_lat {
-                    -1.0
-                } else {
-                    c
-                },
-                normal: (
-                    if pole { 0.0 } else { s },
-                    if k == 0 {
-                        1.0
-                    } else if k == n_lat {
-                        -1.0
-                    } else {
-                        c
-                    },
-                ),
+                y,
+                normal: (if pole { 0.0 } else { s }, y),
                 pole,
             }
         })
         .collect();
     let mut mesh = LocalMesh {
         closed: true,
-        segments: vec![n_lon.max(3), 2 * n_lat],
+        segments: vec![phi.len() as u32, 2 * last as u32],
         ..LocalMesh::default()
     };
-    revolve(&[(profile, false)], n_lon, &mut mesh);
+    revolve(&[(profile, false)], &phi, &mut mesh);
+    for p in &mut mesh.positions {
+        *p *= radii;
+    }
+    if let Some(normals) = &mut mesh.normals {
+        for n in normals.iter_mut() {
+            *n = (*n / radii).normalize();
+        }
+    }
     mesh
 }
 
@@ -185,37 +484,18 @@ fn unit_sphere(n_lon: u32, n_lat: u32) -> LocalMesh {
 /// tessellation (plane, mesh, composites).
 pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<LocalMesh> {
     let mesh = match *kind {
-        NodeKind::Sphere { radius } => {
-            let n_lon = segments(detail, radius, 1.0, 3, max_per_turn);
-            let n_lat = segments(detail, radius, 0.5, 2, max_per_turn);
-            let mut m = unit_sphere(n_lon, n_lat);
-            for p in &mut m.positions {
-                *p *= radius;
-            }
-            m
-        }
-        NodeKind::Ellipsoid { radii } => {
-            // Scaled unit sphere: |p_uu|, |p_vv| <= max radius.
-            let m_bound = radii.max_element();
-            let n_lon = segments(detail, m_bound, 1.0, 3, max_per_turn);
-            let n_lat = segments(detail, m_bound, 0.5, 2, max_per_turn);
-            let mut m = unit_sphere(n_lon, n_lat);
-            for p in &mut m.positions {
-                *p *= radii;
-            }
-            if let Some(normals) = &mut m.normals {
-                for n in normals.iter_mut() {
-                    *n = (*n / radii).normalize();
-                }
-            }
-            m
-        }
+        NodeKind::Sphere { radius } => lat_long(DVec3::splat(radius), detail, max_per_turn),
+        NodeKind::Ellipsoid { radii } => lat_long(radii, detail, max_per_turn),
         NodeKind::Cylinder {
             radius,
             half_height,
         } => {
-            let n = segments(detail, radius, 1.0, 3, max_per_turn);
             let h = half_height;
+            let bands = [Band {
+                radial: (0.0, radius),
+                y: (-h, h),
+            }];
+            let phi = revolution_angles(detail, &bands, 3, max_per_turn);
             let rim = |y: f64, normal: (f64, f64)| ProfilePoint {
                 radial: radius,
                 y,
@@ -230,7 +510,7 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
             };
             let mut m = LocalMesh {
                 closed: true,
-                segments: vec![n.max(3)],
+                segments: vec![phi.len() as u32],
                 ..LocalMesh::default()
             };
             revolve(
@@ -239,7 +519,7 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
                     (vec![rim(h, (1.0, 0.0)), rim(-h, (1.0, 0.0))], false),
                     (vec![rim(-h, (0.0, -1.0)), centre(-h)], false),
                 ],
-                n,
+                &phi,
                 &mut m,
             );
             m
@@ -248,14 +528,39 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
             major_radius,
             minor_radius,
         } => {
-            let n_major = segments(detail, major_radius + minor_radius, 1.0, 3, max_per_turn);
-            let n_minor = segments(detail, minor_radius, 1.0, 3, max_per_turn);
-            let profile: Vec<ProfilePoint> = (0..n_minor)
-                .map(|k| {
-                    let (s, c) = (TAU * f64::from(k) / f64::from(n_minor)).sin_cos();
+            let (big, small) = (major_radius, minor_radius);
+            let v_closed = sample_span(detail, (0.0, TAU), small, 3, max_per_turn, |a, b| {
+                let Detail::Screen(budget) = detail else {
+                    return f64::INFINITY;
+                };
+                let (c_min, c_max) = cos_range(a, b);
+                let (s_min, s_max) = sin_range(a, b);
+                let radial = (big + small * c_min, big + small * c_max);
+                step_for(
+                    budget.ring_error(radial, (-small * s_max, -small * s_min)),
+                    small,
+                )
+            });
+            let bands: Vec<Band> = v_closed
+                .windows(2)
+                .map(|w| {
+                    let (c_min, c_max) = cos_range(w[0], w[1]);
+                    let (s_min, s_max) = sin_range(w[0], w[1]);
+                    Band {
+                        radial: (big + small * c_min, big + small * c_max),
+                        y: (-small * s_max, -small * s_min),
+                    }
+                })
+                .collect();
+            let phi = revolution_angles(detail, &bands, 3, max_per_turn);
+            let v = turn(v_closed);
+            let profile: Vec<ProfilePoint> = v
+                .iter()
+                .map(|&t| {
+                    let (s, c) = t.sin_cos();
                     ProfilePoint {
-                        radial: major_radius + minor_radius * c,
-                        y: -minor_radius * s,
+                        radial: big + small * c,
+                        y: -small * s,
                         normal: (c, -s),
                         pole: false,
                     }
@@ -263,10 +568,10 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
                 .collect();
             let mut m = LocalMesh {
                 closed: true,
-                segments: vec![n_major.max(3), n_minor],
+                segments: vec![phi.len() as u32, v.len() as u32],
                 ..LocalMesh::default()
             };
-            revolve(&[(profile, true)], n_major, &mut m);
+            revolve(&[(profile, true)], &phi, &mut m);
             m
         }
         NodeKind::Box { half_extents } => box_mesh(half_extents),

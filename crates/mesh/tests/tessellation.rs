@@ -345,3 +345,56 @@ fn ellipsoid_reference_distance_is_exact_on_a_sphere() {
     }
     let _ = DVec2::ZERO;
 }
+
+#[test]
+fn screen_budgets_hold_where_each_part_is_and_coarsen_far_away() {
+    use glam::{DAffine3, DQuat};
+    use marchmesh_mesh::tessellate::ScreenBudget;
+    // The camera sits at the render-space origin, 0.5-0.7 units off each shape's side.
+    let placement = DAffine3::from_rotation_translation(
+        DQuat::from_euler(glam::EulerRot::XYZ, 0.3, -0.7, 0.2),
+        DVec3::new(-2.0, 0.2, 0.1),
+    );
+    let k = 2e-3; // world error per unit distance
+    let budget = ScreenBudget::new(&[placement], k, 1e-3);
+    for (name, kind) in shapes() {
+        let m = tessellate(&kind, Detail::Screen(&budget), 4096).expect(name);
+        let tm = TriangleMesh {
+            positions: m.positions.iter().map(|p| p.as_vec3()).collect(),
+            normals: None,
+            triangles: m.triangles.clone(),
+            report: LoadReport::default(),
+        };
+        assert!(
+            tm.is_closed(),
+            "{name}: adaptive tessellation is not watertight"
+        );
+        for t in &m.triangles {
+            let [a, b, c] = corners(&m, t);
+            for (u, v) in [(1.0 / 3.0, 1.0 / 3.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5)] {
+                let p = a + (b - a) * u + (c - a) * v;
+                let allowed = k * placement.transform_point3(p).length().max(1e-3);
+                let err = distance(&kind, p);
+                assert!(
+                    err <= allowed * 1.01 + 1e-12,
+                    "{name}: error {err} over {allowed} at {p:?}"
+                );
+            }
+        }
+        if name != "box" {
+            // Uniform at the nearest distance would be finer everywhere.
+            let nearest = m
+                .positions
+                .iter()
+                .map(|p| placement.transform_point3(*p).length())
+                .fold(f64::INFINITY, f64::min);
+            let uniform = tessellate(&kind, Detail::ChordError(k * nearest), 4096).expect(name);
+            assert!(
+                m.triangles.len() < uniform.triangles.len(),
+                "{name}: adaptive {} vs uniform {}",
+                m.triangles.len(),
+                uniform.triangles.len()
+            );
+        }
+    }
+}
