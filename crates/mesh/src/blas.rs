@@ -231,9 +231,9 @@ pub(crate) struct Blas {
     pub tree: Tree,
     /// Unit vertex normals, if the source had them.
     pub normals: Option<Vec<Vec3>>,
-    /// Vertex indices per triangle (kept only with `normals`).
+    /// Vertex indices per slot (kept only with `normals`).
     pub indices: Vec<[u32; 3]>,
-    /// Material per triangle (empty: the instance's material).
+    /// Material per slot (empty: the instance's material).
     pub materials: Vec<MaterialId>,
     /// Triangle count (distinct, before any spatial splits).
     pub triangle_count: usize,
@@ -274,17 +274,27 @@ impl Blas {
             .iter()
             .map(|&i| RtTriangle::from(&tris[i as usize]))
             .collect();
-        let has_normals = input.normals.is_some();
+        // Per-triangle shading data in slot order too: one indirection less per hit.
+        let slots = tree.primitive_indices();
+        let indices = if input.normals.is_some() {
+            slots.iter().map(|&i| input.triangles[i as usize]).collect()
+        } else {
+            Vec::new()
+        };
+        let materials = if input.materials.is_empty() {
+            Vec::new()
+        } else {
+            slots
+                .iter()
+                .map(|&i| input.materials.get(i as usize).copied().unwrap_or(0))
+                .collect()
+        };
         Self {
             tris: rt,
             tree,
             normals: input.normals,
-            indices: if has_normals {
-                input.triangles.clone()
-            } else {
-                Vec::new()
-            },
-            materials: input.materials,
+            indices,
+            materials,
             triangle_count: input.triangles.len(),
         }
     }
@@ -330,15 +340,6 @@ impl Blas {
         hit
     }
 
-    /// Triangle index behind a slot.
-    pub(crate) fn triangle_of(&self, slot: u32) -> u32 {
-        self.tree
-            .primitive_indices()
-            .get(slot as usize)
-            .copied()
-            .unwrap_or(0)
-    }
-
     /// Shading normal (this BLAS's frame, unit) at a hit: interpolated vertex normals if
     /// present (barycentrics from `RtTriangle::compute_barycentric`), else geometric.
     pub(crate) fn normal(&self, ray: &Ray, slot: u32) -> Vec3 {
@@ -347,7 +348,7 @@ impl Blas {
         };
         let geometric = Vec3::from(tri.compute_normal());
         if let Some(normals) = &self.normals
-            && let Some(idx) = self.indices.get(self.triangle_of(slot) as usize)
+            && let Some(idx) = self.indices.get(slot as usize)
         {
             let b: Vec2 = tri.compute_barycentric(ray);
             let n = |k: usize| normals.get(idx[k] as usize).copied().unwrap_or(geometric);
@@ -361,7 +362,7 @@ impl Blas {
 
     /// Material of the triangle behind `slot`, if this BLAS carries materials.
     pub(crate) fn material(&self, slot: u32) -> Option<MaterialId> {
-        self.materials.get(self.triangle_of(slot) as usize).copied()
+        self.materials.get(slot as usize).copied()
     }
 
     /// Exact bytes held (lengths).
