@@ -82,3 +82,66 @@ fn mesh_scenes_render() {
         );
     }
 }
+
+#[test]
+fn single_triangle_and_empty_scenes_build() {
+    let s = common::scene(
+        r#"{"camera": {"position": [0, 1.5, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 16, "height": 16},
+            "objects": [{"shape": {"triangle": {"vertices": [[-1.2, -0.8, 0.3], [1.3, -0.6, -0.2], [0.1, 1.2, 0.1]]}}}]}"#,
+    );
+    for bvh in [
+        marchmesh_mesh::BvhKind::Bvh2,
+        marchmesh_mesh::BvhKind::CwBvh,
+    ] {
+        let g = build(
+            &s,
+            &MeshOptions {
+                bvh,
+                ..MeshOptions::DEFAULT
+            },
+        )
+        .expect("one triangle");
+        let hits = common::camera_rays(&s, 16)
+            .iter()
+            .filter(|r| marchmesh_core::Geometry::closest_hit(&g, r).hit.is_some())
+            .count();
+        assert!(hits > 20, "{bvh:?}: {hits}");
+    }
+    let empty = common::scene(r#"{"camera": {"width": 8, "height": 8}}"#);
+    let g = build(&empty, &MeshOptions::DEFAULT).expect("empty scene");
+    let r = marchmesh_core::Geometry::closest_hit(&g, &common::camera_rays(&empty, 1)[0]);
+    assert!(r.hit.is_none());
+}
+
+#[test]
+fn instanced_and_flattened_images_match() {
+    let s = common::scene(
+        r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50, "width": 48, "height": 48},
+            "objects": [{"shape": {"repeat": {"period": [2, 0, 2],
+                "child": {"shape": {"torus": {"major_radius": 0.6, "minor_radius": 0.2}}, "transform": {"rotate_deg": [60, 0, 0]}}}}},
+                {"shape": {"plane": {}}, "transform": {"translate": [0, -0.9, 0]}}],
+            "render": {"max_distance": 30}}"#,
+    );
+    let bg = BackgroundSampler::load(&s.background).expect("background");
+    let opts = RenderOptions {
+        threads: 1,
+        ..Default::default()
+    };
+    let inst = build(&s, &MeshOptions::DEFAULT).expect("instanced");
+    let flat = build(
+        &s,
+        &MeshOptions {
+            instancing: false,
+            ..MeshOptions::DEFAULT
+        },
+    )
+    .expect("flat");
+    assert!(inst.instance_count() > 100);
+    let a = render(&s, &inst, &bg, &opts, &|| {}).expect("render");
+    let b = render(&s, &flat, &bg, &opts, &|| {}).expect("render");
+    let acc = marchmesh_core::compare(&a.framebuffer, &b.framebuffer).expect("same size");
+    assert!(acc.silhouette_mismatch_pct < 0.1, "{acc:#?}");
+    assert!(acc.depth_rel_p95 < 1e-5, "{acc:#?}");
+    assert!(acc.normal_deg_mean < 0.01, "{acc:#?}");
+    assert_eq!(acc.material_mismatch, 0, "{acc:#?}");
+}
