@@ -21,7 +21,7 @@
 
 mod blas;
 mod build;
-mod extract;
+pub mod extract;
 mod options;
 pub mod tessellate;
 
@@ -429,9 +429,10 @@ fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
         }
         _ => {}
     }
-    if o.surface_resolution < 8 || o.surface_resolution > 2048 {
+    if o.surface_resolution < 8 || o.surface_resolution > extract::MAX_SURFACE_RESOLUTION {
         return Err(MeshError::InvalidOption(format!(
-            "surface_resolution must be in 8..=2048, got {}",
+            "surface_resolution must be in 8..={}, got {}",
+            extract::MAX_SURFACE_RESOLUTION,
             o.surface_resolution
         )));
     }

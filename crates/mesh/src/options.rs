@@ -77,7 +77,7 @@ pub struct MeshOptions {
     /// Tessellation of analytic shapes. Default `ScreenError { pixels: 0.25 }`.
     pub tessellation: Tessellation,
     /// Surface-nets grid cells along the longest side of a CSG / smooth-union object's
-    /// bounds (>= 8). Default 128.
+    /// bounds (8..=512). Default 128.
     pub surface_resolution: u32,
     /// Instance shapes used more than once (repetition, a mesh placed twice) from one BLAS
     /// under a TLAS. `false` flattens everything into one BVH (same image, more memory).
