@@ -153,8 +153,8 @@ mod tests {
         let mut fb = Framebuffer::new(depths.len() as u32, 1);
         fb.depth.copy_from_slice(depths);
         fb.normal.copy_from_slice(normals);
-        for i in 0..depths.len() {
-            if depths[i].is_finite() {
+        for (i, d) in depths.iter().enumerate() {
+            if d.is_finite() {
                 fb.material[i] = 0;
                 fb.color[i] = Vec3::ONE;
             }

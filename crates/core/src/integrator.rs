@@ -347,7 +347,8 @@ fn trace_row(
                     } => (to_light, intensity, shadows, sh.max_distance),
                 };
                 let ndl = n.dot(to_light);
-                if !(ndl > 0.0) || intensity <= 0.0 || !to_light.is_finite() {
+                let facing = ndl > 0.0; // false for NaN too
+                if !facing || intensity <= 0.0 || !to_light.is_finite() {
                     continue;
                 }
                 let mut amount = intensity * ndl;

@@ -52,7 +52,7 @@ impl Camera {
     ) -> Option<Self> {
         let forward = (look_at - position).try_normalize()?;
         let right = forward.cross(up).try_normalize()?;
-        if !position.is_finite() || !(vfov_deg > 0.0 && vfov_deg < 180.0) {
+        if !(position.is_finite() && vfov_deg > 0.0 && vfov_deg < 180.0) {
             return None;
         }
         Some(Self {

@@ -233,7 +233,8 @@ impl Ctx<'_> {
                 ];
                 let n = (v[1] - v[0]).cross(v[2] - v[0]);
                 let scale = (v[1] - v[0]).length() * (v[2] - v[0]).length();
-                if !(n.length() > 1e-12 * scale) {
+                let area_ok = n.length() > 1e-12 * scale; // false for NaN too
+                if !area_ok {
                     self.fail(&p, "the vertices are collinear or coincide (zero area)");
                 }
                 NodeKind::Triangle { vertices: v }
@@ -324,13 +325,13 @@ impl Ctx<'_> {
                         );
                     }
                     period[axis] = v.max(0.0);
-                    if let Some(n) = r.count[axis] {
-                        if n == 0 || n > MAX_REPEAT_COUNT_PER_AXIS {
-                            self.fail(
-                                &format!("{p}.count[{axis}]"),
-                                format!("must be in 1..={MAX_REPEAT_COUNT_PER_AXIS}, got {n}"),
-                            );
-                        }
+                    if let Some(n) = r.count[axis]
+                        && (n == 0 || n > MAX_REPEAT_COUNT_PER_AXIS)
+                    {
+                        self.fail(
+                            &format!("{p}.count[{axis}]"),
+                            format!("must be in 1..={MAX_REPEAT_COUNT_PER_AXIS}, got {n}"),
+                        );
                     }
                 }
                 if period.max_element() <= 0.0 {
