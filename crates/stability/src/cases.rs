@@ -1,0 +1,602 @@
+//! The stability case families, as generated scenes.
+//!
+//! Every case is a scene (JSON text, so it can be written out and re-run with
+//! `marchmesh render`), a ground truth (the exact reference on the same scene, or on a
+//! "clean" twin of it: the analytic shape a hostile mesh approximates, or the default ray
+//! offset for the acne family) and the backend variants measured against it.
+
+use std::fmt::Write as _;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use marchmesh_harness::backend::BackendKind;
+use serde_json::{Value, json};
+
+/// Option keys of the backends as the harness parses them (`key=value`).
+pub mod keys {
+    /// SDF: absolute hit epsilon, world units.
+    pub const SDF_EPSILON_ABS: &str = "eps_abs";
+    /// SDF: maximum sphere-tracing steps per ray.
+    pub const SDF_MAX_STEPS: &str = "max_steps";
+    /// SDF: over-relaxation factor in [1, 2).
+    pub const SDF_RELAXATION: &str = "relaxation";
+    /// SDF: mesh bake grid resolution (cells on the longest side).
+    pub const SDF_GRID: &str = "grid_res";
+    /// Mesh: fixed tessellation level.
+    pub const MESH_TESS_LEVEL: &str = "tess_level";
+}
+
+/// One backend configuration measured in a case.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Variant {
+    /// The backend.
+    pub backend: BackendKind,
+    /// `key=value` options for [`marchmesh_harness::backend::build`].
+    pub options: Vec<(String, String)>,
+}
+
+impl Variant {
+    /// A backend at its defaults.
+    pub fn default_of(backend: BackendKind) -> Self {
+        Self {
+            backend,
+            options: Vec::new(),
+        }
+    }
+
+    /// A backend with one option set.
+    pub fn with(backend: BackendKind, key: &str, value: impl ToString) -> Self {
+        Self {
+            backend,
+            options: vec![(key.to_string(), value.to_string())],
+        }
+    }
+
+    /// `backend` or `backend[k=v,...]`, for reports.
+    pub fn label(&self) -> String {
+        if self.options.is_empty() {
+            return self.backend.name().to_string();
+        }
+        let opts: Vec<String> = self
+            .options
+            .iter()
+            .map(|(k, v)| format!("{k}={v}"))
+            .collect();
+        format!("{}[{}]", self.backend.name(), opts.join(","))
+    }
+}
+
+/// A generated stability case.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StabilityCase {
+    /// Family name (`scale`, `distance`, ...).
+    pub family: &'static str,
+    /// Parameter name of the family's sweep (`scale`, `distance`, `angle_deg`, ...).
+    pub parameter: &'static str,
+    /// The swept value.
+    pub value: f64,
+    /// Scene JSON.
+    pub scene_json: String,
+    /// Scene JSON of the ground truth (rendered with the reference), when it differs from
+    /// `scene_json` (acne: the default ray offset; hostile meshes: the clean shape).
+    pub truth_json: Option<String>,
+    /// A length that characterises the scene (world units), to make depth errors relative.
+    pub scene_size: f64,
+    /// The configurations measured against the truth.
+    pub variants: Vec<Variant>,
+    /// Judge by image PSNR instead of geometry (families where the geometry is identical
+    /// by construction and only shading can go wrong).
+    pub judge_by_image: bool,
+    /// Folder that relative mesh paths in the scene resolve against.
+    pub base_dir: PathBuf,
+}
+
+impl StabilityCase {
+    /// `family/parameter=value`, a stable identifier (used by `--filter`).
+    pub fn id(&self) -> String {
+        format!(
+            "{}/{}={}",
+            self.family,
+            self.parameter,
+            fmt_value(self.value)
+        )
+    }
+}
+
+/// Formats a sweep value compactly (`1e-6`, `0.01`, `250`).
+pub fn fmt_value(v: f64) -> String {
+    if v != 0.0 && (v.abs() < 1e-3 || v.abs() >= 1e5) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
+/// What the generators need to know.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaseContext {
+    /// Folder where generated meshes are written (created if missing).
+    pub mesh_dir: PathBuf,
+    /// The project's `scenes/` folder (committed meshes live in `scenes/meshes/`).
+    pub scenes_dir: PathBuf,
+    /// Include the slow cases (1M+ triangle meshes, 10^5 steps).
+    pub include_large: bool,
+}
+
+fn both_backends() -> Vec<Variant> {
+    vec![
+        Variant::default_of(BackendKind::Sdf),
+        Variant::default_of(BackendKind::Mesh),
+    ]
+}
+
+fn camera(position: [f64; 3], look_at: [f64; 3], vfov_deg: f64) -> Value {
+    json!({ "position": position, "look_at": look_at, "vfov_deg": vfov_deg })
+}
+
+fn scene(camera: Value, objects: Vec<Value>, max_distance: f64) -> String {
+    json!({
+        "camera": camera,
+        "background": { "color": [0.1, 0.1, 0.15] },
+        "lights": [
+            { "ambient": { "intensity": 0.2 } },
+            { "directional": { "direction": [0.4, 1.0, -0.6], "intensity": 0.8 } }
+        ],
+        "objects": objects,
+        "render": { "max_distance": max_distance, "max_reflection_depth": 1 }
+    })
+    .to_string()
+}
+
+fn obj(shape: Value, translate: [f64; 3], color: [f64; 3]) -> Value {
+    json!({ "shape": shape, "transform": { "translate": translate },
+            "material": { "color": color, "specular_exponent": 40 } })
+}
+
+/// Sphere, box and floor, all lengths multiplied by `s` (camera too).
+fn scaled_scene(s: f64, offset: f64) -> String {
+    let o = offset;
+    scene(
+        camera([o, o + 2.5 * s, o - 6.0 * s], [o, o, o], 45.0),
+        vec![
+            obj(
+                json!({ "plane": { "normal": [0, 1, 0], "offset": o - s } }),
+                [0.0, 0.0, 0.0],
+                [0.7, 0.7, 0.7],
+            ),
+            obj(
+                json!({ "sphere": { "radius": s } }),
+                [o - 1.2 * s, o, o],
+                [0.9, 0.3, 0.2],
+            ),
+            json!({ "shape": { "box": { "half_extents": [0.7 * s, 0.7 * s, 0.7 * s] } },
+                    "transform": { "translate": [o + 1.3 * s, o - 0.3 * s, o], "rotate_deg": [0, 30, 0] },
+                    "material": { "color": [0.2, 0.5, 0.9] } }),
+        ],
+        100.0 * s,
+    )
+}
+
+/// Every case family, in report order.
+pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
+    let mut out = Vec::new();
+    let base = ctx.scenes_dir.clone();
+    let case = |family, parameter, value, scene_json: String, size: f64| StabilityCase {
+        family,
+        parameter,
+        value,
+        scene_json,
+        truth_json: None,
+        scene_size: size,
+        variants: both_backends(),
+        judge_by_image: false,
+        base_dir: base.clone(),
+    };
+
+    // Scale: the same scene at 1e-6 .. 1e6 (absolute epsilons meet relative geometry).
+    for s in [1e-6, 1e-4, 1e-2, 1.0, 1e2, 1e4, 1e6] {
+        out.push(case("scale", "scale", s, scaled_scene(s, 0.0), 6.0 * s));
+    }
+
+    // Distance: a unit sphere from far away with a matching narrow field of view.
+    for d in [10.0, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7] {
+        let vfov = 2.0 * (1.6f64 / d).atan().to_degrees();
+        let json = scene(
+            camera([0.0, 0.0, -d], [0.0, 0.0, 0.0], vfov),
+            vec![obj(
+                json!({ "sphere": { "radius": 1 } }),
+                [0.0, 0.0, 0.0],
+                [0.9, 0.8, 0.3],
+            )],
+            2.0 * d + 10.0,
+        );
+        out.push(case("distance", "camera_distance", d, json, 2.0));
+    }
+
+    // Large coordinates: the scaled scene moved far from the origin (camera with it).
+    for o in [0.0, 1e3, 1e5, 1e7] {
+        out.push(case("far_origin", "offset", o, scaled_scene(1.0, o), 6.0));
+    }
+
+    // Grazing rays: a plane and a box top seen at angles down to 0.01 degree.
+    for a in [10.0f64, 1.0, 0.1, 0.01] {
+        let dir_y = -a.to_radians().sin();
+        let dir_z = a.to_radians().cos();
+        let cam = camera([0.0, 1.0, 0.0], [0.0, 1.0 + dir_y, dir_z], a.min(20.0));
+        let far = 3.0 / (0.5 * a).to_radians().sin();
+        let plane = scene(
+            cam.clone(),
+            vec![obj(
+                json!({ "plane": { "normal": [0, 1, 0], "offset": 0 } }),
+                [0.0, 0.0, 0.0],
+                [0.7, 0.7, 0.7],
+            )],
+            far,
+        );
+        out.push(case(
+            "grazing_plane",
+            "angle_deg",
+            a,
+            plane,
+            1.0 / a.to_radians().sin(),
+        ));
+        let half = far;
+        let slab = scene(
+            cam,
+            vec![obj(
+                json!({ "box": { "half_extents": [half, 0.5, half] } }),
+                [0.0, -0.5, 0.0],
+                [0.6, 0.7, 0.8],
+            )],
+            far,
+        );
+        out.push(case(
+            "grazing_box",
+            "angle_deg",
+            a,
+            slab,
+            1.0 / a.to_radians().sin(),
+        ));
+    }
+
+    // Thin features: slabs, rods and a torus tube down to 1e-5 thick.
+    for t in [1e-1, 1e-2, 1e-3, 1e-4, 1e-5] {
+        let cam = camera([0.0, 0.0, -4.0], [0.0, 0.0, 0.0], 40.0);
+        let slab = scene(
+            cam.clone(),
+            vec![
+                json!({ "shape": { "box": { "half_extents": [1.0, t / 2.0, 1.0] } },
+                         "transform": { "rotate_deg": [30, 20, 0] },
+                         "material": { "color": [0.8, 0.6, 0.3] } }),
+            ],
+            100.0,
+        );
+        out.push(case("thin_box", "thickness", t, slab, 2.0));
+        let rod = scene(
+            cam.clone(),
+            vec![
+                json!({ "shape": { "cylinder": { "radius": t / 2.0, "height": 2.5 } },
+                         "transform": { "rotate_deg": [0, 0, 30] },
+                         "material": { "color": [0.3, 0.8, 0.4] } }),
+            ],
+            100.0,
+        );
+        out.push(case("thin_cylinder", "thickness", t, rod, 2.5));
+        let tube = scene(
+            cam,
+            vec![
+                json!({ "shape": { "torus": { "major_radius": 1.0, "minor_radius": t / 2.0 } },
+                         "transform": { "rotate_deg": [-60, 0, 0] },
+                         "material": { "color": [0.7, 0.4, 0.9] } }),
+            ],
+            100.0,
+        );
+        out.push(case("thin_torus", "thickness", t, tube, 2.0));
+    }
+
+    // Sphere-tracing knobs at their extremes, on a scene with grazing floor and curved shapes.
+    let knob_scene = scaled_scene(1.0, 0.0);
+    for eps in [1e-8, 1e-6, 1e-4, 1e-3, 1e-2, 1e-1] {
+        let mut c = case("sdf_epsilon", "epsilon_abs", eps, knob_scene.clone(), 6.0);
+        c.variants = vec![Variant::with(BackendKind::Sdf, keys::SDF_EPSILON_ABS, eps)];
+        out.push(c);
+    }
+    let mut steps: Vec<f64> = vec![8.0, 16.0, 32.0, 64.0, 128.0, 1000.0];
+    if ctx.include_large {
+        steps.push(1e5);
+    }
+    for n in steps {
+        let mut c = case("sdf_max_steps", "max_steps", n, knob_scene.clone(), 6.0);
+        c.variants = vec![Variant::with(
+            BackendKind::Sdf,
+            keys::SDF_MAX_STEPS,
+            n as u64,
+        )];
+        out.push(c);
+    }
+    for w in [1.0, 1.2, 1.4, 1.6, 1.8, 1.99] {
+        let mut c = case("sdf_relaxation", "relaxation", w, knob_scene.clone(), 6.0);
+        c.variants = vec![Variant::with(BackendKind::Sdf, keys::SDF_RELAXATION, w)];
+        out.push(c);
+    }
+
+    // Hostile and hard meshes.
+    out.extend(mesh_cases(ctx)?);
+
+    // Acne: secondary-ray offsets shrinking to zero, against the reference at the default.
+    for off in [1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8, 0.0] {
+        let make = |offset: f64| {
+            let mut v: Value = serde_json::from_str(&knob_scene).expect("generated JSON");
+            v["render"]["ray_offset"] = json!(offset);
+            v["render"]["max_reflection_depth"] = json!(2);
+            v["objects"][0]["material"]["reflectivity"] = json!(0.4);
+            v["objects"][1]["material"]["reflectivity"] = json!(0.5);
+            v.to_string()
+        };
+        let mut c = case("acne", "ray_offset", off, make(off), 6.0);
+        c.truth_json = Some(make(1e-4));
+        c.judge_by_image = true;
+        c.variants = vec![
+            Variant::default_of(BackendKind::Reference),
+            Variant::default_of(BackendKind::Sdf),
+            Variant::default_of(BackendKind::Mesh),
+        ];
+        out.push(c);
+    }
+    Ok(out)
+}
+
+/// Mesh families: degenerate/duplicate triangles, slivers, watertightness, open meshes baked
+/// to distance grids, bake resolution, and (with `include_large`) 1M+ triangles.
+fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
+    std::fs::create_dir_all(&ctx.mesh_dir)?;
+    let mut out = Vec::new();
+    let cam = camera([2.2, 1.8, -3.5], [0.0, 0.0, 0.0], 40.0);
+    let mesh_obj = |path: &Path, color: [f64; 3]| json!({ "shape": { "mesh": { "path": path } }, "material": { "color": color, "specular_exponent": 30 } });
+    let mk = |family, parameter, value, scene_json, truth_json, variants| StabilityCase {
+        family,
+        parameter,
+        value,
+        scene_json,
+        truth_json,
+        scene_size: 2.0,
+        variants,
+        judge_by_image: false,
+        base_dir: ctx.mesh_dir.clone(),
+    };
+
+    // A unit cube (half extent 0.7) with degenerate, collinear and duplicate triangles mixed in.
+    let cube = ctx.mesh_dir.join("cube_with_degenerates.obj");
+    std::fs::write(&cube, cube_with_degenerates_obj(0.7))?;
+    let analytic_box = scene(
+        cam.clone(),
+        vec![
+            json!({ "shape": { "box": { "half_extents": [0.7, 0.7, 0.7] } },
+                     "material": { "color": [0.8, 0.5, 0.3], "specular_exponent": 30 } }),
+        ],
+        100.0,
+    );
+    out.push(mk(
+        "mesh_degenerate",
+        "extra_bad_triangles",
+        18.0,
+        scene(cam.clone(), vec![mesh_obj(&cube, [0.8, 0.5, 0.3])], 100.0),
+        Some(analytic_box),
+        both_backends(),
+    ));
+
+    // A closed cylinder whose caps are fans of slivers (aspect ratios up to ~10^4).
+    for segments in [64u32, 1024, 16384] {
+        let path = ctx.mesh_dir.join(format!("sliver_cylinder_{segments}.obj"));
+        std::fs::write(&path, sliver_cylinder_obj(0.7, 0.8, segments))?;
+        let analytic = scene(
+            cam.clone(),
+            vec![
+                json!({ "shape": { "cylinder": { "radius": 0.7, "height": 1.6 } },
+                         "material": { "color": [0.3, 0.7, 0.5], "specular_exponent": 30 } }),
+            ],
+            100.0,
+        );
+        let _ = analytic; // The analytic cylinder differs by the chord error; judge against the mesh itself.
+        out.push(mk(
+            "mesh_slivers",
+            "segments",
+            segments as f64,
+            scene(cam.clone(), vec![mesh_obj(&path, [0.3, 0.7, 0.5])], 100.0),
+            None,
+            both_backends(),
+        ));
+    }
+
+    // Watertightness: a closed UV sphere seen so that many rays pass exactly through shared
+    // edges and vertices (axis-aligned camera, vertices on the pixel grid's symmetry lines).
+    for (stacks, sectors) in [(16u32, 32u32), (64, 128), (256, 512)] {
+        let path = ctx
+            .mesh_dir
+            .join(format!("uv_sphere_{stacks}x{sectors}.obj"));
+        std::fs::write(&path, uv_sphere_obj(1.0, stacks, sectors))?;
+        let head_on = camera([0.0, 0.0, -3.0], [0.0, 0.0, 0.0], 50.0);
+        out.push(mk(
+            "mesh_watertight",
+            "triangles",
+            (2 * stacks * sectors) as f64,
+            scene(head_on, vec![mesh_obj(&path, [0.9, 0.9, 0.9])], 100.0),
+            None,
+            both_backends(),
+        ));
+    }
+
+    // Open meshes baked to a distance grid at growing resolution (sign from winding numbers).
+    for (name, scale, translate) in [
+        ("teapot", 0.35, [0.0, -0.6, 0.0]),
+        ("bunny", 0.15, [0.0, -0.8, 0.0]),
+        ("dragon_res3", 10.0, [0.0, -0.6, 0.0]),
+    ] {
+        let path = ctx.scenes_dir.join("meshes").join(format!("{name}.obj"));
+        if !path.exists() {
+            continue;
+        }
+        for res in [32u32, 64, 128] {
+            let obj = json!({ "shape": { "mesh": { "path": path } },
+                              "transform": { "translate": translate, "scale": scale },
+                              "material": { "color": [0.85, 0.8, 0.7], "specular_exponent": 30 } });
+            out.push(StabilityCase {
+                family: match name {
+                    "teapot" => "bake_teapot_open",
+                    "bunny" => "bake_bunny_closed",
+                    _ => "bake_dragon_open",
+                },
+                parameter: "grid_res",
+                value: res as f64,
+                scene_json: scene(cam.clone(), vec![obj], 100.0),
+                truth_json: None,
+                scene_size: 2.0,
+                variants: vec![Variant::with(BackendKind::Sdf, keys::SDF_GRID, res)],
+                judge_by_image: false,
+                base_dir: ctx.scenes_dir.clone(),
+            });
+        }
+    }
+
+    // Many triangles: a finely tessellated sphere (mesh backend) and the full dragon.
+    if ctx.include_large {
+        let sphere = scene(
+            cam.clone(),
+            vec![
+                json!({ "shape": { "sphere": { "radius": 1.0 } }, "material": { "color": [0.8, 0.8, 0.8] } }),
+            ],
+            100.0,
+        );
+        for level in [4u32, 6, 7] {
+            let mut c = mk(
+                "mesh_many_triangles",
+                "tess_level",
+                level as f64,
+                sphere.clone(),
+                None,
+                vec![Variant::with(
+                    BackendKind::Mesh,
+                    keys::MESH_TESS_LEVEL,
+                    level,
+                )],
+            );
+            c.base_dir = ctx.scenes_dir.clone();
+            out.push(c);
+        }
+        let full = ctx.scenes_dir.join("meshes").join("dragon_full.obj");
+        if full.exists() {
+            let obj = json!({ "shape": { "mesh": { "path": full } },
+                              "transform": { "translate": [0.0, -0.6, 0.0], "scale": 10.0 },
+                              "material": { "color": [0.85, 0.8, 0.7] } });
+            out.push(StabilityCase {
+                family: "mesh_dragon_full",
+                parameter: "triangles",
+                value: 871_414.0,
+                scene_json: scene(cam, vec![obj], 100.0),
+                truth_json: None,
+                scene_size: 2.0,
+                variants: both_backends(),
+                judge_by_image: false,
+                base_dir: ctx.scenes_dir.clone(),
+            });
+        }
+    }
+    Ok(out)
+}
+
+/// OBJ text of an axis-aligned cube of half extent `h` (12 triangles, outward) plus 18 bad
+/// triangles: 6 with a repeated vertex, 6 collinear, 6 exact duplicates of cube faces.
+pub fn cube_with_degenerates_obj(h: f64) -> String {
+    let mut s = String::from("# cube with degenerate, collinear and duplicate triangles\n");
+    for i in 0..8 {
+        let x = if i & 1 == 0 { -h } else { h };
+        let y = if i & 2 == 0 { -h } else { h };
+        let z = if i & 4 == 0 { -h } else { h };
+        let _ = writeln!(s, "v {x} {y} {z}");
+    }
+    // Extra vertices on the midpoints of edges for the collinear triangles.
+    let _ = writeln!(s, "v 0 {} {}", -h, -h); // 9: midpoint of edge 1-2
+    let faces: [[u32; 3]; 12] = [
+        [1, 3, 4],
+        [1, 4, 2], // z = -h
+        [5, 6, 8],
+        [5, 8, 7], // z = +h
+        [1, 5, 7],
+        [1, 7, 3], // x = -h
+        [2, 4, 8],
+        [2, 8, 6], // x = +h
+        [1, 2, 6],
+        [1, 6, 5], // y = -h
+        [3, 7, 8],
+        [3, 8, 4], // y = +h
+    ];
+    for f in faces {
+        let _ = writeln!(s, "f {} {} {}", f[0], f[1], f[2]);
+    }
+    for i in 1..=6 {
+        let _ = writeln!(s, "f {i} {i} {}", i + 1); // repeated vertex
+        let _ = writeln!(s, "f 1 9 2"); // collinear (zero area)
+        let f = faces[(i as usize - 1) * 2];
+        let _ = writeln!(s, "f {} {} {}", f[0], f[1], f[2]); // duplicate
+    }
+    s
+}
+
+/// OBJ text of a closed capped cylinder along y (radius `r`, half height `hh`) with
+/// `segments` side quads and caps triangulated as fans from one rim vertex: the cap
+/// triangles get thinner as `segments` grows (slivers).
+pub fn sliver_cylinder_obj(r: f64, hh: f64, segments: u32) -> String {
+    let n = segments.max(3);
+    let mut s = format!("# sliver cylinder, {n} segments\n");
+    for ring in [-hh, hh] {
+        for i in 0..n {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            let _ = writeln!(s, "v {} {} {}", r * a.cos(), ring, r * a.sin());
+        }
+    }
+    let v = |ring: u32, i: u32| ring * n + (i % n) + 1;
+    for i in 0..n {
+        let (a, b, c, d) = (v(0, i), v(0, i + 1), v(1, i + 1), v(1, i));
+        let _ = writeln!(s, "f {a} {d} {c}\nf {a} {c} {b}");
+    }
+    // Fans from vertex 0 of each ring (outward: bottom faces -y, top faces +y).
+    for i in 1..n - 1 {
+        let _ = writeln!(s, "f {} {} {}", v(0, 0), v(0, i), v(0, i + 1));
+        let _ = writeln!(s, "f {} {} {}", v(1, 0), v(1, i + 1), v(1, i));
+    }
+    s
+}
+
+/// OBJ text of a closed UV sphere (`stacks` x `sectors`, poles as triangle fans), outward.
+pub fn uv_sphere_obj(r: f64, stacks: u32, sectors: u32) -> String {
+    let (st, se) = (stacks.max(2), sectors.max(3));
+    let mut s = format!("# uv sphere {st}x{se}\n");
+    let _ = writeln!(s, "v 0 {r} 0"); // 1: north pole
+    for i in 1..st {
+        let phi = std::f64::consts::PI * i as f64 / st as f64;
+        for j in 0..se {
+            let th = std::f64::consts::TAU * j as f64 / se as f64;
+            let _ = writeln!(
+                s,
+                "v {} {} {}",
+                r * phi.sin() * th.cos(),
+                r * phi.cos(),
+                r * phi.sin() * th.sin()
+            );
+        }
+    }
+    let south = 2 + (st - 1) * se;
+    let _ = writeln!(s, "v 0 {} 0", -r);
+    let v = |ring: u32, j: u32| 2 + ring * se + (j % se);
+    for j in 0..se {
+        let _ = writeln!(s, "f 1 {} {}", v(0, j + 1), v(0, j));
+        let _ = writeln!(s, "f {south} {} {}", v(st - 2, j), v(st - 2, j + 1));
+    }
+    for i in 0..st - 2 {
+        for j in 0..se {
+            let (a, b, c, d) = (v(i, j), v(i, j + 1), v(i + 1, j + 1), v(i + 1, j));
+            let _ = writeln!(s, "f {a} {b} {c}\nf {a} {c} {d}");
+        }
+    }
+    s
+}

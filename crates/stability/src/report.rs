@@ -1,0 +1,209 @@
+//! `stability.csv`, `stability.json` and `summary.md` of a stability run.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::cases::fmt_value;
+use crate::runner::{CaseError, Row, Verdict};
+
+/// CSV header; one row per case x configuration, units in the names.
+pub const CSV_HEADER: &str = "case,family,parameter,value,backend,configuration,verdict,non_finite,silhouette_mismatch_pct,interior_holes_px,depth_rel_p95,depth_max_over_scene,normal_deg_mean,normal_deg_p95,psnr_db,step_exhaustion_pct,mean_steps,build_ms,render_ms,memory_bytes,error";
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// The rows as CSV text (header included). Missing metrics are empty fields.
+pub fn to_csv(rows: &[Row]) -> String {
+    let mut out = String::from(CSV_HEADER);
+    out.push('\n');
+    for r in rows {
+        let m = |f: &dyn Fn(&crate::runner::Metrics) -> String| {
+            r.metrics.as_ref().map(f).unwrap_or_default()
+        };
+        let fields = [
+            csv_field(&r.case),
+            csv_field(&r.family),
+            csv_field(&r.parameter),
+            format!("{}", r.value),
+            csv_field(&r.backend),
+            csv_field(&r.configuration),
+            r.verdict.name().to_string(),
+            m(&|m| m.non_finite.to_string()),
+            m(&|m| format!("{:.4}", m.silhouette_mismatch_pct)),
+            m(&|m| m.interior_holes.to_string()),
+            m(&|m| format!("{:.3e}", m.depth_rel_p95)),
+            m(&|m| format!("{:.3e}", m.depth_max_over_scene)),
+            m(&|m| format!("{:.4}", m.normal_deg_mean)),
+            m(&|m| format!("{:.4}", m.normal_deg_p95)),
+            m(&|m| format!("{:.2}", m.psnr_db)),
+            m(&|m| format!("{:.4}", m.step_exhaustion_pct)),
+            m(&|m| format!("{:.2}", m.mean_steps)),
+            format!("{:.2}", r.build_ms),
+            format!("{:.2}", r.render_ms),
+            r.memory_bytes.to_string(),
+            csv_field(r.error.as_deref().unwrap_or("")),
+        ];
+        out.push_str(&fields.join(","));
+        out.push('\n');
+    }
+    out
+}
+
+/// Everything `stability.json` holds.
+#[derive(Debug, Serialize)]
+pub struct StabilityReport<'a> {
+    /// The command line that produced the run.
+    pub command: &'a str,
+    /// Image side of every render, pixels.
+    pub side: u32,
+    /// One entry per case x configuration.
+    pub rows: &'a [Row],
+    /// Cases that could not run at all.
+    pub case_errors: Vec<String>,
+}
+
+/// The safe ranges per family and configuration: for each verdict, the swept values that got it.
+pub fn ranges(rows: &[Row]) -> BTreeMap<(String, String), BTreeMap<&'static str, Vec<f64>>> {
+    let mut out: BTreeMap<(String, String), BTreeMap<&'static str, Vec<f64>>> = BTreeMap::new();
+    for r in rows {
+        let label = if r.configuration.contains('[') {
+            r.backend.clone()
+        } else {
+            r.configuration.clone()
+        };
+        out.entry((r.family.clone(), label))
+            .or_default()
+            .entry(r.verdict.name())
+            .or_default()
+            .push(r.value);
+    }
+    out
+}
+
+fn list(values: &[f64]) -> String {
+    values
+        .iter()
+        .map(|v| fmt_value(*v))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// `summary.md`: verdict ranges per family and backend, then every row's key numbers.
+pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Stability run\n");
+    let _ = writeln!(
+        s,
+        "Each case renders {side}x{side} pixels with the exact reference (ground truth) and each \
+         configuration. Verdicts: **exact** = no NaN, silhouette <= 0.5%, relative depth p95 <= 1e-3, \
+         mean normal error <= 1 deg, step exhaustion <= 0.1%; **degraded** = silhouette <= 5%, depth \
+         p95 <= 1e-2, normal <= 5 deg, exhaustion <= 5%; **broken** = worse or any NaN/inf; \
+         **refused** = the backend declined to build (clear error). Image-judged families (acne) \
+         use PSNR >= 40 dB / >= 25 dB.\n"
+    );
+    let _ = writeln!(s, "## Ranges per family and backend\n");
+    let _ = writeln!(
+        s,
+        "| family | backend | exact | degraded | broken | refused |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|");
+    for ((family, backend), by) in ranges(rows) {
+        let get = |v: &str| by.get(v).map(|x| list(x)).unwrap_or_default();
+        let _ = writeln!(
+            s,
+            "| {family} | {backend} | {} | {} | {} | {} |",
+            get("exact"),
+            get("degraded"),
+            get("broken"),
+            get("refused")
+        );
+    }
+    let _ = writeln!(s, "\n## All rows\n");
+    let _ = writeln!(
+        s,
+        "| case | configuration | verdict | NaN | silhouette % | holes px | depth rel p95 | normal deg mean | PSNR dB | exhaustion % | mean steps | render ms |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        match &r.metrics {
+            Some(m) => {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | {} | {:.2} | {} | {:.2e} | {:.3} | {:.1} | {:.2} | {:.1} | {:.1} |",
+                    r.case,
+                    r.configuration,
+                    r.verdict.name(),
+                    m.non_finite,
+                    m.silhouette_mismatch_pct,
+                    m.interior_holes,
+                    m.depth_rel_p95,
+                    m.normal_deg_mean,
+                    m.psnr_db,
+                    m.step_exhaustion_pct,
+                    m.mean_steps,
+                    r.render_ms
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} | | | | | | | | | | {} |",
+                    r.case,
+                    r.configuration,
+                    r.verdict.name(),
+                    r.error.as_deref().unwrap_or("").replace('|', "/")
+                );
+            }
+        }
+    }
+    if !errors.is_empty() {
+        let _ = writeln!(s, "\n## Cases that could not run\n");
+        for e in errors {
+            let _ = writeln!(s, "- {e}");
+        }
+    }
+    s
+}
+
+/// Writes `stability.csv`, `stability.json` and `summary.md` into `dir` (which must exist).
+pub fn write(
+    dir: &Path,
+    rows: &[Row],
+    errors: &[CaseError],
+    side: u32,
+    command: &str,
+) -> std::io::Result<()> {
+    std::fs::write(dir.join("stability.csv"), to_csv(rows))?;
+    let report = StabilityReport {
+        command,
+        side,
+        rows,
+        case_errors: errors.iter().map(|e| e.to_string()).collect(),
+    };
+    let json = serde_json::to_string_pretty(&report).map_err(std::io::Error::other)?;
+    std::fs::write(dir.join("stability.json"), json)?;
+    std::fs::write(dir.join("summary.md"), to_markdown(rows, errors, side))?;
+    Ok(())
+}
+
+/// Counts rows per verdict.
+pub fn verdict_counts(rows: &[Row]) -> BTreeMap<&'static str, usize> {
+    let mut m = BTreeMap::new();
+    for v in [
+        Verdict::Exact,
+        Verdict::Degraded,
+        Verdict::Broken,
+        Verdict::Refused,
+    ] {
+        m.insert(v.name(), rows.iter().filter(|r| r.verdict == v).count());
+    }
+    m
+}
