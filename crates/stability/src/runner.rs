@@ -327,26 +327,78 @@ pub fn run_cases(
     (rows, errors)
 }
 
-/// Writes each case's scene (and truth scene) as JSON into `dir`, named after the case id,
-/// so any case can be re-rendered with `marchmesh render`. Returns the files written.
-pub fn write_scenes(cases: &[StabilityCase], dir: &Path) -> std::io::Result<Vec<String>> {
+/// Writes each case's scene (and truth scene) as pretty JSON into `dir`, named after the
+/// case id, so any case can be re-rendered with `marchmesh render`. Mesh paths are rewritten
+/// relative to `dir` (the meshes themselves are not copied). Returns the file names written.
+pub fn write_scenes(cases: &[&StabilityCase], dir: &Path) -> std::io::Result<Vec<String>> {
     std::fs::create_dir_all(dir)?;
+    let dir_abs = std::path::absolute(dir)?;
     let mut written = Vec::new();
     for c in cases {
         let stem = c.id().replace(['/', '='], "_");
-        let pretty = |json: &str| -> String {
-            serde_json::from_str::<serde_json::Value>(json)
-                .and_then(|v| serde_json::to_string_pretty(&v))
-                .unwrap_or_else(|_| json.to_string())
-        };
-        let name = format!("{stem}.json");
-        std::fs::write(dir.join(&name), pretty(&c.scene_json))?;
-        written.push(name);
-        if let Some(t) = &c.truth_json {
-            let name = format!("{stem}.truth.json");
-            std::fs::write(dir.join(&name), pretty(t))?;
+        let base = std::path::absolute(&c.base_dir)?;
+        let texts = std::iter::once(("", &c.scene_json))
+            .chain(c.truth_json.as_ref().map(|t| (".truth", t)));
+        for (suffix, json) in texts {
+            let mut v: serde_json::Value =
+                serde_json::from_str(json).map_err(std::io::Error::other)?;
+            rewrite_mesh_paths(&mut v, &base, &dir_abs);
+            let name = format!("{stem}{suffix}.json");
+            let text = serde_json::to_string_pretty(&v).map_err(std::io::Error::other)?;
+            std::fs::write(dir.join(&name), text + "\n")?;
             written.push(name);
         }
     }
     Ok(written)
+}
+
+/// Rewrites every `"mesh": {"path": ...}` from relative-to-`from` to relative-to-`to`.
+fn rewrite_mesh_paths(v: &mut serde_json::Value, from: &Path, to: &Path) {
+    match v {
+        serde_json::Value::Object(map) => {
+            if let Some(serde_json::Value::Object(mesh)) = map.get_mut("mesh")
+                && let Some(serde_json::Value::String(p)) = mesh.get_mut("path")
+            {
+                let abs = from.join(&*p);
+                *p = relative_path(&abs, to).to_string_lossy().replace('\\', "/");
+            }
+            for (_, child) in map.iter_mut() {
+                rewrite_mesh_paths(child, from, to);
+            }
+        }
+        serde_json::Value::Array(items) => {
+            for child in items {
+                rewrite_mesh_paths(child, from, to);
+            }
+        }
+        _ => {}
+    }
+}
+
+/// `target` expressed relative to the folder `base` (both absolute, lexically normalised).
+pub fn relative_path(target: &Path, base: &Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let norm = |p: &Path| -> Vec<std::ffi::OsString> {
+        let mut out: Vec<std::ffi::OsString> = Vec::new();
+        for c in p.components() {
+            match c {
+                Component::ParentDir => {
+                    out.pop();
+                }
+                Component::CurDir => {}
+                other => out.push(other.as_os_str().to_owned()),
+            }
+        }
+        out
+    };
+    let (t, b) = (norm(target), norm(base));
+    let common = t.iter().zip(&b).take_while(|(x, y)| x == y).count();
+    let mut out = std::path::PathBuf::new();
+    for _ in common..b.len() {
+        out.push("..");
+    }
+    for part in &t[common..] {
+        out.push(part);
+    }
+    out
 }

@@ -22,7 +22,7 @@ fn scratch(name: &str) -> PathBuf {
 
 fn ctx(name: &str, include_large: bool) -> CaseContext {
     CaseContext {
-        mesh_dir: scratch(name),
+        generated_dir: scratch(name),
         scenes_dir: PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes"),
         include_large,
     }
@@ -225,4 +225,44 @@ fn csv_rows_have_as_many_fields_as_the_header() {
     // The quoted error holds one comma inside quotes.
     assert_eq!(lines[2].split(',').count(), n + 1);
     assert!(lines[2].ends_with("\"bad, \"\"quoted\"\" reason\""));
+}
+
+#[test]
+fn written_scenes_reload_with_their_meshes_from_another_folder() {
+    let c = ctx("write", false);
+    let cases = all_cases(&c).unwrap();
+    let picked: Vec<_> = cases
+        .iter()
+        .filter(|k| {
+            k.family == "mesh_degenerate" || k.family == "bake_teapot_open" || k.family == "scale"
+        })
+        .collect();
+    let out = scratch("written").join("nested/extreme");
+    let files = marchmesh_stability::runner::write_scenes(&picked, &out).unwrap();
+    assert!(files.iter().any(|f| f.ends_with(".truth.json")));
+    for f in &files {
+        let text = std::fs::read_to_string(out.join(f)).unwrap();
+        let scene = parse_scene(&text, f, &out).unwrap();
+        for p in scene.mesh_paths() {
+            assert!(
+                p.exists(),
+                "{f}: mesh {} not found from the written folder",
+                p.display()
+            );
+        }
+    }
+}
+
+#[test]
+fn relative_paths() {
+    use marchmesh_stability::runner::relative_path;
+    use std::path::Path;
+    assert_eq!(
+        relative_path(Path::new("/a/b/c.obj"), Path::new("/a/d")),
+        Path::new("../b/c.obj")
+    );
+    assert_eq!(
+        relative_path(Path::new("/a/x/../b/c.obj"), Path::new("/a/b")),
+        Path::new("c.obj")
+    );
 }
