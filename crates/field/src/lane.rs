@@ -1,0 +1,414 @@
+//! The number types the evaluator is generic over: `f32`, `f64` and [`F32x8`] (eight f32
+//! lanes evaluated in lockstep). The distance functions are written once against [`Lane`], so
+//! the f64 reference, the f32 tracer and the 8-lane tracer compute the same formulas.
+
+use std::ops::{Add, Div, Mul, Neg, Sub};
+
+/// A number type the field can be evaluated in: one value (`f32`, `f64`) or several lanes.
+///
+/// Comparisons return a [`Lane::Mask`]; data-dependent choices go through [`Lane::select`], so
+/// lane types evaluate every branch some lane needs and blend.
+pub trait Lane:
+    Copy
+    + Send
+    + Sync
+    + 'static
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+{
+    /// The scalar type program constants are stored in.
+    type S: Scalar;
+    /// Per-lane booleans.
+    type Mask: Copy;
+    /// Per-lane material ids.
+    type Mat: Copy;
+    /// Every lane equal to `s`.
+    fn splat(s: Self::S) -> Self;
+    /// A constant (converted from f64).
+    #[inline]
+    fn c(v: f64) -> Self {
+        Self::splat(Self::S::from_f64(v))
+    }
+    /// Square root.
+    fn sqrt(self) -> Self;
+    /// Absolute value.
+    fn abs(self) -> Self;
+    /// Lane-wise minimum.
+    fn min(self, o: Self) -> Self;
+    /// Lane-wise maximum.
+    fn max(self, o: Self) -> Self;
+    /// Round down.
+    fn floor(self) -> Self;
+    /// Round up.
+    fn ceil(self) -> Self;
+    /// `self < o`.
+    fn lt(self, o: Self) -> Self::Mask;
+    /// `self <= o`.
+    fn le(self, o: Self) -> Self::Mask;
+    /// Lane-wise and.
+    fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    /// Lane-wise or.
+    fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    /// True if any lane is set.
+    fn any(m: Self::Mask) -> bool;
+    /// True if every lane is set.
+    fn all(m: Self::Mask) -> bool;
+    /// `m ? a : b` per lane.
+    fn select(m: Self::Mask, a: Self, b: Self) -> Self;
+    /// Every lane's material `id`.
+    fn mat_splat(id: u32) -> Self::Mat;
+    /// `m ? a : b` per lane for materials.
+    fn mat_select(m: Self::Mask, a: Self::Mat, b: Self::Mat) -> Self::Mat;
+    /// Largest lane, as f64.
+    fn hmax(self) -> f64;
+    /// Applies `f` per lane (f64 in, f64 out); used for mesh grids.
+    fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self;
+    /// Clamp to `[lo, hi]`.
+    #[inline]
+    fn clamp(self, lo: Self, hi: Self) -> Self {
+        self.max(lo).min(hi)
+    }
+}
+
+/// A scalar lane type program constants are stored in (`f32` or `f64`).
+pub trait Scalar: Lane<S = Self> + PartialOrd + std::fmt::Debug {
+    /// Conversion from f64 (rounding to nearest for f32).
+    fn from_f64(v: f64) -> Self;
+    /// Conversion to f64 (exact).
+    fn to_f64(self) -> f64;
+}
+
+macro_rules! scalar_lane {
+    ($t:ty) => {
+        impl Lane for $t {
+            type S = $t;
+            type Mask = bool;
+            type Mat = u32;
+            #[inline(always)]
+            fn splat(s: $t) -> Self {
+                s
+            }
+            #[inline(always)]
+            fn sqrt(self) -> Self {
+                <$t>::sqrt(self)
+            }
+            #[inline(always)]
+            fn abs(self) -> Self {
+                <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn min(self, o: Self) -> Self {
+                if self < o { self } else { o }
+            }
+            #[inline(always)]
+            fn max(self, o: Self) -> Self {
+                if self > o { self } else { o }
+            }
+            #[inline(always)]
+            fn floor(self) -> Self {
+                <$t>::floor(self)
+            }
+            #[inline(always)]
+            fn ceil(self) -> Self {
+                <$t>::ceil(self)
+            }
+            #[inline(always)]
+            fn lt(self, o: Self) -> bool {
+                self < o
+            }
+            #[inline(always)]
+            fn le(self, o: Self) -> bool {
+                self <= o
+            }
+            #[inline(always)]
+            fn and(a: bool, b: bool) -> bool {
+                a & b
+            }
+            #[inline(always)]
+            fn or(a: bool, b: bool) -> bool {
+                a | b
+            }
+            #[inline(always)]
+            fn any(m: bool) -> bool {
+                m
+            }
+            #[inline(always)]
+            fn all(m: bool) -> bool {
+                m
+            }
+            #[inline(always)]
+            fn select(m: bool, a: Self, b: Self) -> Self {
+                if m { a } else { b }
+            }
+            #[inline(always)]
+            fn mat_splat(id: u32) -> u32 {
+                id
+            }
+            #[inline(always)]
+            fn mat_select(m: bool, a: u32, b: u32) -> u32 {
+                if m { a } else { b }
+            }
+            #[inline(always)]
+            fn hmax(self) -> f64 {
+                self as f64
+            }
+            #[inline]
+            fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {
+                f(x as f64, y as f64, z as f64) as $t
+            }
+        }
+        impl Scalar for $t {
+            #[inline(always)]
+            fn from_f64(v: f64) -> Self {
+                v as $t
+            }
+            #[inline(always)]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+        }
+    };
+}
+scalar_lane!(f32);
+scalar_lane!(f64);
+
+/// Eight f32 lanes, operated on element-wise (the loops auto-vectorise to SIMD).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[repr(align(32))]
+pub struct F32x8(pub [f32; 8]);
+
+macro_rules! binop8 {
+    ($tr:ident, $f:ident, $op:tt) => {
+        impl $tr for F32x8 {
+            type Output = F32x8;
+            #[inline(always)]
+            fn $f(self, o: F32x8) -> F32x8 {
+                let mut r = [0.0f32; 8];
+                for i in 0..8 {
+                    r[i] = self.0[i] $op o.0[i];
+                }
+                F32x8(r)
+            }
+        }
+    };
+}
+binop8!(Add, add, +);
+binop8!(Sub, sub, -);
+binop8!(Mul, mul, *);
+binop8!(Div, div, /);
+
+impl Neg for F32x8 {
+    type Output = F32x8;
+    #[inline(always)]
+    fn neg(self) -> F32x8 {
+        F32x8(self.0.map(|v| -v))
+    }
+}
+
+impl F32x8 {
+    #[inline(always)]
+    fn zip(self, o: F32x8, f: impl Fn(f32, f32) -> f32) -> F32x8 {
+        let mut r = [0.0f32; 8];
+        for i in 0..8 {
+            r[i] = f(self.0[i], o.0[i]);
+        }
+        F32x8(r)
+    }
+    #[inline(always)]
+    fn cmp(self, o: F32x8, f: impl Fn(f32, f32) -> bool) -> [bool; 8] {
+        let mut r = [false; 8];
+        for i in 0..8 {
+            r[i] = f(self.0[i], o.0[i]);
+        }
+        r
+    }
+}
+
+impl Lane for F32x8 {
+    type S = f32;
+    type Mask = [bool; 8];
+    type Mat = [u32; 8];
+    #[inline(always)]
+    fn splat(s: f32) -> Self {
+        F32x8([s; 8])
+    }
+    #[inline(always)]
+    fn sqrt(self) -> Self {
+        F32x8(self.0.map(f32::sqrt))
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        F32x8(self.0.map(f32::abs))
+    }
+    #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        self.zip(o, |a, b| if a < b { a } else { b })
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        self.zip(o, |a, b| if a > b { a } else { b })
+    }
+    #[inline(always)]
+    fn floor(self) -> Self {
+        F32x8(self.0.map(f32::floor))
+    }
+    #[inline(always)]
+    fn ceil(self) -> Self {
+        F32x8(self.0.map(f32::ceil))
+    }
+    #[inline(always)]
+    fn lt(self, o: Self) -> [bool; 8] {
+        self.cmp(o, |a, b| a < b)
+    }
+    #[inline(always)]
+    fn le(self, o: Self) -> [bool; 8] {
+        self.cmp(o, |a, b| a <= b)
+    }
+    #[inline(always)]
+    fn and(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
+        let mut r = [false; 8];
+        for i in 0..8 {
+            r[i] = a[i] & b[i];
+        }
+        r
+    }
+    #[inline(always)]
+    fn or(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
+        let mut r = [false; 8];
+        for i in 0..8 {
+            r[i] = a[i] | b[i];
+        }
+        r
+    }
+    #[inline(always)]
+    fn any(m: [bool; 8]) -> bool {
+        m.iter().fold(false, |a, &b| a | b)
+    }
+    #[inline(always)]
+    fn all(m: [bool; 8]) -> bool {
+        m.iter().fold(true, |a, &b| a & b)
+    }
+    #[inline(always)]
+    fn select(m: [bool; 8], a: Self, b: Self) -> Self {
+        let mut r = [0.0f32; 8];
+        for i in 0..8 {
+            r[i] = if m[i] { a.0[i] } else { b.0[i] };
+        }
+        F32x8(r)
+    }
+    #[inline(always)]
+    fn mat_splat(id: u32) -> [u32; 8] {
+        [id; 8]
+    }
+    #[inline(always)]
+    fn mat_select(m: [bool; 8], a: [u32; 8], b: [u32; 8]) -> [u32; 8] {
+        let mut r = [0u32; 8];
+        for i in 0..8 {
+            r[i] = if m[i] { a[i] } else { b[i] };
+        }
+        r
+    }
+    #[inline(always)]
+    fn hmax(self) -> f64 {
+        self.0.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64
+    }
+    #[inline]
+    fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {
+        let mut r = [0.0f32; 8];
+        for i in 0..8 {
+            r[i] = f(x.0[i] as f64, y.0[i] as f64, z.0[i] as f64) as f32;
+        }
+        F32x8(r)
+    }
+}
+
+/// A 3-vector of lanes (no glam type is generic over the number type).
+#[derive(Debug, Clone, Copy)]
+pub struct V3<T> {
+    /// x.
+    pub x: T,
+    /// y.
+    pub y: T,
+    /// z.
+    pub z: T,
+}
+
+impl<T: Lane> V3<T> {
+    /// From components.
+    #[inline(always)]
+    pub fn new(x: T, y: T, z: T) -> Self {
+        V3 { x, y, z }
+    }
+    /// From a stored constant.
+    #[inline(always)]
+    pub fn splat3(v: [T::S; 3]) -> Self {
+        V3::new(T::splat(v[0]), T::splat(v[1]), T::splat(v[2]))
+    }
+    /// Dot product.
+    #[inline(always)]
+    pub fn dot(self, o: Self) -> T {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    /// Squared length.
+    #[inline(always)]
+    pub fn len2(self) -> T {
+        self.dot(self)
+    }
+    /// Length.
+    #[inline(always)]
+    pub fn len(self) -> T {
+        self.len2().sqrt()
+    }
+    /// Component-wise absolute value.
+    #[inline(always)]
+    pub fn abs(self) -> Self {
+        V3::new(self.x.abs(), self.y.abs(), self.z.abs())
+    }
+    /// Component-wise max with a scalar lane.
+    #[inline(always)]
+    pub fn max_s(self, s: T) -> Self {
+        V3::new(self.x.max(s), self.y.max(s), self.z.max(s))
+    }
+    /// Largest component.
+    #[inline(always)]
+    pub fn max_elem(self) -> T {
+        self.x.max(self.y).max(self.z)
+    }
+    /// Cross product.
+    #[inline(always)]
+    pub fn cross(self, o: Self) -> Self {
+        V3::new(
+            self.y * o.z - self.z * o.y,
+            self.z * o.x - self.x * o.z,
+            self.x * o.y - self.y * o.x,
+        )
+    }
+    /// Scaled by a lane.
+    #[inline(always)]
+    pub fn scale(self, s: T) -> Self {
+        V3::new(self.x * s, self.y * s, self.z * s)
+    }
+    /// Component-wise product.
+    #[inline(always)]
+    pub fn mul_elem(self, o: Self) -> Self {
+        V3::new(self.x * o.x, self.y * o.y, self.z * o.z)
+    }
+}
+
+impl<T: Lane> Add for V3<T> {
+    type Output = Self;
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        V3::new(self.x + o.x, self.y + o.y, self.z + o.z)
+    }
+}
+impl<T: Lane> Sub for V3<T> {
+    type Output = Self;
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        V3::new(self.x - o.x, self.y - o.y, self.z - o.z)
+    }
+}

@@ -1,0 +1,500 @@
+//! The flat SDF program: nodes stored in pre-order in one `Vec`, each carrying its subtree's
+//! end index, its frame transform, its distance scale and its bounding box, and the
+//! interpreter that evaluates it for any [`Lane`] type.
+//!
+//! # Bounds and skipping
+//! A node with `has_bound` stores an axis-aligned box (in its parent's frame) containing its
+//! surface, and `tau` (half the box diagonal). With `L` the distance to that box (`L > 0`
+//! only outside it) and `c` the node's evaluated value, the parent uses
+//! `g = max(L, min(c, tau))` (`min(c, tau)` inside the box), and skips evaluating `c` when
+//! `L >= tau` (then `g = L`) or when `L` already proves the node cannot change the parent's
+//! result (union: `L >= best so far`; smooth union: `L >= best + k`; subtracted child:
+//! `L >= -first`). `g` is 1-Lipschitz, never above the true distance, and equal to `c`
+//! wherever `c <= tau`; so a point far from a subtree pays only its box test and the
+//! field stays continuous across the skip boundary.
+//!
+//! # Repetition
+//! A repeat node evaluates, per repeated axis, every copy whose box (child box shifted by
+//! the copy's offset) overlaps the window `[x - R, x + R]` around the point, and returns
+//! `min(evaluated copies, R)`. Any copy outside the window is farther than `R` along that
+//! axis, so the result is exactly `min(true distance, R)`: a 1-Lipschitz bound, exact near
+//! surfaces, continuous across cell borders. `R` is half the smallest period, reduced so at
+//! most [`MAX_WINDOW`] copies per axis are evaluated; a child that fits its cell needs at
+//! most 3 per axis (usually 2). A child wider than `MAX_WINDOW - 1` periods (or unbounded
+//! along a repeated axis) cannot get a valid window: it is evaluated over the nearest
+//! `MAX_WINDOW` copies only, the result may over-estimate, and the compiler records a note.
+
+use crate::lane::{Lane, Scalar, V3};
+use crate::shapes::{self, TriData};
+
+/// Most copies evaluated per repeated axis.
+pub const MAX_WINDOW: usize = 5;
+
+/// An affine map `p -> lin * p + trans` (`lin` row-major, `None` = identity).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Affine<S> {
+    /// Row-major 3x3 linear part, `None` for the identity.
+    pub lin: Option<[S; 9]>,
+    /// Translation.
+    pub trans: [S; 3],
+}
+
+impl<S: Scalar> Affine<S> {
+    #[inline(always)]
+    fn apply<T: Lane<S = S>>(&self, p: V3<T>) -> V3<T> {
+        let t = V3::<T>::splat3(self.trans);
+        match &self.lin {
+            None => p + t,
+            Some(m) => {
+                let s = |i: usize| T::splat(m[i]);
+                V3::new(
+                    s(0) * p.x + s(1) * p.y + s(2) * p.z,
+                    s(3) * p.x + s(4) * p.y + s(5) * p.z,
+                    s(6) * p.x + s(7) * p.y + s(8) * p.z,
+                ) + t
+            }
+        }
+    }
+}
+
+/// What a node computes.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Op<S> {
+    /// [`shapes::sphere`].
+    Sphere {
+        /// Radius.
+        r: S,
+    },
+    /// [`shapes::plane`].
+    Plane {
+        /// Unit normal.
+        n: [S; 3],
+        /// Offset.
+        offset: S,
+    },
+    /// [`shapes::box3`].
+    Box {
+        /// Half extents.
+        b: [S; 3],
+    },
+    /// [`shapes::ellipsoid`].
+    Ellipsoid {
+        /// 1 / radii.
+        inv_r: [S; 3],
+        /// Smallest radius.
+        rmin: S,
+    },
+    /// [`shapes::cylinder`].
+    Cylinder {
+        /// Radius.
+        r: S,
+        /// Half height.
+        h: S,
+    },
+    /// [`shapes::torus`].
+    Torus {
+        /// Major radius.
+        big: S,
+        /// Minor radius.
+        small: S,
+    },
+    /// [`shapes::triangle`].
+    Triangle(Box<TriData<S>>),
+    /// A baked mesh grid (index into the field's grid list).
+    Mesh {
+        /// Grid index.
+        grid: u32,
+    },
+    /// Minimum of the children.
+    Union,
+    /// Maximum of the children.
+    Intersection,
+    /// `max(first, -others...)`.
+    Subtraction,
+    /// Folded [`shapes::smin`].
+    SmoothUnion {
+        /// Blend radius.
+        k: S,
+        /// 1 / k.
+        inv_k: S,
+    },
+    /// Domain repetition of the single child.
+    Repeat {
+        /// Period per axis (0 = not repeated).
+        period: [S; 3],
+        /// Copies per axis (0 = infinite).
+        count: [S; 3],
+        /// Offset of copy 0 per axis (`-(n-1)/2 * period`, 0 for infinite).
+        first: [S; 3],
+        /// Window half-width `R`.
+        r: S,
+    },
+}
+
+/// One node of the program.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Instr<S> {
+    /// Index one past this node's subtree.
+    pub end: u32,
+    /// Material of the node (for leaves, the surface material).
+    pub material: u32,
+    /// Whether `lo`/`hi`/`tau` are used to skip this node.
+    pub has_bound: bool,
+    /// Bounding box in the parent's frame (may hold infinities).
+    pub lo: [S; 3],
+    /// Bounding box upper corner.
+    pub hi: [S; 3],
+    /// Skip distance (half the box diagonal).
+    pub tau: S,
+    /// Parent frame -> node frame.
+    pub to_local: Affine<S>,
+    /// Node-frame distances times this = parent-frame bound (smallest singular value of the
+    /// node-to-parent linear map; 1 for rigid transforms).
+    pub dscale: S,
+    /// What it computes.
+    pub op: Op<S>,
+}
+
+/// A mesh distance grid sampler, in the mesh's local frame.
+pub trait GridSampler: Send + Sync {
+    /// Signed distance at a local point (f64).
+    fn sample(&self, x: f64, y: f64, z: f64) -> f64;
+    /// Signed distance at a local point (f32).
+    fn sample_f32(&self, x: f32, y: f32, z: f32) -> f32;
+    /// Exact bytes held.
+    fn memory_bytes(&self) -> u64;
+}
+
+/// A compiled program in scalar type `S`.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Program<S> {
+    /// Nodes in pre-order. Node 0 is the root.
+    pub instrs: Vec<Instr<S>>,
+}
+
+/// How a parent combines a child, for skipping.
+#[derive(Clone, Copy)]
+enum Ctx<T> {
+    /// Skip only by `tau`.
+    Plain,
+    /// Skip also when `L >= thr` (the child cannot lower the running minimum).
+    Below(T),
+}
+
+const BIG: f64 = 1e30;
+
+impl<S: Scalar> Program<S> {
+    /// Exact bytes of the instruction list (length times element size; boxed triangle data
+    /// counted too).
+    pub fn memory_bytes(&self) -> u64 {
+        let tri = self
+            .instrs
+            .iter()
+            .filter(|i| matches!(i.op, Op::Triangle(_)))
+            .count();
+        (self.instrs.len() * std::mem::size_of::<Instr<S>>()
+            + tri * std::mem::size_of::<TriData<S>>()) as u64
+    }
+
+    /// Evaluates the whole program at `p` (root's parent frame): (distance, material).
+    #[inline]
+    pub fn eval<T: Lane<S = S>>(&self, p: V3<T>, grids: &[&dyn GridSampler]) -> (T, T::Mat) {
+        if self.instrs.is_empty() {
+            return (T::c(BIG), T::mat_splat(0));
+        }
+        self.child(0, p, Ctx::Plain, grids)
+    }
+
+    /// Node `i` including its bound logic, `p` in its parent's frame.
+    #[inline]
+    fn child<T: Lane<S = S>>(
+        &self,
+        i: usize,
+        p: V3<T>,
+        ctx: Ctx<T>,
+        grids: &[&dyn GridSampler],
+    ) -> (T, T::Mat) {
+        let ins = &self.instrs[i];
+        if !ins.has_bound {
+            return self.node(i, p, grids);
+        }
+        let zero = T::c(0.0);
+        let l = shapes::box_distance(p, V3::splat3(ins.lo), V3::splat3(ins.hi));
+        let tau = T::splat(ins.tau);
+        let outside = T::lt(zero, l);
+        let mut skip = T::and(outside, T::le(tau, l));
+        if let Ctx::Below(thr) = ctx {
+            skip = T::or(skip, T::and(outside, T::le(thr, l)));
+        }
+        let mat = T::mat_splat(ins.material);
+        if T::all(skip) {
+            return (l, mat);
+        }
+        let (c, m) = self.node(i, p, grids);
+        let cc = c.min(tau);
+        let g = T::select(outside, l.max(cc), cc);
+        (T::select(skip, l, g), T::mat_select(skip, mat, m))
+    }
+
+    /// Node `i` without its bound, `p` in its parent's frame.
+    fn node<T: Lane<S = S>>(&self, i: usize, p: V3<T>, grids: &[&dyn GridSampler]) -> (T, T::Mat) {
+        let ins = &self.instrs[i];
+        let q = ins.to_local.apply(p);
+        let mat = T::mat_splat(ins.material);
+        let end = ins.end as usize;
+        let (d, m) = match &ins.op {
+            Op::Sphere { r } => (shapes::sphere(q, T::splat(*r)), mat),
+            Op::Plane { n, offset } => (shapes::plane(q, V3::splat3(*n), T::splat(*offset)), mat),
+            Op::Box { b } => (shapes::box3(q, V3::splat3(*b)), mat),
+            Op::Ellipsoid { inv_r, rmin } => (
+                shapes::ellipsoid(q, V3::splat3(*inv_r), T::splat(*rmin)),
+                mat,
+            ),
+            Op::Cylinder { r, h } => (shapes::cylinder(q, T::splat(*r), T::splat(*h)), mat),
+            Op::Torus { big, small } => (shapes::torus(q, T::splat(*big), T::splat(*small)), mat),
+            Op::Triangle(t) => (shapes::triangle(q, t), mat),
+            Op::Mesh { grid } => {
+                let g = grids[*grid as usize];
+                (T::map3(q.x, q.y, q.z, &|x, y, z| g.sample(x, y, z)), mat)
+            }
+            Op::Union => {
+                let mut j = i + 1;
+                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                j = self.instrs[j].end as usize;
+                while j < end {
+                    let (d, m) = self.child(j, q, Ctx::Below(best), grids);
+                    let take = T::lt(d, best);
+                    best = best.min(d);
+                    bm = T::mat_select(take, m, bm);
+                    j = self.instrs[j].end as usize;
+                }
+                (best, bm)
+            }
+            Op::Intersection => {
+                let mut j = i + 1;
+                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                j = self.instrs[j].end as usize;
+                while j < end {
+                    let (d, m) = self.child(j, q, Ctx::Plain, grids);
+                    let take = T::lt(best, d);
+                    best = best.max(d);
+                    bm = T::mat_select(take, m, bm);
+                    j = self.instrs[j].end as usize;
+                }
+                (best, bm)
+            }
+            Op::Subtraction => {
+                let mut j = i + 1;
+                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                j = self.instrs[j].end as usize;
+                while j < end {
+                    let (d, m) = self.subtrahend(j, q, best, grids);
+                    let nd = -d;
+                    let take = T::lt(best, nd);
+                    best = best.max(nd);
+                    bm = T::mat_select(take, m, bm);
+                    j = self.instrs[j].end as usize;
+                }
+                (best, bm)
+            }
+            Op::SmoothUnion { k, inv_k } => {
+                let k = T::splat(*k);
+                let inv_k = T::splat(*inv_k);
+                let mut j = i + 1;
+                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                j = self.instrs[j].end as usize;
+                while j < end {
+                    let (d, m) = self.child(j, q, Ctx::Below(best + k), grids);
+                    let take = T::lt(d, best);
+                    best = shapes::smin(best, d, k, inv_k);
+                    bm = T::mat_select(take, m, bm);
+                    j = self.instrs[j].end as usize;
+                }
+                (best, bm)
+            }
+            Op::Repeat {
+                period,
+                count,
+                first,
+                r,
+            } => self.repeat(i + 1, q, period, count, first, *r, grids),
+        };
+        (d * T::splat(ins.dscale), m)
+    }
+
+    /// A subtracted child: exact skip when it cannot cut into `first`.
+    #[inline]
+    fn subtrahend<T: Lane<S = S>>(
+        &self,
+        j: usize,
+        q: V3<T>,
+        first: T,
+        grids: &[&dyn GridSampler],
+    ) -> (T, T::Mat) {
+        let ins = &self.instrs[j];
+        if !ins.has_bound {
+            return self.node(j, q, grids);
+        }
+        let zero = T::c(0.0);
+        let l = shapes::box_distance(q, V3::splat3(ins.lo), V3::splat3(ins.hi));
+        // Outside its box the child is >= l > 0, so -child <= -l; when -l <= first the
+        // subtraction's max is `first` whatever the child's value.
+        let skip = T::and(T::lt(zero, l), T::le(-first, l));
+        let mat = T::mat_splat(ins.material);
+        if T::all(skip) {
+            return (T::c(BIG), mat);
+        }
+        let (c, m) = self.node(j, q, grids);
+        (T::select(skip, T::c(BIG), c), m)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn repeat<T: Lane<S = S>>(
+        &self,
+        c: usize,
+        q: V3<T>,
+        period: &[S; 3],
+        count: &[S; 3],
+        first: &[S; 3],
+        r: S,
+        grids: &[&dyn GridSampler],
+    ) -> (T, T::Mat) {
+        let ch = &self.instrs[c];
+        let rr = T::splat(r);
+        let qa = [q.x, q.y, q.z];
+        // Per axis: first cell, last cell, number of cells to loop over.
+        let mut lo_j = [T::c(0.0); 3];
+        let mut hi_j = [T::c(0.0); 3];
+        let mut n = [1usize; 3];
+        for a in 0..3 {
+            let p = period[a];
+            if p.to_f64() == 0.0 {
+                continue;
+            }
+            let pp = T::splat(p);
+            let x = qa[a] - T::splat(first[a]);
+            let mut jl = ((x - rr - T::splat(ch.hi[a])) / pp).ceil();
+            let mut jh = ((x + rr - T::splat(ch.lo[a])) / pp).floor();
+            let cnt = count[a].to_f64();
+            let nearest = (x / pp + T::c(0.5)).floor();
+            if cnt > 0.0 {
+                let last = T::c(cnt - 1.0);
+                let zero = T::c(0.0);
+                let nearest = nearest.clamp(zero, last);
+                jl = jl.max(zero).min(nearest);
+                jh = jh.min(last).max(nearest);
+            } else {
+                // Non-finite windows (unbounded child) fall back to the nearest copies.
+                jl = jl.max(nearest - T::c(2.0)).min(nearest);
+                jh = jh.min(nearest + T::c(2.0)).max(nearest);
+            }
+            jh = jh.min(jl + T::c((MAX_WINDOW - 1) as f64));
+            let span = (jh - jl).hmax();
+            n[a] = if span.is_finite() && span >= 0.0 {
+                (span as usize + 1).min(MAX_WINDOW)
+            } else {
+                1
+            };
+            lo_j[a] = jl;
+            hi_j[a] = jh;
+        }
+        let offset = |a: usize, k: usize| -> T {
+            if period[a].to_f64() == 0.0 {
+                T::c(0.0)
+            } else {
+                let j = (lo_j[a] + T::c(k as f64)).min(hi_j[a]);
+                T::splat(first[a]) + j * T::splat(period[a])
+            }
+        };
+        let mut best = rr;
+        let mut bm = T::mat_splat(ch.material);
+        for kx in 0..n[0] {
+            let ox = offset(0, kx);
+            for ky in 0..n[1] {
+                let oy = offset(1, ky);
+                for kz in 0..n[2] {
+                    let oz = offset(2, kz);
+                    let p = V3::new(q.x - ox, q.y - oy, q.z - oz);
+                    let (d, m) = self.child(c, p, Ctx::Below(best), grids);
+                    let take = T::lt(d, best);
+                    best = best.min(d);
+                    bm = T::mat_select(take, m, bm);
+                }
+            }
+        }
+        (best, bm)
+    }
+
+    /// The same program with constants converted to another scalar type.
+    pub fn cast<U: Scalar>(&self) -> Program<U> {
+        let c = |v: S| U::from_f64(v.to_f64());
+        let c3 = |v: [S; 3]| v.map(c);
+        Program {
+            instrs: self
+                .instrs
+                .iter()
+                .map(|i| Instr {
+                    end: i.end,
+                    material: i.material,
+                    has_bound: i.has_bound,
+                    lo: c3(i.lo),
+                    hi: c3(i.hi),
+                    tau: c(i.tau),
+                    to_local: Affine {
+                        lin: i.to_local.lin.map(|m| m.map(c)),
+                        trans: c3(i.to_local.trans),
+                    },
+                    dscale: c(i.dscale),
+                    op: match &i.op {
+                        Op::Sphere { r } => Op::Sphere { r: c(*r) },
+                        Op::Plane { n, offset } => Op::Plane {
+                            n: c3(*n),
+                            offset: c(*offset),
+                        },
+                        Op::Box { b } => Op::Box { b: c3(*b) },
+                        Op::Ellipsoid { inv_r, rmin } => Op::Ellipsoid {
+                            inv_r: c3(*inv_r),
+                            rmin: c(*rmin),
+                        },
+                        Op::Cylinder { r, h } => Op::Cylinder { r: c(*r), h: c(*h) },
+                        Op::Torus { big, small } => Op::Torus {
+                            big: c(*big),
+                            small: c(*small),
+                        },
+                        Op::Triangle(t) => Op::Triangle(Box::new(TriData {
+                            a: c3(t.a),
+                            b: c3(t.b),
+                            c: c3(t.c),
+                            ba: c3(t.ba),
+                            cb: c3(t.cb),
+                            ac: c3(t.ac),
+                            en: t.en.map(c3),
+                            n: c3(t.n),
+                            inv2: c3(t.inv2),
+                        })),
+                        Op::Mesh { grid } => Op::Mesh { grid: *grid },
+                        Op::Union => Op::Union,
+                        Op::Intersection => Op::Intersection,
+                        Op::Subtraction => Op::Subtraction,
+                        Op::SmoothUnion { k, inv_k } => Op::SmoothUnion {
+                            k: c(*k),
+                            inv_k: c(*inv_k),
+                        },
+                        Op::Repeat {
+                            period,
+                            count,
+                            first,
+                            r,
+                        } => Op::Repeat {
+                            period: c3(*period),
+                            count: c3(*count),
+                            first: c3(*first),
+                            r: c(*r),
+                        },
+                    },
+                })
+                .collect(),
+        }
+    }
+}
