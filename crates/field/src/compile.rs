@@ -368,7 +368,19 @@ impl Compiler<'_> {
         ins.lo = a3(parent_box.lo);
         ins.hi = a3(parent_box.hi);
         ins.has_bound = !cheap && parent_box.any_finite();
-        ins.tau = if parent_box.is_finite() {
+        let leaf = !matches!(
+            ins.op,
+            Op::Union
+                | Op::Intersection
+                | Op::Subtraction
+                | Op::SmoothUnion { .. }
+                | Op::Repeat { .. }
+        );
+        // Leaves keep only the exact skips (their value is >= the box distance anyway), so
+        // exact primitives stay exact everywhere; subtrees switch to their box beyond tau.
+        ins.tau = if leaf && !matches!(ins.op, Op::Mesh { .. }) {
+            f64::INFINITY
+        } else if parent_box.is_finite() {
             ((parent_box.hi - parent_box.lo).length() * 0.5).max(1e-30)
         } else {
             f64::INFINITY

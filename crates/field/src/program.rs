@@ -4,7 +4,8 @@
 //!
 //! # Bounds and skipping
 //! A node with `has_bound` stores an axis-aligned box (in its parent's frame) containing its
-//! surface, and `tau` (half the box diagonal). With `L` the distance to that box (`L > 0`
+//! solid, and `tau` (half the box diagonal for subtrees and meshes, infinite for analytic
+//! leaves, which thus stay exact everywhere). With `L` the distance to that box (`L > 0`
 //! only outside it) and `c` the node's evaluated value, the parent uses
 //! `g = max(L, min(c, tau))` (`min(c, tau)` inside the box), and skips evaluating `c` when
 //! `L >= tau` (then `g = L`) or when `L` already proves the node cannot change the parent's
