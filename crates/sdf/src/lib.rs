@@ -1,0 +1,371 @@
+//! The SDF backend of marchmesh: the scene compiled into a distance field
+//! ([`marchmesh_field::Field`], render space, f32) and sphere traced.
+//!
+//! * Hit test: `d < eps` with a cone epsilon proportional to the pixel footprint by default
+//!   ([`HitEpsilon::PixelCone`]), then a few plain steps move the hit onto the surface.
+//! * Over-relaxation (Keinert et al. 2014) with the overlap test and plain-step fallback.
+//! * Rays starting on a surface (reflection and shadow rays, offset by the core integrator by
+//!   `ray_offset * |p|` along the normal) first leave that surface's epsilon shell: while the
+//!   field is below `eps` they step by the (safe) field value and only count a hit if the
+//!   field drops below half of its starting value (another surface closing in, e.g. at a
+//!   contact), so a ray never re-hits the surface it leaves yet still sees contacts.
+//! * Normals: central differences of the field with a step that is a fraction of the pixel
+//!   footprint ([`SdfOptions::normal_step`]), evaluated as one 8-lane field call.
+//! * Every ray reports its evaluations and whether it ended by hit, miss (left the scene's
+//!   box), max steps or max distance.
+//! * [`Geometry::closest_hits`] / [`Geometry::occluded_many`] trace 8 rays in lockstep: one
+//!   8-lane field evaluation per step, a lane that finishes is refilled with the next ray.
+
+mod march;
+mod options;
+
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use marchmesh_core::{
+    Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, Termination, TraceResult,
+};
+use marchmesh_field::{Field, FieldError, FieldOptions};
+use marchmesh_scene::Scene;
+
+use march::{March, Next, Params};
+pub use options::{HitEpsilon, SdfOptions};
+
+/// Why the SDF backend could not build a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum SdfError {
+    /// The field could not be compiled (the message names the node and the reason).
+    #[error(transparent)]
+    Field(#[from] FieldError),
+    /// An option is out of range.
+    #[error("sdf option {name}: {reason}")]
+    Option {
+        /// Field name in [`SdfOptions`].
+        name: &'static str,
+        /// Why it is rejected.
+        reason: String,
+    },
+}
+
+/// A scene compiled for sphere tracing.
+#[derive(Debug)]
+pub struct SdfGeometry {
+    field: Field,
+    params: Params,
+    /// Normal step per unit path length (world units).
+    normal_step: f32,
+    lockstep: bool,
+    report: GeometryReport,
+}
+
+fn check(ok: bool, name: &'static str, reason: &str) -> Result<(), SdfError> {
+    if ok {
+        Ok(())
+    } else {
+        Err(SdfError::Option {
+            name,
+            reason: reason.to_string(),
+        })
+    }
+}
+
+/// Compiles `scene` for sphere tracing. Errors name the offending node, mesh file or option.
+pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> {
+    let (eps_abs, eps_cone) = match opts.hit_epsilon {
+        HitEpsilon::Absolute(e) => {
+            check(
+                e > 0.0 && e.is_finite(),
+                "hit_epsilon",
+                "absolute epsilon must be > 0",
+            )?;
+            (e, 0.0)
+        }
+        HitEpsilon::PixelCone(k) => {
+            check(
+                k > 0.0 && k.is_finite(),
+                "hit_epsilon",
+                "cone fraction must be > 0",
+            )?;
+            (0.0, k * scene.camera.pixel_angle())
+        }
+    };
+    check(opts.max_steps >= 1, "max_steps", "must be >= 1")?;
+    check(
+        (1.0..2.0).contains(&opts.relaxation),
+        "relaxation",
+        "must be in [1, 2)",
+    )?;
+    check(
+        opts.normal_step > 0.0 && opts.normal_step.is_finite(),
+        "normal_step",
+        "must be > 0",
+    )?;
+    let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
+    check(max_distance > 0.0, "max_distance", "must be > 0")?;
+    check(
+        opts.mesh_grid_resolution >= 2,
+        "mesh_grid_resolution",
+        "must be >= 2",
+    )?;
+    let t0 = Instant::now();
+    let field = Field::compile_scene(
+        scene,
+        &FieldOptions {
+            mesh_grid_resolution: opts.mesh_grid_resolution,
+            cache_dir: opts.cache_dir.clone(),
+        },
+    )?;
+    let total_ms = t0.elapsed().as_secs_f64() * 1e3;
+    let bounds = field.bounds().map(|(lo, hi)| {
+        // Pad by a relative margin so f32 rounding never clips a surface.
+        let pad = (hi - lo).length() * 1e-4 + (lo.abs().max(hi.abs())).max_element() * 1e-6;
+        (
+            (lo - DVec3::splat(pad)).as_vec3(),
+            (hi + DVec3::splat(pad)).as_vec3(),
+        )
+    });
+    let fr = field.report();
+    let mut notes = fr.notes.clone();
+    notes.push(format!(
+        "sphere tracing: {:?}, max_steps {}, max_distance {}, relaxation {}, normals by central differences with step {} pixel footprints",
+        opts.hit_epsilon, opts.max_steps, max_distance, opts.relaxation, opts.normal_step
+    ));
+    notes.push(
+        "memory counts the f32 program the tracer reads, the f64 program (shared field API) and mesh grids"
+            .into(),
+    );
+    let mut counters = fr.counters.clone();
+    counters.push(("field_bytes_f32".into(), field.memory_bytes_f32() as f64));
+    let mut phases = fr.phases_ms.clone();
+    let accounted: f64 = phases.iter().map(|p| p.1).sum();
+    phases.push(("other".into(), (total_ms - accounted).max(0.0)));
+    let report = GeometryReport {
+        backend: "sdf".into(),
+        memory_bytes: field.memory_bytes(),
+        build_phases_ms: phases,
+        counters,
+        notes,
+    };
+    Ok(SdfGeometry {
+        params: Params {
+            eps_abs: eps_abs as f32,
+            eps_cone: eps_cone as f32,
+            omega: opts.relaxation as f32,
+            max_steps: opts.max_steps,
+            refine_steps: opts.refine_steps,
+            max_distance: max_distance as f32,
+            bounds,
+        },
+        normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
+        lockstep: opts.lockstep,
+        field,
+        report,
+    })
+}
+
+impl SdfGeometry {
+    /// The compiled field (render space).
+    pub fn field(&self) -> &Field {
+        &self.field
+    }
+
+    /// Field normal at `p` (render space) with central differences of step `h`; falls back
+    /// to a point backed off along `dir` when the gradient is not unit (unsigned surfaces
+    /// such as triangles straddled by the stencil).
+    pub fn normal_at(&self, p: Vec3, dir: Vec3, h: f32) -> Vec3 {
+        let g = self.gradient(p, h);
+        let len = g.length();
+        if (0.7..1.3).contains(&len) {
+            return g / len;
+        }
+        let g2 = self.gradient(p - dir * (4.0 * h), h);
+        let len2 = g2.length();
+        if len2 > 0.0 && (len2 - 1.0).abs() < (len - 1.0).abs() {
+            g2 / len2
+        } else if len > 0.0 {
+            g / len
+        } else {
+            -dir
+        }
+    }
+
+    fn gradient(&self, p: Vec3, h: f32) -> Vec3 {
+        let (x, y, z) = (Vec3::X * h, Vec3::Y * h, Vec3::Z * h);
+        let d = self
+            .field
+            .distance_x8([p + x, p - x, p + y, p - y, p + z, p - z, p, p]);
+        Vec3::new(d[0] - d[1], d[2] - d[3], d[4] - d[5]) / (2.0 * h)
+    }
+
+    fn finish(&self, m: &March, term: Termination) -> TraceResult {
+        let work = RayWork {
+            steps: m.evals,
+            ..RayWork::default()
+        };
+        if term != Termination::Hit {
+            return TraceResult {
+                hit: None,
+                termination: term,
+                work,
+            };
+        }
+        let p = m.point();
+        let h = (self.normal_step * m.path_length())
+            .max(p.length() * 1e-6)
+            .max(1e-30);
+        let normal = self.normal_at(p, m.dir(), h);
+        let material = self.field.distance_material(p).1;
+        TraceResult {
+            hit: Some(Hit {
+                t: m.t,
+                position: p,
+                normal,
+                material,
+            }),
+            termination: Termination::Hit,
+            work,
+        }
+    }
+
+    fn occ(m: &March, term: Termination) -> OcclusionResult {
+        OcclusionResult {
+            occluded: term == Termination::Hit,
+            termination: term,
+            work: RayWork {
+                steps: m.evals,
+                ..RayWork::default()
+            },
+        }
+    }
+
+    fn run(&self, m: &mut March) -> Termination {
+        loop {
+            let d = self.field.distance(m.point());
+            if let Next::Done(t) = m.feed(d, &self.params) {
+                return t;
+            }
+        }
+    }
+
+    /// Traces `rays` 8 at a time in lockstep; `done(i, march, termination)` receives each
+    /// finished ray (`march` is `None` when the ray missed the scene box before any step).
+    fn lockstep(
+        &self,
+        rays: &[Ray],
+        refine: bool,
+        mut done: impl FnMut(usize, Option<&March>, Termination),
+    ) {
+        let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
+        let mut next = 0usize;
+        let load = |next: &mut usize, done: &mut dyn FnMut(usize, Option<&March>, Termination)| {
+            while *next < rays.len() {
+                let i = *next;
+                *next += 1;
+                match March::new(&rays[i], &self.params, refine) {
+                    Ok(m) => return Some((i, m)),
+                    Err(t) => done(i, None, t),
+                }
+            }
+            None
+        };
+        for lane in lanes.iter_mut() {
+            *lane = load(&mut next, &mut done);
+        }
+        while let Some(fill) = lanes.iter().flatten().next().map(|l| l.1.point()) {
+            let pts: [Vec3; 8] =
+                std::array::from_fn(|k| lanes[k].as_ref().map_or(fill, |l| l.1.point()));
+            let d = self.field.distance_x8(pts);
+            for k in 0..8 {
+                let Some((i, m)) = lanes[k].as_mut() else {
+                    continue;
+                };
+                if let Next::Done(t) = m.feed(d[k], &self.params) {
+                    done(*i, Some(m), t);
+                    lanes[k] = load(&mut next, &mut done);
+                }
+            }
+        }
+    }
+}
+
+impl Geometry for SdfGeometry {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        match March::new(ray, &self.params, true) {
+            Err(t) => TraceResult {
+                hit: None,
+                termination: t,
+                work: RayWork::default(),
+            },
+            Ok(mut m) => {
+                let t = self.run(&mut m);
+                self.finish(&m, t)
+            }
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        match March::new(ray, &self.params, false) {
+            Err(t) => OcclusionResult {
+                occluded: false,
+                termination: t,
+                work: RayWork::default(),
+            },
+            Ok(mut m) => {
+                let t = self.run(&mut m);
+                Self::occ(&m, t)
+            }
+        }
+    }
+
+    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "closest_hits: rays and out differ in length"
+        );
+        if !self.lockstep {
+            for (r, o) in rays.iter().zip(out.iter_mut()) {
+                *o = self.closest_hit(r);
+            }
+            return;
+        }
+        self.lockstep(rays, true, |i, m, t| {
+            out[i] = match m {
+                Some(m) => self.finish(m, t),
+                None => TraceResult {
+                    hit: None,
+                    termination: t,
+                    work: RayWork::default(),
+                },
+            };
+        });
+    }
+
+    fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "occluded_many: rays and out differ in length"
+        );
+        if !self.lockstep {
+            for (r, o) in rays.iter().zip(out.iter_mut()) {
+                *o = self.occluded(r);
+            }
+            return;
+        }
+        self.lockstep(rays, false, |i, m, t| {
+            out[i] = match m {
+                Some(m) => Self::occ(m, t),
+                None => OcclusionResult {
+                    occluded: false,
+                    termination: t,
+                    work: RayWork::default(),
+                },
+            };
+        });
+    }
+
+    fn report(&self) -> GeometryReport {
+        self.report.clone()
+    }
+}
