@@ -5,6 +5,7 @@
 use fast_surface_nets::ndshape::RuntimeShape;
 use fast_surface_nets::{SurfaceNetsBuffer, surface_nets};
 use glam::DVec3;
+use marchmesh_field::{Field, FieldOptions};
 use marchmesh_scene::{MaterialId, Node};
 use rayon::prelude::*;
 
@@ -15,19 +16,39 @@ use crate::tessellate::LocalMesh;
 /// about 0.5 GB of f32.
 pub const MAX_SURFACE_RESOLUTION: u32 = 512;
 
-/// Extracts the surface of a composite node in its local frame.
+/// Extracts the surface of a composite node in its local frame (the frame before
+/// `node.transform`) from the shared distance field (`marchmesh-field`).
 ///
-/// Needs the shared distance-field crate (`marchmesh-field`), which did not exist when this
-/// backend was written: until it is wired in here, composites are reported as unsupported.
+/// `bounds` are the node's local bounds when the backend knows them; otherwise the field's
+/// own bounds are used. A composite without finite bounds (a subtraction from a plane, an
+/// intersection of infinite repetitions) has no finite surface to extract: that is
+/// [`MeshError::Unsupported`], naming the node.
 pub(crate) fn extract(
     node: &Node,
-    _bounds: Option<(DVec3, DVec3)>,
-    _resolution: u32,
+    bounds: Option<(DVec3, DVec3)>,
+    resolution: u32,
+    field_options: &FieldOptions,
 ) -> Result<LocalMesh, MeshError> {
-    Err(MeshError::Unsupported {
-        json_path: node.json_path.clone(),
-        reason: "CSG surface extraction needs the shared distance-field crate (marchmesh-field), which is not available yet".into(),
-    })
+    let field =
+        Field::compile_node(node, node.transform.inverse(), field_options).map_err(|e| {
+            MeshError::Unsupported {
+                json_path: node.json_path.clone(),
+                reason: format!("its distance field could not be built: {e}"),
+            }
+        })?;
+    let bounds = bounds
+        .or_else(|| field.bounds())
+        .filter(|(lo, hi)| lo.is_finite() && hi.is_finite() && (*hi - *lo).min_element() >= 0.0)
+        .ok_or_else(|| MeshError::Unsupported {
+            json_path: node.json_path.clone(),
+            reason: "the CSG result is unbounded (e.g. a plane or an infinite repetition survives), so it has no finite surface to extract".into(),
+        })?;
+    Ok(extract_surface(
+        |p| field.distance_f64(p) as f32,
+        |p| field.distance_material_f64(p).1,
+        bounds,
+        resolution,
+    ))
 }
 
 /// Meshes the zero set of `distance` (negative inside, in the frame of `bounds`) inside

@@ -242,7 +242,14 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             ShapeKey::Composite(_) => {
                 let te = Instant::now();
                 let local = build::local_bounds(node, &mesh_bounds);
-                let mesh = extract::extract(node, local, options.surface_resolution)?;
+                // Meshes inside a CSG node are baked to distance grids as fine as the
+                // extraction grid: a finer bake would not show, a coarser one would.
+                let field_options = marchmesh_field::FieldOptions {
+                    mesh_grid_resolution: options.surface_resolution,
+                    cache_dir: None,
+                };
+                let mesh =
+                    extract::extract(node, local, options.surface_resolution, &field_options)?;
                 report.notes.push(format!(
                     "{}: surface extracted from the distance field, {} triangles at resolution {}",
                     node.json_path,

@@ -36,14 +36,26 @@ fn seed_spheres_and_primitives_render() {
 }
 
 #[test]
-fn csg_scene_renders_or_names_the_missing_field_crate() {
-    match render_file("csg.json", 32) {
-        Ok(out) => assert_eq!(out.stats.non_finite_pixels, 0),
+fn csg_scene_renders_with_extracted_surfaces() {
+    let out = render_file("csg.json", 32).unwrap_or_else(|e| panic!("csg.json: {e}"));
+    assert_eq!(out.stats.non_finite_pixels, 0);
+    assert!(out.stats.hits > 0, "nothing hit");
+}
+
+#[test]
+fn unbounded_csg_is_declined_with_its_path() {
+    let scene = common::scene(
+        r#"{"objects": [{"shape": {"subtraction": {"children": [
+            {"shape": {"plane": {}}},
+            {"shape": {"sphere": {"radius": 1}}}]}}}]}"#,
+    );
+    match build(&scene, &MeshOptions::fast()) {
         Err(MeshError::Unsupported { json_path, reason }) => {
-            assert!(json_path.starts_with("objects["), "{json_path}");
-            assert!(reason.contains("marchmesh-field"), "{reason}");
+            assert_eq!(json_path, "objects[0]");
+            assert!(reason.contains("unbounded"), "{reason}");
         }
         Err(e) => panic!("unexpected error: {e}"),
+        Ok(_) => panic!("an unbounded subtraction cannot be tessellated"),
     }
 }
 
