@@ -181,7 +181,37 @@ impl Compiler<'_> {
         });
         let (op, local) = match &n.kind {
             NodeKind::Sphere { radius } => {
-                (Op::Sphere { r: *radius }, Aabb::sym(DVec3::splat(*radius)))
+                let m = xf.matrix3;
+                let sc = m.x_axis.length();
+                let g = m.transpose() * m;
+                let conformal = (0..3).all(|c| {
+                    (0..3).all(|r| {
+                        let want = if c == r { sc * sc } else { 0.0 };
+                        (g.col(c)[r] - want).abs() <= 1e-12 * sc * sc
+                    })
+                });
+                if conformal {
+                    // Rotation and uniform scale: a sphere in the parent frame, evaluated
+                    // without moving the point into the local frame first (see Op::SphereAt).
+                    let c = xf.translation;
+                    let r = radius * sc;
+                    let ins = &mut self.instrs[idx];
+                    ins.to_local = Affine {
+                        lin: None,
+                        trans: [0.0; 3],
+                    };
+                    ins.dscale = 1.0;
+                    (
+                        Op::SphereAt {
+                            c: a3(c),
+                            r,
+                            k: (c.length_squared() - r * r),
+                        },
+                        Aabb::sym(DVec3::splat(*radius)),
+                    )
+                } else {
+                    (Op::Sphere { r: *radius }, Aabb::sym(DVec3::splat(*radius)))
+                }
             }
             NodeKind::Plane { normal, offset } => (
                 Op::Plane {
@@ -360,7 +390,10 @@ impl Compiler<'_> {
             }
         };
         let parent_box = local.transformed(&xf);
-        let cheap = matches!(op, Op::Sphere { .. } | Op::Box { .. } | Op::Plane { .. });
+        let cheap = matches!(
+            op,
+            Op::Sphere { .. } | Op::SphereAt { .. } | Op::Box { .. } | Op::Plane { .. }
+        );
         let end = self.instrs.len() as u32;
         let ins = &mut self.instrs[idx];
         ins.op = op;

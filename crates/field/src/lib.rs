@@ -230,36 +230,36 @@ impl Field {
     }
 
     #[inline]
-    fn eval<T: Lane>(&self, prog: &Program<T::S>, p: V3<T>) -> (T, T::Mat) {
+    fn eval<T: Lane, const M: bool>(&self, prog: &Program<T::S>, p: V3<T>) -> (T, T::Mat) {
         if self.grids.is_empty() {
-            prog.eval(p, &[])
+            prog.eval::<T, M>(p, &[])
         } else {
-            prog.eval(p, &self.grid_refs())
+            prog.eval::<T, M>(p, &self.grid_refs())
         }
     }
 
     /// Signed distance bound at `p` (f32). 1e30 for an empty field.
     #[inline]
     pub fn distance(&self, p: Vec3) -> f32 {
-        self.eval::<f32>(&self.p32, V3::new(p.x, p.y, p.z)).0
+        self.eval::<f32, false>(&self.p32, V3::new(p.x, p.y, p.z)).0
     }
 
     /// Signed distance bound at `p` in f64 (same formulas as [`Field::distance`]).
     #[inline]
     pub fn distance_f64(&self, p: DVec3) -> f64 {
-        self.eval::<f64>(&self.p64, V3::new(p.x, p.y, p.z)).0
+        self.eval::<f64, false>(&self.p64, V3::new(p.x, p.y, p.z)).0
     }
 
     /// Distance and the material of the surface defining it (f32).
     #[inline]
     pub fn distance_material(&self, p: Vec3) -> (f32, MaterialId) {
-        self.eval::<f32>(&self.p32, V3::new(p.x, p.y, p.z))
+        self.eval::<f32, true>(&self.p32, V3::new(p.x, p.y, p.z))
     }
 
     /// Distance and material in f64.
     #[inline]
     pub fn distance_material_f64(&self, p: DVec3) -> (f64, MaterialId) {
-        self.eval::<f64>(&self.p64, V3::new(p.x, p.y, p.z))
+        self.eval::<f64, true>(&self.p64, V3::new(p.x, p.y, p.z))
     }
 
     /// Distances at eight points evaluated in lockstep (same values as [`Field::distance`]
@@ -271,13 +271,13 @@ impl Field {
             F32x8(p.map(|v| v.y)),
             F32x8(p.map(|v| v.z)),
         );
-        self.eval::<F32x8>(&self.p32, v).0.0
+        self.eval::<F32x8, false>(&self.p32, v).0.0
     }
 
     /// Distances of eight points given as SoA lanes.
     #[inline]
     pub fn distance_lanes(&self, p: V3<F32x8>) -> F32x8 {
-        self.eval::<F32x8>(&self.p32, p).0
+        self.eval::<F32x8, false>(&self.p32, p).0
     }
 
     /// Box containing every surface, `None` when unbounded (planes, infinite repetition) or

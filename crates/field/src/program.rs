@@ -66,6 +66,18 @@ pub enum Op<S> {
         /// Radius.
         r: S,
     },
+    /// A sphere in the parent frame (centre `c`, radius `r`, `k = |c|^2 - r^2`), evaluated
+    /// as `(|p|^2 - 2 p.c + k) / (|p - c| + r)`: the same value as `|p - c| - r`, but
+    /// without the cancellation of `|p - c| ~ r` in f32 when a huge sphere (a ground) passes
+    /// near the camera: the terms stay small in render space.
+    SphereAt {
+        /// Centre.
+        c: [S; 3],
+        /// Radius.
+        r: S,
+        /// `|c|^2 - r^2`.
+        k: S,
+    },
     /// [`shapes::plane`].
     Plane {
         /// Unit normal.
@@ -184,6 +196,12 @@ enum Ctx<T> {
 
 const BIG: f64 = 1e30;
 
+/// Material select, compiled away when materials are not tracked (`M = false`).
+#[inline(always)]
+fn msel<T: Lane, const M: bool>(m: T::Mask, a: T::Mat, b: T::Mat) -> T::Mat {
+    if M { T::mat_select(m, a, b) } else { b }
+}
+
 impl<S: Scalar> Program<S> {
     /// Exact bytes of the instruction list (length times element size; boxed triangle data
     /// counted too).
@@ -197,18 +215,23 @@ impl<S: Scalar> Program<S> {
             + tri * std::mem::size_of::<TriData<S>>()) as u64
     }
 
-    /// Evaluates the whole program at `p` (root's parent frame): (distance, material).
+    /// Evaluates the whole program at `p` (root's parent frame): (distance, material); the
+    /// material is only tracked when `M` is true (otherwise it is the root's).
     #[inline]
-    pub fn eval<T: Lane<S = S>>(&self, p: V3<T>, grids: &[&dyn GridSampler]) -> (T, T::Mat) {
+    pub fn eval<T: Lane<S = S>, const M: bool>(
+        &self,
+        p: V3<T>,
+        grids: &[&dyn GridSampler],
+    ) -> (T, T::Mat) {
         if self.instrs.is_empty() {
             return (T::c(BIG), T::mat_splat(0));
         }
-        self.child(0, p, Ctx::Plain, grids)
+        self.child::<T, M>(0, p, Ctx::Plain, grids)
     }
 
     /// Node `i` including its bound logic, `p` in its parent's frame.
-    #[inline]
-    fn child<T: Lane<S = S>>(
+    #[inline(always)]
+    fn child<T: Lane<S = S>, const M: bool>(
         &self,
         i: usize,
         p: V3<T>,
@@ -217,7 +240,7 @@ impl<S: Scalar> Program<S> {
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
         if !ins.has_bound {
-            return self.node(i, p, grids);
+            return self.node::<T, M>(i, p, grids);
         }
         let zero = T::c(0.0);
         let l = shapes::box_distance(p, V3::splat3(ins.lo), V3::splat3(ins.hi));
@@ -231,20 +254,29 @@ impl<S: Scalar> Program<S> {
         if T::all(skip) {
             return (l, mat);
         }
-        let (c, m) = self.node(i, p, grids);
+        let (c, m) = self.node::<T, M>(i, p, grids);
         let cc = c.min(tau);
         let g = T::select(outside, l.max(cc), cc);
-        (T::select(skip, l, g), T::mat_select(skip, mat, m))
+        (T::select(skip, l, g), msel::<T, M>(skip, mat, m))
     }
 
     /// Node `i` without its bound, `p` in its parent's frame.
-    fn node<T: Lane<S = S>>(&self, i: usize, p: V3<T>, grids: &[&dyn GridSampler]) -> (T, T::Mat) {
+    fn node<T: Lane<S = S>, const M: bool>(
+        &self,
+        i: usize,
+        p: V3<T>,
+        grids: &[&dyn GridSampler],
+    ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
         let q = ins.to_local.apply(p);
         let mat = T::mat_splat(ins.material);
         let end = ins.end as usize;
         let (d, m) = match &ins.op {
             Op::Sphere { r } => (shapes::sphere(q, T::splat(*r)), mat),
+            Op::SphereAt { c, r, k } => (
+                shapes::sphere_at(q, V3::splat3(*c), T::splat(*r), T::splat(*k)),
+                mat,
+            ),
             Op::Plane { n, offset } => (shapes::plane(q, V3::splat3(*n), T::splat(*offset)), mat),
             Op::Box { b } => (shapes::box3(q, V3::splat3(*b)), mat),
             Op::Ellipsoid { inv_r, rmin } => (
@@ -260,40 +292,40 @@ impl<S: Scalar> Program<S> {
             }
             Op::Union => {
                 let mut j = i + 1;
-                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.child(j, q, Ctx::Below(best), grids);
+                    let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best), grids);
                     let take = T::lt(d, best);
                     best = best.min(d);
-                    bm = T::mat_select(take, m, bm);
+                    bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }
                 (best, bm)
             }
             Op::Intersection => {
                 let mut j = i + 1;
-                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.child(j, q, Ctx::Plain, grids);
+                    let (d, m) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                     let take = T::lt(best, d);
                     best = best.max(d);
-                    bm = T::mat_select(take, m, bm);
+                    bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }
                 (best, bm)
             }
             Op::Subtraction => {
                 let mut j = i + 1;
-                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.subtrahend(j, q, best, grids);
+                    let (d, m) = self.subtrahend::<T, M>(j, q, best, grids);
                     let nd = -d;
                     let take = T::lt(best, nd);
                     best = best.max(nd);
-                    bm = T::mat_select(take, m, bm);
+                    bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }
                 (best, bm)
@@ -302,13 +334,13 @@ impl<S: Scalar> Program<S> {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);
                 let mut j = i + 1;
-                let (mut best, mut bm) = self.child(j, q, Ctx::Plain, grids);
+                let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.child(j, q, Ctx::Below(best + k), grids);
+                    let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best + k), grids);
                     let take = T::lt(d, best);
                     best = shapes::smin(best, d, k, inv_k);
-                    bm = T::mat_select(take, m, bm);
+                    bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }
                 (best, bm)
@@ -318,14 +350,14 @@ impl<S: Scalar> Program<S> {
                 count,
                 first,
                 r,
-            } => self.repeat(i + 1, q, period, count, first, *r, grids),
+            } => self.repeat::<T, M>(i + 1, q, period, count, first, *r, grids),
         };
         (d * T::splat(ins.dscale), m)
     }
 
     /// A subtracted child: exact skip when it cannot cut into `first`.
     #[inline]
-    fn subtrahend<T: Lane<S = S>>(
+    fn subtrahend<T: Lane<S = S>, const M: bool>(
         &self,
         j: usize,
         q: V3<T>,
@@ -334,7 +366,7 @@ impl<S: Scalar> Program<S> {
     ) -> (T, T::Mat) {
         let ins = &self.instrs[j];
         if !ins.has_bound {
-            return self.node(j, q, grids);
+            return self.node::<T, M>(j, q, grids);
         }
         let zero = T::c(0.0);
         let l = shapes::box_distance(q, V3::splat3(ins.lo), V3::splat3(ins.hi));
@@ -345,13 +377,13 @@ impl<S: Scalar> Program<S> {
         if T::all(skip) {
             return (T::c(BIG), mat);
         }
-        let (c, m) = self.node(j, q, grids);
+        let (c, m) = self.node::<T, M>(j, q, grids);
         (T::select(skip, T::c(BIG), c), m)
     }
 
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn repeat<T: Lane<S = S>>(
+    fn repeat<T: Lane<S = S>, const M: bool>(
         &self,
         c: usize,
         q: V3<T>,
@@ -417,10 +449,10 @@ impl<S: Scalar> Program<S> {
                 for kz in 0..n[2] {
                     let oz = offset(2, kz);
                     let p = V3::new(q.x - ox, q.y - oy, q.z - oz);
-                    let (d, m) = self.child(c, p, Ctx::Below(best), grids);
+                    let (d, m) = self.child::<T, M>(c, p, Ctx::Below(best), grids);
                     let take = T::lt(d, best);
                     best = best.min(d);
-                    bm = T::mat_select(take, m, bm);
+                    bm = msel::<T, M>(take, m, bm);
                 }
             }
         }
@@ -449,6 +481,11 @@ impl<S: Scalar> Program<S> {
                     dscale: c(i.dscale),
                     op: match &i.op {
                         Op::Sphere { r } => Op::Sphere { r: c(*r) },
+                        Op::SphereAt { c: cen, r, k } => Op::SphereAt {
+                            c: c3(*cen),
+                            r: c(*r),
+                            k: c(*k),
+                        },
                         Op::Plane { n, offset } => Op::Plane {
                             n: c3(*n),
                             offset: c(*offset),

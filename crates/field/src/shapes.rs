@@ -11,6 +11,14 @@ pub fn sphere<T: Lane>(p: V3<T>, r: T) -> T {
     p.len() - r
 }
 
+/// Sphere with centre `c`, radius `r` and `k = |c|^2 - r^2`, as
+/// `(|p|^2 - 2 p.c + k) / (|p - c| + r)` (equal to `|p - c| - r`). Exact, and accurate in f32
+/// for points near the origin of the frame even when `|c|` and `r` are huge.
+#[inline(always)]
+pub fn sphere_at<T: Lane>(p: V3<T>, c: V3<T>, r: T, k: T) -> T {
+    (p.len2() - p.dot(c) * T::c(2.0) + k) / ((p - c).len() + r)
+}
+
 /// Half-space `dot(n, p) <= offset` with unit `n`: `dot(n, p) - offset`. Exact.
 #[inline(always)]
 pub fn plane<T: Lane>(p: V3<T>, n: V3<T>, offset: T) -> T {

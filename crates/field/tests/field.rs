@@ -545,3 +545,20 @@ fn scene_compiles_in_render_space() {
     // The camera is outside every solid.
     assert!(f.distance(Vec3::ZERO) > 0.0);
 }
+
+#[test]
+fn huge_sphere_near_the_frame_origin_keeps_f32_precision() {
+    // The seed scene's ground: radius 5000, centre 5001 below the camera.
+    let g = at(sphere(5000.0), DVec3::new(0.0, -5001.0, 0.0));
+    let f = field(&g);
+    for p in [
+        DVec3::new(0.3, -1.0 + 5e-4, 2.0),
+        DVec3::new(-2.0, -0.999, 5.0),
+        DVec3::new(1.0, -1.0 - 2e-4, 3.0),
+    ] {
+        let exact = (p - DVec3::new(0.0, -5001.0, 0.0)).length() - 5000.0;
+        let d32 = f.distance(p.as_vec3()) as f64;
+        // Plain |p - c| - r in f32 would be quantised to ulp(5000) = 4.9e-4.
+        assert!((d32 - exact).abs() < 2e-6, "{p}: {d32} vs {exact}");
+    }
+}

@@ -1,2 +1,104 @@
-//! Placeholder, replaced below.
-fn main() {}
+//! Primary rays of `seed-spheres` (and `csg`) at 256x256: 8-ray lockstep batches against one
+//! ray at a time (same results), and field evaluation per point.
+
+use std::hint::black_box;
+use std::path::Path;
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use glam::Vec3;
+use marchmesh_core::{Geometry, Ray, RenderSpace, TraceResult};
+use marchmesh_scene::Scene;
+use marchmesh_sdf::{SdfOptions, build};
+
+const SIDE: u32 = 256;
+
+fn load(name: &str) -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../scenes")
+        .join(name);
+    marchmesh_scene::load(&path)
+        .expect("committed scene")
+        .with_image_size(SIDE, SIDE)
+        .expect("size")
+}
+
+/// One primary ray per pixel centre, render space.
+fn primary_rays(scene: &Scene) -> Vec<Ray> {
+    let _ = RenderSpace::of(scene);
+    let c = &scene.camera;
+    let mut rays = Vec::with_capacity((c.width * c.height) as usize);
+    for y in 0..c.height {
+        for x in 0..c.width {
+            let d = c.direction(x as f64 + 0.5, y as f64 + 0.5);
+            rays.push(Ray {
+                origin: Vec3::ZERO,
+                dir: d.as_vec3().normalize(),
+                t_min: 0.0,
+                t_max: scene.render.max_distance as f32,
+            });
+        }
+    }
+    rays
+}
+
+fn bench(c: &mut Criterion) {
+    for name in ["seed-spheres.json", "csg.json"] {
+        let scene = load(name);
+        let rays = primary_rays(&scene);
+        let mut group = c.benchmark_group(format!("primary_{}", name.trim_end_matches(".json")));
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.sample_size(10);
+        for lockstep in [true, false] {
+            let g = build(
+                &scene,
+                &SdfOptions {
+                    lockstep,
+                    ..SdfOptions::DEFAULT
+                },
+            )
+            .expect("builds");
+            let mut out = vec![TraceResult::default(); rays.len()];
+            // Rows of rays, as the core integrator hands them over.
+            group.bench_function(if lockstep { "lockstep8" } else { "single" }, |b| {
+                b.iter(|| {
+                    for (r, o) in rays
+                        .chunks(SIDE as usize)
+                        .zip(out.chunks_mut(SIDE as usize))
+                    {
+                        g.closest_hits(black_box(r), o);
+                    }
+                })
+            });
+            let steps: u64 = out.iter().map(|r| r.work.steps as u64).sum();
+            eprintln!(
+                "{name} lockstep={lockstep}: mean steps per primary ray {:.2}",
+                steps as f64 / rays.len() as f64
+            );
+        }
+        group.finish();
+        // Field evaluation per point along the rays (scalar vs 8 lanes).
+        let g = build(&scene, &SdfOptions::DEFAULT).expect("builds");
+        let pts: Vec<Vec3> = rays.iter().step_by(7).map(|r| r.dir * 3.0).collect();
+        let mut group = c.benchmark_group(format!("field_{}", name.trim_end_matches(".json")));
+        group.throughput(Throughput::Elements(pts.len() as u64));
+        group.bench_function("scalar", |b| {
+            b.iter(|| pts.iter().map(|p| g.field().distance(*p)).sum::<f32>())
+        });
+        group.bench_function("x8", |b| {
+            b.iter(|| {
+                pts.chunks_exact(8)
+                    .map(|c| {
+                        g.field()
+                            .distance_x8(std::array::from_fn(|i| c[i]))
+                            .iter()
+                            .sum::<f32>()
+                    })
+                    .sum::<f32>()
+            })
+        });
+        group.finish();
+    }
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
