@@ -190,11 +190,13 @@ impl Compiler<'_> {
                         (g.col(c)[r] - want).abs() <= 1e-12 * sc * sc
                     })
                 });
-                if conformal {
+                let c = xf.translation;
+                let r = radius * sc;
+                // Only when the frame origin (the camera, in render space) is close to the
+                // surface relative to the radius does `|p - c| - r` lose precision in f32.
+                if conformal && r >= 16.0 * (c.length() - r).abs() {
                     // Rotation and uniform scale: a sphere in the parent frame, evaluated
                     // without moving the point into the local frame first (see Op::SphereAt).
-                    let c = xf.translation;
-                    let r = radius * sc;
                     let ins = &mut self.instrs[idx];
                     ins.to_local = Affine {
                         lin: None,

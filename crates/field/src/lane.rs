@@ -217,19 +217,28 @@ impl F32x8 {
         }
         F32x8(r)
     }
+}
+
+impl F32x8 {
     #[inline(always)]
-    fn cmp(self, o: F32x8, f: impl Fn(f32, f32) -> bool) -> [bool; 8] {
-        let mut r = [false; 8];
+    fn mask(self, o: F32x8, f: impl Fn(f32, f32) -> bool) -> M8 {
+        let mut r = [0u32; 8];
         for i in 0..8 {
-            r[i] = f(self.0[i], o.0[i]);
+            r[i] = if f(self.0[i], o.0[i]) { !0 } else { 0 };
         }
-        r
+        M8(r)
     }
 }
 
+/// Eight lane masks, each all ones (true) or all zeros (false), so selects are bitwise
+/// blends that vectorise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(align(32))]
+pub struct M8(pub [u32; 8]);
+
 impl Lane for F32x8 {
     type S = f32;
-    type Mask = [bool; 8];
+    type Mask = M8;
     type Mat = [u32; 8];
     #[inline(always)]
     fn splat(s: f32) -> Self {
@@ -260,42 +269,42 @@ impl Lane for F32x8 {
         F32x8(self.0.map(f32::ceil))
     }
     #[inline(always)]
-    fn lt(self, o: Self) -> [bool; 8] {
-        self.cmp(o, |a, b| a < b)
+    fn lt(self, o: Self) -> M8 {
+        self.mask(o, |a, b| a < b)
     }
     #[inline(always)]
-    fn le(self, o: Self) -> [bool; 8] {
-        self.cmp(o, |a, b| a <= b)
+    fn le(self, o: Self) -> M8 {
+        self.mask(o, |a, b| a <= b)
     }
     #[inline(always)]
-    fn and(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
-        let mut r = [false; 8];
+    fn and(a: M8, b: M8) -> M8 {
+        let mut r = [0u32; 8];
         for i in 0..8 {
-            r[i] = a[i] & b[i];
+            r[i] = a.0[i] & b.0[i];
         }
-        r
+        M8(r)
     }
     #[inline(always)]
-    fn or(a: [bool; 8], b: [bool; 8]) -> [bool; 8] {
-        let mut r = [false; 8];
+    fn or(a: M8, b: M8) -> M8 {
+        let mut r = [0u32; 8];
         for i in 0..8 {
-            r[i] = a[i] | b[i];
+            r[i] = a.0[i] | b.0[i];
         }
-        r
+        M8(r)
     }
     #[inline(always)]
-    fn any(m: [bool; 8]) -> bool {
-        m.iter().fold(false, |a, &b| a | b)
+    fn any(m: M8) -> bool {
+        m.0.iter().fold(0, |a, &b| a | b) != 0
     }
     #[inline(always)]
-    fn all(m: [bool; 8]) -> bool {
-        m.iter().fold(true, |a, &b| a & b)
+    fn all(m: M8) -> bool {
+        m.0.iter().fold(!0, |a, &b| a & b) != 0
     }
     #[inline(always)]
-    fn select(m: [bool; 8], a: Self, b: Self) -> Self {
+    fn select(m: M8, a: Self, b: Self) -> Self {
         let mut r = [0.0f32; 8];
         for i in 0..8 {
-            r[i] = if m[i] { a.0[i] } else { b.0[i] };
+            r[i] = f32::from_bits((a.0[i].to_bits() & m.0[i]) | (b.0[i].to_bits() & !m.0[i]));
         }
         F32x8(r)
     }
@@ -304,10 +313,10 @@ impl Lane for F32x8 {
         [id; 8]
     }
     #[inline(always)]
-    fn mat_select(m: [bool; 8], a: [u32; 8], b: [u32; 8]) -> [u32; 8] {
+    fn mat_select(m: M8, a: [u32; 8], b: [u32; 8]) -> [u32; 8] {
         let mut r = [0u32; 8];
         for i in 0..8 {
-            r[i] = if m[i] { a[i] } else { b[i] };
+            r[i] = (a[i] & m.0[i]) | (b[i] & !m.0[i]);
         }
         r
     }

@@ -39,7 +39,7 @@ use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 
 use compile::{Aabb, MeshResolver, compile_roots};
-pub use lane::{F32x8, Lane, Scalar, V3};
+pub use lane::{F32x8, Lane, M8, Scalar, V3};
 use program::{GridSampler, Program};
 
 /// Options of field compilation.
