@@ -10,7 +10,9 @@
 //!   field drops below half of its starting value (another surface closing in, e.g. at a
 //!   contact), so a ray never re-hits the surface it leaves yet still sees contacts.
 //! * Normals: central differences of the field with a step that is a fraction of the pixel
-//!   footprint ([`SdfOptions::normal_step`]), evaluated as one 8-lane field call.
+//!   footprint ([`SdfOptions::normal_step`]), evaluated as one 8-lane field call (the two
+//!   spare lanes detect a stencil straddling an unsigned surface, see
+//!   [`SdfGeometry::normal_at`]).
 //! * Every ray reports its evaluations and whether it ended by hit, miss (left the scene's
 //!   box), max steps or max distance.
 //! * [`Geometry::closest_hits`] / [`Geometry::occluded_many`] trace 8 rays in lockstep: one
@@ -169,20 +171,35 @@ impl SdfGeometry {
         &self.field
     }
 
-    /// Field normal at `p` (render space) with central differences of step `h`; falls back
-    /// to a point backed off along `dir` when the gradient is not unit (unsigned surfaces
-    /// such as triangles straddled by the stencil).
+    /// Field normal at `p` (render space) by central differences of step `h`.
+    ///
+    /// On an unsigned surface (a triangle: the field is `|distance|`) the stencil straddles
+    /// the zero set and the differences collapse; that is detected from the field on both
+    /// sides of the hit along the ray (positive on both) together with a gradient shorter
+    /// than 0.9, and the normal is then taken at a point backed off `4 h` along the ray.
     pub fn normal_at(&self, p: Vec3, dir: Vec3, h: f32) -> Vec3 {
-        let g = self.gradient(p, h);
+        let (x, y, z) = (Vec3::X * h, Vec3::Y * h, Vec3::Z * h);
+        let d = self.field.distance_x8([
+            p + x,
+            p - x,
+            p + y,
+            p - y,
+            p + z,
+            p - z,
+            p - dir * (2.0 * h),
+            p + dir * (2.0 * h),
+        ]);
+        let g = Vec3::new(d[0] - d[1], d[2] - d[3], d[4] - d[5]) / (2.0 * h);
         let len = g.length();
-        if (0.7..1.3).contains(&len) {
-            return g / len;
+        let straddles = d[6] > 0.0 && d[7] > 0.0 && len < 0.9;
+        if straddles || len == 0.0 || !len.is_finite() {
+            let g2 = self.gradient(p - dir * (4.0 * h), h);
+            let len2 = g2.length();
+            if len2 > 0.0 && len2.is_finite() {
+                return g2 / len2;
+            }
         }
-        let g2 = self.gradient(p - dir * (4.0 * h), h);
-        let len2 = g2.length();
-        if len2 > 0.0 && (len2 - 1.0).abs() < (len - 1.0).abs() {
-            g2 / len2
-        } else if len > 0.0 {
+        if len > 0.0 && len.is_finite() {
             g / len
         } else {
             -dir

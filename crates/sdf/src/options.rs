@@ -41,8 +41,10 @@ pub struct SdfOptions {
     /// to `eps` in front of the surface (depth error up to `k` pixel footprints).
     pub refine_steps: u32,
     /// Central-difference step for normals as a fraction of the pixel footprint at the hit
-    /// (default 0.05). Below ~1e-3 f32 cancellation dominates; above ~0.5 curved surfaces
-    /// lose detail. See the crate docs for measured errors.
+    /// (default 0.1). Measured on `seed-spheres` at 256x256 against analytic sphere normals
+    /// (mean / p95 angle error over 39k primary hits): 0.002: 0.54 / 1.30 deg (f32
+    /// cancellation), 0.01: 0.107 / 0.256, 0.05: 0.031 / 0.050, 0.1: 0.029 / 0.024,
+    /// 0.2: 0.038 / 0.014, 1.0: 0.166 / 0.011 deg (silhouette pixels dominate the mean).
     pub normal_step: f64,
     /// Trace `closest_hits` batches 8 rays in lockstep (SoA lanes, default true); false
     /// traces them one at a time (same results).
@@ -61,7 +63,7 @@ impl SdfOptions {
         max_distance: None,
         relaxation: 1.0,
         refine_steps: 4,
-        normal_step: 0.05,
+        normal_step: 0.1,
         lockstep: true,
         mesh_grid_resolution: 64,
         cache_dir: None,

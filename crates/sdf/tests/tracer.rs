@@ -346,3 +346,61 @@ fn options_out_of_range_are_rejected() {
     assert_eq!(rep.backend, "sdf");
     assert_eq!(rep.memory_bytes, g.field().memory_bytes());
 }
+
+#[test]
+fn normals_of_unsigned_and_bound_fields() {
+    // Triangle (unsigned field): the normal is the plane normal (up to sign).
+    let s = scene(
+        r#"{"shape": {"triangle": {"vertices": [[-1.2, -0.8, 0.3], [1.3, -0.6, -0.2], [0.1, 1.2, 0.1]]}}}"#,
+        "",
+    );
+    let g = build(&s, &SdfOptions::DEFAULT).unwrap();
+    let (a, b, c) = (
+        Vec3::new(-1.2, -0.8, 0.3),
+        Vec3::new(1.3, -0.6, -0.2),
+        Vec3::new(0.1, 1.2, 0.1),
+    );
+    let n = (b - a).cross(c - a).normalize();
+    let mut hits = 0;
+    for i in 0..20 {
+        for j in 0..20 {
+            let d = Vec3::new(i as f32 / 40.0 - 0.25, j as f32 / 40.0 - 0.25, 1.0);
+            if let Some(h) = g.closest_hit(&ray(Vec3::ZERO, d)).hit {
+                // Within a few normal steps of an edge the field's gradient turns around
+                // the edge (correctly for the field); compare the face normal inside.
+                let q = h.position - Vec3::new(0.0, 0.0, 5.0);
+                let edge = |u: Vec3, v: Vec3| {
+                    let e = v - u;
+                    let t = ((q - u).dot(e) / e.length_squared()).clamp(0.0, 1.0);
+                    (q - (u + e * t)).length()
+                };
+                if edge(a, b).min(edge(b, c)).min(edge(c, a)) < 0.05 {
+                    continue;
+                }
+                hits += 1;
+                assert!(h.normal.dot(n).abs() > 0.9999, "{:?} vs {n:?}", h.normal);
+                // On the plane of the triangle (render space: world + (0, 0, 5)).
+                assert!((h.position - Vec3::new(0.0, 0.0, 5.0) - a).dot(n).abs() < 1e-4);
+            }
+        }
+    }
+    assert!(hits > 100);
+    // Ellipsoid (a distance bound): the gradient direction is still the surface normal.
+    let s = scene(
+        r#"{"shape": {"ellipsoid": {"radii": [1.3, 0.6, 0.8]}}}"#,
+        "",
+    );
+    let g = build(&s, &SdfOptions::DEFAULT).unwrap();
+    let r = Vec3::new(1.3, 0.6, 0.8);
+    for i in 0..10 {
+        let d = Vec3::new(i as f32 / 40.0 - 0.12, 0.05, 1.0);
+        let h = g
+            .closest_hit(&ray(Vec3::ZERO, d))
+            .hit
+            .expect("hits the ellipsoid");
+        let q = h.position - Vec3::new(0.0, 0.0, 5.0);
+        assert!(((q / r).length() - 1.0).abs() < 1e-4);
+        let want = (q / (r * r)).normalize();
+        assert!(h.normal.dot(want) > 0.9999, "{:?} vs {want:?}", h.normal);
+    }
+}
