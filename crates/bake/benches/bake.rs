@@ -1,0 +1,2 @@
+//! Placeholder, replaced by the real bench in the next step.
+fn main() {}

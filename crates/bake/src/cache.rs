@@ -1,0 +1,236 @@
+//! On-disk cache of baked grids: one small little-endian file per (mesh content, resolution,
+//! format version).
+//!
+//! Layout (all little-endian):
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 8 | magic `b"MMSDFGRD"` |
+//! | 4 | format version (u32, [`FORMAT_VERSION`]) |
+//! | 8 | mesh content hash (u64, `TriangleMesh::content_hash`) |
+//! | 4 | resolution (u32) |
+//! | 12 | dims (3 x u32) |
+//! | 12 | min (3 x f32) |
+//! | 4 | cell size (f32) |
+//! | 8 | value count (u64) = dims product |
+//! | 4 x count | values (f32) |
+//! | 8 | FNV-1a 64 of every preceding byte |
+//!
+//! Files are written to a unique temporary name in the same directory and renamed into
+//! place, so readers never see a partial file. Any mismatch on read (short file, magic,
+//! version, key, dims, length, non-finite header, checksum) makes the caller re-bake.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+
+use crate::grid::DistanceGrid;
+
+/// Cache format version; bump when the file layout or the bake algorithm (padding, sign
+/// rule, far-field parameters) changes, so stale files are re-baked.
+pub const FORMAT_VERSION: u32 = 1;
+
+const MAGIC: &[u8; 8] = b"MMSDFGRD";
+const HEADER: usize = 8 + 4 + 8 + 4 + 12 + 12 + 4 + 8;
+
+/// The cache file for `(hash, resolution)` under `dir`.
+pub fn cache_path(dir: &Path, hash: u64, resolution: u32) -> PathBuf {
+    dir.join(format!(
+        "{hash:016x}-r{resolution}-v{FORMAT_VERSION}.sdfgrid"
+    ))
+}
+
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= b as u64;
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+/// Serialises `grid` with its key.
+pub fn encode(grid: &DistanceGrid, hash: u64, resolution: u32) -> Vec<u8> {
+    let mut b = Vec::with_capacity(HEADER + grid.values.len() * 4 + 8);
+    b.extend_from_slice(MAGIC);
+    b.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    b.extend_from_slice(&hash.to_le_bytes());
+    b.extend_from_slice(&resolution.to_le_bytes());
+    for d in grid.dims {
+        b.extend_from_slice(&d.to_le_bytes());
+    }
+    for c in grid.min.to_array() {
+        b.extend_from_slice(&c.to_le_bytes());
+    }
+    b.extend_from_slice(&grid.cell_size.to_le_bytes());
+    b.extend_from_slice(&(grid.values.len() as u64).to_le_bytes());
+    for v in &grid.values {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    let mut h = Fnv::new();
+    h.write(&b);
+    b.extend_from_slice(&h.0.to_le_bytes());
+    b
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl Reader<'_> {
+    fn take<const N: usize>(&mut self) -> Result<[u8; N], String> {
+        let s = self
+            .b
+            .get(self.at..self.at + N)
+            .ok_or_else(|| format!("truncated at byte {}", self.at))?;
+        self.at += N;
+        let mut a = [0u8; N];
+        a.copy_from_slice(s);
+        Ok(a)
+    }
+    fn u32(&mut self) -> Result<u32, String> {
+        self.take::<4>().map(u32::from_le_bytes)
+    }
+    fn u64(&mut self) -> Result<u64, String> {
+        self.take::<8>().map(u64::from_le_bytes)
+    }
+    fn f32(&mut self) -> Result<f32, String> {
+        self.take::<4>().map(f32::from_le_bytes)
+    }
+}
+
+/// Parses and validates a cache file's bytes against the expected key. `Err` explains the
+/// first problem found.
+pub fn decode(bytes: &[u8], hash: u64, resolution: u32) -> Result<DistanceGrid, String> {
+    let mut r = Reader { b: bytes, at: 0 };
+    if &r.take::<8>()? != MAGIC {
+        return Err("bad magic".into());
+    }
+    let v = r.u32()?;
+    if v != FORMAT_VERSION {
+        return Err(format!("format version {v}, expected {FORMAT_VERSION}"));
+    }
+    let h = r.u64()?;
+    if h != hash {
+        return Err(format!("mesh hash {h:016x}, expected {hash:016x}"));
+    }
+    let res = r.u32()?;
+    if res != resolution {
+        return Err(format!("resolution {res}, expected {resolution}"));
+    }
+    let dims = [r.u32()?, r.u32()?, r.u32()?];
+    if dims.iter().any(|&d| d < 2) {
+        return Err(format!("bad dims {dims:?}"));
+    }
+    let min = Vec3::new(r.f32()?, r.f32()?, r.f32()?);
+    let cell = r.f32()?;
+    if !min.is_finite() || !cell.is_finite() || cell <= 0.0 {
+        return Err("non-finite or non-positive grid header".into());
+    }
+    let count = r.u64()?;
+    let expect = dims.iter().map(|&d| d as u64).product::<u64>();
+    if count != expect {
+        return Err(format!("value count {count}, dims {dims:?} need {expect}"));
+    }
+    let body = usize::try_from(count)
+        .ok()
+        .and_then(|c| c.checked_mul(4))
+        .ok_or("value count too large")?;
+    if bytes.len() != HEADER + body + 8 {
+        return Err(format!(
+            "file is {} bytes, expected {}",
+            bytes.len(),
+            HEADER + body + 8
+        ));
+    }
+    let mut f = Fnv::new();
+    f.write(&bytes[..HEADER + body]);
+    let stored = u64::from_le_bytes(
+        bytes[HEADER + body..]
+            .try_into()
+            .map_err(|_| "truncated checksum")?,
+    );
+    if stored != f.0 {
+        return Err("checksum mismatch".into());
+    }
+    let values: Vec<f32> = bytes[HEADER..HEADER + body]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    if values.iter().any(|v| v.is_nan()) {
+        return Err("NaN sample".into());
+    }
+    Ok(DistanceGrid {
+        min,
+        cell_size: cell,
+        dims,
+        values,
+    })
+}
+
+/// Writes `bytes` to `path` atomically (unique temp file in the same directory, then
+/// rename). Creates the directory if needed.
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let tmp = dir.join(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
+    let res = (|| {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        std::fs::rename(&tmp, path)
+    })();
+    if res.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    res
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> DistanceGrid {
+        DistanceGrid {
+            min: Vec3::new(-1.0, 0.5, 2.0),
+            cell_size: 0.25,
+            dims: [2, 3, 2],
+            values: (0..12).map(|i| i as f32 - 5.5).collect(),
+        }
+    }
+
+    #[test]
+    fn round_trip_and_every_corruption_detected() {
+        let g = grid();
+        let b = encode(&g, 42, 7);
+        assert_eq!(decode(&b, 42, 7).unwrap(), g);
+        assert!(decode(&b, 43, 7).unwrap_err().contains("hash"));
+        assert!(decode(&b, 42, 8).unwrap_err().contains("resolution"));
+        assert!(decode(&b[..b.len() - 1], 42, 7).is_err());
+        assert!(decode(&[], 42, 7).is_err());
+        // Flip each byte in turn: every single-byte corruption is caught.
+        for i in 0..b.len() {
+            let mut c = b.clone();
+            c[i] ^= 0x10;
+            assert!(decode(&c, 42, 7).is_err(), "byte {i}");
+        }
+        let mut longer = b.clone();
+        longer.push(0);
+        assert!(decode(&longer, 42, 7).is_err());
+    }
+}
