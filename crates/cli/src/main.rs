@@ -145,6 +145,10 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
 
 fn render(args: RenderArgs) -> Result<()> {
     let kind: BackendKind = args.backend.parse()?;
+    if args.options.iter().any(|o| o == "help") {
+        print!("{}", backend::option_help(kind));
+        return Ok(());
+    }
     let options = args
         .options
         .iter()

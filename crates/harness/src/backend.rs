@@ -1,11 +1,20 @@
 //! One place that knows every backend: build any of them for a scene from a name and
 //! `key=value` options, as given on the command line or in a suite file.
+//!
+//! Each backend has an option table ([`option_table`]): key, value type, default and meaning.
+//! Options are applied in order onto the backend's documented defaults (later keys override
+//! earlier ones); unknown keys and unparsable values are errors that name the backend, the
+//! key and the valid keys. Range checks are left to the backend's own `build`, whose errors
+//! name the field.
 
 use std::fmt;
+use std::path::PathBuf;
 use std::str::FromStr;
 
 use marchmesh_core::Geometry;
+use marchmesh_mesh::{BuildQuality, BvhKind, MeshOptions, Tessellation};
 use marchmesh_scene::Scene;
+use marchmesh_sdf::{HitEpsilon, SdfOptions};
 
 /// The geometry backends.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -86,12 +95,347 @@ pub enum BackendError {
     },
 }
 
+/// Message of the reference backend's build error while it is not linked in.
+pub const NOT_BUILT: &str = "not built into this binary yet";
+
 /// Parses `key=value`.
 pub fn parse_option(s: &str) -> Result<(String, String), String> {
     match s.split_once('=') {
         Some((k, v)) if !k.trim().is_empty() => Ok((k.trim().to_string(), v.trim().to_string())),
         _ => Err(format!("`{s}` is not of the form key=value")),
     }
+}
+
+/// One documented option key of a backend.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OptionDoc {
+    /// The key as written in `key=value`.
+    pub key: &'static str,
+    /// The value type (`float`, `int`, `bool`, `path|none`, or the accepted words).
+    pub ty: &'static str,
+    /// The default value, written as it would be parsed.
+    pub default: &'static str,
+    /// What it controls, with units.
+    pub doc: &'static str,
+}
+
+const SDF_OPTIONS: &[OptionDoc] = &[
+    OptionDoc {
+        key: "eps_px",
+        ty: "float",
+        default: "0.5",
+        doc: "hit epsilon as a fraction of the pixel footprint at the point (scale invariant)",
+    },
+    OptionDoc {
+        key: "eps_abs",
+        ty: "float",
+        default: "none",
+        doc: "absolute hit epsilon, world units (replaces eps_px)",
+    },
+    OptionDoc {
+        key: "max_steps",
+        ty: "int",
+        default: "512",
+        doc: "most field evaluations per ray; rays that run out count as misses",
+    },
+    OptionDoc {
+        key: "max_distance",
+        ty: "float|none",
+        default: "none",
+        doc: "longest ray, world units; none = the scene's render.max_distance",
+    },
+    OptionDoc {
+        key: "relaxation",
+        ty: "float",
+        default: "1",
+        doc: "over-relaxation factor in [1, 2) with overlap fallback (1 = off)",
+    },
+    OptionDoc {
+        key: "refine_steps",
+        ty: "int",
+        default: "4",
+        doc: "plain steps after a hit to move it onto the surface",
+    },
+    OptionDoc {
+        key: "normal_step",
+        ty: "float",
+        default: "0.1",
+        doc: "central-difference normal step, fraction of the pixel footprint",
+    },
+    OptionDoc {
+        key: "lockstep",
+        ty: "bool",
+        default: "true",
+        doc: "trace batches 8 rays in lockstep (same results)",
+    },
+    OptionDoc {
+        key: "grid_res",
+        ty: "int",
+        default: "64",
+        doc: "cells on the longest side of baked mesh distance grids",
+    },
+    OptionDoc {
+        key: "cache_dir",
+        ty: "path|none",
+        default: "none",
+        doc: "folder caching baked grids (none = no disk cache)",
+    },
+];
+
+const MESH_OPTIONS: &[OptionDoc] = &[
+    OptionDoc {
+        key: "preset",
+        ty: "fast|default|quality",
+        default: "default",
+        doc: "start from MeshOptions::fast()/DEFAULT/quality() (give it first)",
+    },
+    OptionDoc {
+        key: "bvh",
+        ty: "bvh2|cwbvh",
+        default: "cwbvh",
+        doc: "BVH layout: binary or compressed 8-wide",
+    },
+    OptionDoc {
+        key: "build",
+        ty: "fastest|very_fast|fast|medium|slow|very_slow",
+        default: "medium",
+        doc: "obvhs build preset",
+    },
+    OptionDoc {
+        key: "tess_px",
+        ty: "float",
+        default: "0.25",
+        doc: "tessellation chord error on screen, pixels",
+    },
+    OptionDoc {
+        key: "tess_chord",
+        ty: "float",
+        default: "none",
+        doc: "tessellation chord error, world units (replaces tess_px)",
+    },
+    OptionDoc {
+        key: "tess_level",
+        ty: "int",
+        default: "none",
+        doc: "fixed tessellation: 8*2^level segments per turn, <= 12 (replaces tess_px)",
+    },
+    OptionDoc {
+        key: "surface_res",
+        ty: "int",
+        default: "128",
+        doc: "surface-nets cells on the longest side of CSG / smooth-union objects (8..=512)",
+    },
+    OptionDoc {
+        key: "instancing",
+        ty: "bool",
+        default: "true",
+        doc: "instance repeated shapes under a TLAS (false = flatten into one BVH)",
+    },
+    OptionDoc {
+        key: "max_instances",
+        ty: "int",
+        default: "4194304",
+        doc: "largest instance count an infinite repetition may expand to",
+    },
+    OptionDoc {
+        key: "max_segments",
+        ty: "int",
+        default: "4096",
+        doc: "cap on segments per full turn of any parametric direction",
+    },
+];
+
+const REFERENCE_OPTIONS: &[OptionDoc] = &[];
+
+/// The documented options of `kind`.
+pub fn option_table(kind: BackendKind) -> &'static [OptionDoc] {
+    match kind {
+        BackendKind::Reference => REFERENCE_OPTIONS,
+        BackendKind::Sdf => SDF_OPTIONS,
+        BackendKind::Mesh => MESH_OPTIONS,
+    }
+}
+
+/// The option table of `kind` as aligned text (for `--opt help`).
+pub fn option_help(kind: BackendKind) -> String {
+    let table = option_table(kind);
+    if table.is_empty() {
+        return format!("backend `{kind}` has no options\n");
+    }
+    let kw = table.iter().map(|o| o.key.len()).max().unwrap_or(0);
+    let tw = table.iter().map(|o| o.ty.len()).max().unwrap_or(0);
+    let mut s = format!("options of backend `{kind}` (key=value):\n");
+    for o in table {
+        s += &format!(
+            "  {:kw$}  {:tw$}  default {:8}  {}\n",
+            o.key, o.ty, o.default, o.doc
+        );
+    }
+    s
+}
+
+fn valid_keys(kind: BackendKind) -> String {
+    let keys: Vec<&str> = option_table(kind).iter().map(|o| o.key).collect();
+    if keys.is_empty() {
+        "it has no options".into()
+    } else {
+        format!("valid keys: {}", keys.join(", "))
+    }
+}
+
+fn bad(kind: BackendKind, key: &str, reason: String) -> BackendError {
+    BackendError::BadOption {
+        backend: kind,
+        key: key.to_string(),
+        reason,
+    }
+}
+
+fn parse_f64(v: &str) -> Result<f64, String> {
+    match v.parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(x),
+        Ok(_) => Err(format!("`{v}` is not a finite number")),
+        Err(_) => Err(format!("`{v}` is not a number")),
+    }
+}
+
+fn parse_int<T: FromStr>(v: &str) -> Result<T, String> {
+    v.parse::<T>()
+        .map_err(|_| format!("`{v}` is not a non-negative integer in range"))
+}
+
+fn parse_bool(v: &str) -> Result<bool, String> {
+    match v {
+        "true" | "1" | "yes" | "on" => Ok(true),
+        "false" | "0" | "no" | "off" => Ok(false),
+        _ => Err(format!("`{v}` is not a boolean (true/false)")),
+    }
+}
+
+fn is_none(v: &str) -> bool {
+    v.eq_ignore_ascii_case("none")
+}
+
+/// Applies `key=value` options in order onto the SDF defaults.
+pub fn sdf_options(options: &[(String, String)]) -> Result<SdfOptions, BackendError> {
+    let kind = BackendKind::Sdf;
+    let mut o = SdfOptions::DEFAULT;
+    for (k, v) in options {
+        let r: Result<(), String> = (|| {
+            match k.as_str() {
+                "eps_px" => o.hit_epsilon = HitEpsilon::PixelCone(parse_f64(v)?),
+                "eps_abs" => o.hit_epsilon = HitEpsilon::Absolute(parse_f64(v)?),
+                "max_steps" => o.max_steps = parse_int(v)?,
+                "max_distance" => {
+                    o.max_distance = if is_none(v) {
+                        None
+                    } else {
+                        Some(parse_f64(v)?)
+                    }
+                }
+                "relaxation" => o.relaxation = parse_f64(v)?,
+                "refine_steps" => o.refine_steps = parse_int(v)?,
+                "normal_step" => o.normal_step = parse_f64(v)?,
+                "lockstep" => o.lockstep = parse_bool(v)?,
+                "grid_res" => o.mesh_grid_resolution = parse_int(v)?,
+                "cache_dir" => {
+                    o.cache_dir = if is_none(v) {
+                        None
+                    } else {
+                        Some(PathBuf::from(v))
+                    }
+                }
+                _ => return Err(format!("unknown option; {}", valid_keys(kind))),
+            }
+            Ok(())
+        })();
+        r.map_err(|reason| bad(kind, k, reason))?;
+    }
+    Ok(o)
+}
+
+/// Applies `key=value` options in order onto the mesh defaults.
+pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, BackendError> {
+    let kind = BackendKind::Mesh;
+    let mut o = MeshOptions::DEFAULT;
+    for (k, v) in options {
+        let r: Result<(), String> = (|| {
+            match k.as_str() {
+                "preset" => {
+                    o = match v.as_str() {
+                        "fast" => MeshOptions::fast(),
+                        "default" => MeshOptions::DEFAULT,
+                        "quality" => MeshOptions::quality(),
+                        _ => return Err(format!("`{v}` is not one of fast, default, quality")),
+                    }
+                }
+                "bvh" => {
+                    o.bvh = match v.to_ascii_lowercase().as_str() {
+                        "bvh2" => BvhKind::Bvh2,
+                        "cwbvh" => BvhKind::CwBvh,
+                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh")),
+                    }
+                }
+                "build" => {
+                    o.build_quality = match v.as_str() {
+                        "fastest" => BuildQuality::Fastest,
+                        "very_fast" => BuildQuality::VeryFast,
+                        "fast" => BuildQuality::Fast,
+                        "medium" => BuildQuality::Medium,
+                        "slow" => BuildQuality::Slow,
+                        "very_slow" => BuildQuality::VerySlow,
+                        _ => {
+                            return Err(format!(
+                                "`{v}` is not one of fastest, very_fast, fast, medium, slow, very_slow"
+                            ));
+                        }
+                    }
+                }
+                "tess_px" => {
+                    o.tessellation = Tessellation::ScreenError {
+                        pixels: parse_f64(v)?,
+                    }
+                }
+                "tess_chord" => {
+                    o.tessellation = Tessellation::ChordError {
+                        world: parse_f64(v)?,
+                    }
+                }
+                "tess_level" => o.tessellation = Tessellation::FixedLevel(parse_int(v)?),
+                "surface_res" => o.surface_resolution = parse_int(v)?,
+                "instancing" => o.instancing = parse_bool(v)?,
+                "max_instances" => o.max_instances = parse_int(v)?,
+                "max_segments" => o.max_segments_per_turn = parse_int(v)?,
+                _ => return Err(format!("unknown option; {}", valid_keys(kind))),
+            }
+            Ok(())
+        })();
+        r.map_err(|reason| bad(kind, k, reason))?;
+    }
+    Ok(o)
+}
+
+/// Checks the options of the reference backend (it has none yet).
+fn reference_options(options: &[(String, String)]) -> Result<(), BackendError> {
+    let kind = BackendKind::Reference;
+    if let Some((k, _)) = options.first() {
+        return Err(bad(kind, k, format!("unknown option; {}", valid_keys(kind))));
+    }
+    Ok(())
+}
+
+/// Checks `spec`'s options without building anything (suite validation).
+pub fn check_options(spec: &BackendSpec) -> Result<(), BackendError> {
+    match spec.kind.ok_or(BackendError::Missing)? {
+        BackendKind::Reference => reference_options(&spec.options),
+        BackendKind::Sdf => sdf_options(&spec.options).map(drop),
+        BackendKind::Mesh => mesh_options(&spec.options).map(drop),
+    }
+}
+
+/// Whether `kind` is linked into this binary.
+pub fn is_available(kind: BackendKind) -> bool {
+    !matches!(kind, BackendKind::Reference)
 }
 
 /// Builds the backend named in `spec` for `scene`.
@@ -102,9 +446,170 @@ pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, Bac
         reason: e.to_string(),
     };
     match kind {
-        BackendKind::Reference | BackendKind::Sdf | BackendKind::Mesh => Err(BackendError::Build {
-            backend: kind,
-            reason: "not built into this binary yet".into(),
-        }),
+        BackendKind::Reference => {
+            reference_options(&spec.options)?;
+            Err(BackendError::Build {
+                backend: kind,
+                reason: NOT_BUILT.into(),
+            })
+        }
+        BackendKind::Sdf => {
+            let o = sdf_options(&spec.options)?;
+            let g = marchmesh_sdf::build(scene, &o).map_err(|e| build_err(&e))?;
+            Ok(Box::new(g))
+        }
+        BackendKind::Mesh => {
+            let o = mesh_options(&spec.options)?;
+            let g = marchmesh_mesh::build(scene, &o).map_err(|e| build_err(&e))?;
+            Ok(Box::new(g))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    }
+
+    #[test]
+    fn every_documented_key_parses_its_default_or_an_example() {
+        for kind in [BackendKind::Sdf, BackendKind::Mesh] {
+            for o in option_table(kind) {
+                let value = match (o.default, o.ty) {
+                    ("none", "float") => "0.01",
+                    ("none", "int") => "3",
+                    (d, _) => d,
+                };
+                let spec = BackendSpec {
+                    kind: Some(kind),
+                    options: opts(&[(o.key, value)]),
+                };
+                check_options(&spec).unwrap_or_else(|e| panic!("{kind} {}: {e}", o.key));
+            }
+        }
+    }
+
+    #[test]
+    fn defaults_in_the_table_match_the_structs() {
+        let all_defaults = |kind| -> Vec<(String, String)> {
+            option_table(kind)
+                .iter()
+                .filter(|o| o.default != "none" || o.ty.contains("none"))
+                .map(|o| (o.key.to_string(), o.default.to_string()))
+                .collect()
+        };
+        assert_eq!(
+            sdf_options(&all_defaults(BackendKind::Sdf)).unwrap(),
+            SdfOptions::DEFAULT
+        );
+        assert_eq!(
+            mesh_options(&all_defaults(BackendKind::Mesh)).unwrap(),
+            MeshOptions::DEFAULT
+        );
+    }
+
+    #[test]
+    fn values_land_in_the_right_fields() {
+        let s = sdf_options(&opts(&[
+            ("eps_abs", "1e-4"),
+            ("max_steps", "64"),
+            ("relaxation", "1.5"),
+            ("grid_res", "32"),
+            ("max_distance", "100"),
+            ("lockstep", "false"),
+        ]))
+        .unwrap();
+        assert_eq!(s.hit_epsilon, HitEpsilon::Absolute(1e-4));
+        assert_eq!(s.max_steps, 64);
+        assert_eq!(s.relaxation, 1.5);
+        assert_eq!(s.mesh_grid_resolution, 32);
+        assert_eq!(s.max_distance, Some(100.0));
+        assert!(!s.lockstep);
+        let m = mesh_options(&opts(&[
+            ("preset", "fast"),
+            ("bvh", "cwbvh"),
+            ("build", "very_slow"),
+            ("tess_level", "5"),
+            ("surface_res", "48"),
+            ("instancing", "false"),
+        ]))
+        .unwrap();
+        assert_eq!(m.bvh, BvhKind::CwBvh);
+        assert_eq!(m.build_quality, BuildQuality::VerySlow);
+        assert_eq!(m.tessellation, Tessellation::FixedLevel(5));
+        assert_eq!(m.surface_resolution, 48);
+        assert!(!m.instancing);
+        let later_wins = mesh_options(&opts(&[("tess_level", "5"), ("tess_px", "2")])).unwrap();
+        assert_eq!(
+            later_wins.tessellation,
+            Tessellation::ScreenError { pixels: 2.0 }
+        );
+    }
+
+    #[test]
+    fn unknown_keys_name_backend_key_and_valid_keys() {
+        let e = sdf_options(&opts(&[("epsilon", "0.1")]))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("`sdf`") && e.contains("`epsilon`"), "{e}");
+        assert!(e.contains("eps_abs") && e.contains("max_steps") && e.contains("grid_res"));
+        let e = mesh_options(&opts(&[("tess", "1")])).unwrap_err().to_string();
+        assert!(e.contains("`mesh`") && e.contains("`tess`") && e.contains("tess_level"));
+        let e = check_options(&BackendSpec {
+            kind: Some(BackendKind::Reference),
+            options: opts(&[("x", "1")]),
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("`reference`") && e.contains("`x`"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_name_backend_key_and_value() {
+        for (kind, k, v) in [
+            (BackendKind::Sdf, "max_steps", "-3"),
+            (BackendKind::Sdf, "eps_px", "nan"),
+            (BackendKind::Sdf, "relaxation", "fast"),
+            (BackendKind::Sdf, "lockstep", "maybe"),
+            (BackendKind::Mesh, "bvh", "bvh4"),
+            (BackendKind::Mesh, "build", "quick"),
+            (BackendKind::Mesh, "tess_level", "1.5"),
+            (BackendKind::Mesh, "preset", "best"),
+        ] {
+            let e = check_options(&BackendSpec {
+                kind: Some(kind),
+                options: opts(&[(k, v)]),
+            })
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.contains(&format!("`{kind}`")) && e.contains(&format!("`{k}`")) && e.contains(v),
+                "{e}"
+            );
+        }
+    }
+
+    #[test]
+    fn parse_option_splits_on_the_first_equals() {
+        assert_eq!(
+            parse_option("cache_dir=a=b").unwrap(),
+            ("cache_dir".to_string(), "a=b".to_string())
+        );
+        assert!(parse_option("=3").is_err());
+        assert!(parse_option("novalue").is_err());
+    }
+
+    #[test]
+    fn help_lists_every_key() {
+        let h = option_help(BackendKind::Mesh);
+        for o in option_table(BackendKind::Mesh) {
+            assert!(h.contains(o.key));
+        }
     }
 }
