@@ -419,7 +419,11 @@ pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, Backend
 fn reference_options(options: &[(String, String)]) -> Result<(), BackendError> {
     let kind = BackendKind::Reference;
     if let Some((k, _)) = options.first() {
-        return Err(bad(kind, k, format!("unknown option; {}", valid_keys(kind))));
+        return Err(bad(
+            kind,
+            k,
+            format!("unknown option; {}", valid_keys(kind)),
+        ));
     }
     Ok(())
 }
@@ -559,7 +563,9 @@ mod tests {
             .to_string();
         assert!(e.contains("`sdf`") && e.contains("`epsilon`"), "{e}");
         assert!(e.contains("eps_abs") && e.contains("max_steps") && e.contains("grid_res"));
-        let e = mesh_options(&opts(&[("tess", "1")])).unwrap_err().to_string();
+        let e = mesh_options(&opts(&[("tess", "1")]))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("`mesh`") && e.contains("`tess`") && e.contains("tess_level"));
         let e = check_options(&BackendSpec {
             kind: Some(BackendKind::Reference),

@@ -3,4 +3,7 @@
 //! [`backend`] builds any backend by name with `key=value` options; the rest of the harness
 //! runs suites and writes reports.
 
+pub mod alloc;
 pub mod backend;
+pub mod rss;
+pub mod stats;

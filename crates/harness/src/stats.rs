@@ -1,0 +1,227 @@
+//! Timing statistics: median, min, max, MAD and a distribution-free confidence interval of
+//! the median from order statistics; and the repeat loop that collects the samples.
+
+use serde::{Deserialize, Serialize};
+
+/// Summary of a set of samples (any unit; the harness uses milliseconds).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Number of samples.
+    pub n: usize,
+    /// Median (mean of the two middle samples for even `n`).
+    pub median: f64,
+    /// Smallest sample.
+    pub min: f64,
+    /// Largest sample.
+    pub max: f64,
+    /// Median absolute deviation from the median (unscaled).
+    pub mad: f64,
+    /// Lower end of the confidence interval of the median: order statistic `x_(j)`.
+    pub ci_low: f64,
+    /// Upper end: order statistic `x_(n+1-j)`.
+    pub ci_high: f64,
+    /// Actual coverage of `[ci_low, ci_high]` (>= 0.95 from 6 samples on; fewer samples
+    /// give `[min, max]` with coverage `1 - 2^(1-n)`).
+    pub ci_coverage: f64,
+}
+
+fn median_sorted(s: &[f64]) -> f64 {
+    let n = s.len();
+    if n % 2 == 1 {
+        s[n / 2]
+    } else {
+        0.5 * (s[n / 2 - 1] + s[n / 2])
+    }
+}
+
+/// The 1-based rank `j` of the order-statistic interval `[x_(j), x_(n+1-j)]` for the median
+/// with coverage at least `confidence`, and its exact coverage under the binomial(n, 1/2)
+/// law. The largest such `j` (narrowest interval); `j = 1` with lower coverage when even
+/// `[min, max]` does not reach `confidence`. `n` must be >= 1.
+pub fn median_ci_rank(n: usize, confidence: f64) -> (usize, f64) {
+    let tail = (1.0 - confidence) / 2.0;
+    // log pmf(0) = -n ln 2; pmf(k) = pmf(k-1) * (n-k+1)/k.
+    let mut log_pmf = -(n as f64) * std::f64::consts::LN_2;
+    let mut cdf = log_pmf.exp(); // P(X <= 0)
+    if cdf > tail {
+        return (1, 1.0 - 2.0 * cdf);
+    }
+    // Invariant: cdf = P(X <= j - 1) <= tail.
+    let mut j = 1;
+    while j < n.div_ceil(2) {
+        log_pmf += ((n - j + 1) as f64 / j as f64).ln();
+        let next = cdf + log_pmf.exp(); // P(X <= j)
+        if next > tail {
+            break;
+        }
+        cdf = next;
+        j += 1;
+    }
+    (j, 1.0 - 2.0 * cdf)
+}
+
+impl Summary {
+    /// Summarises `samples` (NaN samples are an error of the caller: they sort last).
+    /// `None` for an empty slice.
+    pub fn of(samples: &[f64]) -> Option<Self> {
+        if samples.is_empty() {
+            return None;
+        }
+        let mut s = samples.to_vec();
+        s.sort_by(|a, b| a.total_cmp(b));
+        let n = s.len();
+        let median = median_sorted(&s);
+        let mut dev: Vec<f64> = s.iter().map(|x| (x - median).abs()).collect();
+        dev.sort_by(|a, b| a.total_cmp(b));
+        let (j, coverage) = median_ci_rank(n, 0.95);
+        Some(Self {
+            n,
+            median,
+            min: s[0],
+            max: s[n - 1],
+            mad: median_sorted(&dev),
+            ci_low: s[j - 1],
+            ci_high: s[n - j],
+            ci_coverage: coverage,
+        })
+    }
+}
+
+/// How many timed repeats to run after the untimed warm-up.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RepeatPolicy {
+    /// At least this many timed repeats (>= 1).
+    pub min_count: u32,
+    /// Keep repeating until the timed repeats add up to this many seconds...
+    pub min_time_s: f64,
+    /// ...but never more than this many repeats.
+    pub max_count: u32,
+}
+
+impl Default for RepeatPolicy {
+    fn default() -> Self {
+        Self {
+            min_count: 3,
+            min_time_s: 1.0,
+            max_count: 50,
+        }
+    }
+}
+
+impl RepeatPolicy {
+    /// The `--quick` version: one repeat, no minimum time.
+    pub fn quick(self) -> Self {
+        Self {
+            min_count: 1,
+            min_time_s: 0.0,
+            max_count: self.max_count.min(1),
+        }
+    }
+
+    /// Whether another repeat is due after `count` repeats taking `total_s` seconds.
+    pub fn wants_more(&self, count: u32, total_s: f64) -> bool {
+        count < self.min_count.max(1) || (total_s < self.min_time_s && count < self.max_count)
+    }
+
+    /// Calls `once` (which returns one sample in seconds) until the policy is satisfied or
+    /// `stop` returns true (after at least one sample), returning the samples.
+    pub fn run<E>(
+        &self,
+        mut once: impl FnMut() -> Result<f64, E>,
+        stop: impl Fn() -> bool,
+    ) -> Result<Vec<f64>, E> {
+        let mut samples = Vec::new();
+        let mut total = 0.0;
+        while self.wants_more(samples.len() as u32, total) {
+            if !samples.is_empty() && stop() {
+                break;
+            }
+            let s = once()?;
+            total += s;
+            samples.push(s);
+        }
+        Ok(samples)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn odd_and_even_medians_min_max_mad() {
+        let s = Summary::of(&[5.0, 1.0, 3.0, 2.0, 100.0]).unwrap();
+        assert_eq!((s.n, s.median, s.min, s.max), (5, 3.0, 1.0, 100.0));
+        // |x - 3| = 2, 2, 0, 1, 97 -> sorted 0, 1, 2, 2, 97 -> 2.
+        assert_eq!(s.mad, 2.0);
+        let e = Summary::of(&[4.0, 1.0, 3.0, 2.0]).unwrap();
+        assert_eq!(e.median, 2.5);
+        // |x - 2.5| = 1.5, 0.5, 0.5, 1.5 -> 1.0.
+        assert_eq!(e.mad, 1.0);
+        assert!(Summary::of(&[]).is_none());
+        let one = Summary::of(&[7.0]).unwrap();
+        assert_eq!(
+            (one.median, one.mad, one.ci_low, one.ci_high),
+            (7.0, 0.0, 7.0, 7.0)
+        );
+    }
+
+    #[test]
+    fn ci_ranks_match_binomial_tables() {
+        // Known order-statistic ranks for a 95% median CI (e.g. Conover, Practical
+        // Nonparametric Statistics, table A3): n=6 -> (1,6) 96.9%, n=10 -> (2,9) 97.9%,
+        // n=20 -> (6,15) 95.9%, n=100 -> (40,61) 96.5%.
+        let (j, c) = median_ci_rank(6, 0.95);
+        assert_eq!(j, 1);
+        assert!((c - 0.96875).abs() < 1e-12);
+        let (j, c) = median_ci_rank(10, 0.95);
+        assert_eq!(j, 2);
+        assert!((c - 0.978515625).abs() < 1e-9);
+        assert_eq!(median_ci_rank(20, 0.95).0, 6);
+        assert_eq!(median_ci_rank(100, 0.95).0, 40);
+        // Too few samples: [min, max] with its real coverage.
+        let (j, c) = median_ci_rank(5, 0.95);
+        assert_eq!(j, 1);
+        assert!((c - 0.9375).abs() < 1e-12);
+        // Large n does not underflow into nonsense: about n/2 - 0.98 sqrt(n).
+        let (j, c) = median_ci_rank(10_000, 0.95);
+        assert!((4900..=4903).contains(&j), "{j}");
+        assert!(c >= 0.95 && c < 0.96, "{c}");
+    }
+
+    #[test]
+    fn ci_brackets_the_median_of_synthetic_samples() {
+        // 1..=21 shuffled deterministically: median 11, CI ranks (6, 16) for n = 21.
+        let samples: Vec<f64> = (0..21).map(|i| ((i * 8) % 21 + 1) as f64).collect();
+        let s = Summary::of(&samples).unwrap();
+        assert_eq!(s.median, 11.0);
+        let (j, _) = median_ci_rank(21, 0.95);
+        assert_eq!(j, 6);
+        assert_eq!((s.ci_low, s.ci_high), (6.0, 16.0));
+        assert!(s.ci_coverage >= 0.95);
+    }
+
+    #[test]
+    fn repeat_policy_honours_count_time_and_stop() {
+        let p = RepeatPolicy {
+            min_count: 3,
+            min_time_s: 1.0,
+            max_count: 10,
+        };
+        // Fast samples: keep going to the max count (time never reached).
+        let v: Vec<f64> = p.run(|| Ok::<_, ()>(0.01), || false).unwrap();
+        assert_eq!(v.len(), 10);
+        // Slow samples: the min count suffices once time is reached.
+        let v = p.run(|| Ok::<_, ()>(0.6), || false).unwrap();
+        assert_eq!(v.len(), 3);
+        // Stop after the first sample.
+        let v = p.run(|| Ok::<_, ()>(0.01), || true).unwrap();
+        assert_eq!(v.len(), 1);
+        // Quick: one sample.
+        let v = p.quick().run(|| Ok::<_, ()>(0.01), || false).unwrap();
+        assert_eq!(v.len(), 1);
+        // Errors propagate.
+        assert!(p.run(|| Err::<f64, _>("boom"), || false).is_err());
+    }
+}
