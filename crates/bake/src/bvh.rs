@@ -124,8 +124,10 @@ impl Bvh {
     }
 
     fn compute_moments(&mut self) {
-        // Children come after parents, so a reverse sweep sees children first.
+        // Children come after parents, so a reverse sweep sees children first. Every node's
+        // triangles are a contiguous range of `tris` (leaf order).
         let mut area = vec![0.0f32; self.nodes.len()];
+        let mut range = vec![(0u32, 0u32); self.nodes.len()];
         self.moments = vec![
             Moment {
                 c: Vec3::ZERO,
@@ -138,6 +140,7 @@ impl Bvh {
             let nd = self.nodes[i];
             let (mut a_sum, mut c_sum, mut n_sum) = (0.0f32, Vec3::ZERO, Vec3::ZERO);
             if nd.count > 0 {
+                range[i] = (nd.first, nd.first + nd.count);
                 for t in &self.tris[nd.first as usize..(nd.first + nd.count) as usize] {
                     let av = 0.5 * (t[1] - t[0]).cross(t[2] - t[0]);
                     let a = av.length();
@@ -146,7 +149,9 @@ impl Bvh {
                     n_sum += av;
                 }
             } else {
-                for k in [nd.first as usize, nd.first as usize + 1] {
+                let (l, r) = (nd.first as usize, nd.first as usize + 1);
+                range[i] = (range[l].0.min(range[r].0), range[l].1.max(range[r].1));
+                for k in [l, r] {
                     a_sum += area[k];
                     c_sum += area[k] * self.moments[k].c;
                     n_sum += self.moments[k].n;
@@ -157,12 +162,17 @@ impl Bvh {
             } else {
                 0.5 * (nd.lo + nd.hi)
             };
-            // Farthest box corner from c bounds every triangle point.
-            let far = (nd.hi - c).abs().max((c - nd.lo).abs());
+            // Exact enclosing radius around c: the farthest vertex of the node's triangles
+            // (a little slack for round-off).
+            let r2 = self.tris[range[i].0 as usize..range[i].1 as usize]
+                .iter()
+                .flat_map(|t| t.iter())
+                .map(|v| (*v - c).length_squared())
+                .fold(0.0f32, f32::max);
             area[i] = a_sum;
             self.moments[i] = Moment {
                 c,
-                r: far.length(),
+                r: r2.sqrt() * (1.0 + 1e-5),
                 n: n_sum,
             };
         }

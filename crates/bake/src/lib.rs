@@ -248,6 +248,19 @@ pub fn bake_with_stats(
     Ok((baked, stats))
 }
 
+/// Block edge (in cells) of the winding-number shortcut.
+const SIGN_BLOCK: usize = 4;
+/// How far from 0.5 every block corner's winding number must be for the block to share it.
+const SIGN_MARGIN: f32 = 0.15;
+
+/// Coarse lattice indices along an axis of `n >= 2` samples: multiples of `SIGN_BLOCK`
+/// below `n - 1`, then `n - 1`.
+fn coarse_axis(n: usize) -> Vec<usize> {
+    let mut v: Vec<usize> = (0..n - 1).step_by(SIGN_BLOCK).collect();
+    v.push(n - 1);
+    v
+}
+
 /// Lattice geometry for the mesh bounds `(lo, hi)` at `res` cells on the longest side.
 fn lattice(lo: Vec3, hi: Vec3, res: u32) -> Option<(Vec3, f32, [u32; 3])> {
     let ext = hi - lo;
@@ -286,29 +299,95 @@ fn bake_grid(
     })?;
     let bvh = bvh::Bvh::build(tris);
     let [nx, ny, nz] = dims.map(|d| d as usize);
+    let at = |i: usize, j: usize, k: usize| min + h * Vec3::new(i as f32, j as f32, k as f32);
+    // Pass 1: unsigned distances, each row seeded with its previous sample's triangle.
     let mut values = vec![0.0f32; nx * ny * nz];
-    let evals = std::sync::atomic::AtomicU64::new(0);
     values
         .par_chunks_mut(nx)
         .enumerate()
         .for_each(|(row, out)| {
             let (j, k) = (row % ny, row / ny);
             let mut hint = u32::MAX;
+            for (i, o) in out.iter_mut().enumerate() {
+                let (d2, tri) = bvh.closest(at(i, j, k), hint);
+                hint = tri;
+                *o = d2.sqrt();
+            }
+        });
+    // Pass 2: winding numbers on the coarse lattice (every SIGN_BLOCK-th sample + the last).
+    let coarse = dims.map(|d| coarse_axis(d as usize));
+    let [cx, cy, cz] = [&coarse[0], &coarse[1], &coarse[2]];
+    let coarse_w: Vec<f32> = (0..cx.len() * cy.len() * cz.len())
+        .into_par_iter()
+        .map(|n| {
+            let (a, b, c) = (n % cx.len(), (n / cx.len()) % cy.len(), n / (cx.len() * cy.len()));
+            bvh.winding(at(cx[a], cy[b], cz[c]))
+        })
+        .collect();
+    // Blocks between coarse lattice points whose box provably holds no surface (the sample
+    // nearest the centre is farther from the mesh than from any block corner) and whose
+    // corners agree on the side of 0.5 by a margin take that side for every sample.
+    let nb = [cx.len() - 1, cy.len() - 1, cz.len() - 1];
+    let block_sign: Vec<Option<bool>> = (0..nb[0] * nb[1] * nb[2])
+        .into_par_iter()
+        .map(|n| {
+            let b = [n % nb[0], (n / nb[0]) % nb[1], n / (nb[0] * nb[1])];
+            let lo = [cx[b[0]], cy[b[1]], cz[b[2]]];
+            let hi = [cx[b[0] + 1], cy[b[1] + 1], cz[b[2] + 1]];
+            let mid = [0, 1, 2].map(|a| (lo[a] + hi[a]) / 2);
+            let d = values[mid[0] + nx * (mid[1] + ny * mid[2])];
+            let reach = [0, 1, 2].map(|a| (mid[a] - lo[a]).max(hi[a] - mid[a]) as f32);
+            let reach = h * Vec3::from(reach).length();
+            if d.is_nan() || d <= reach * (1.0 + 1e-4) + 1e-6 * h {
+                return None;
+            }
+            let mut inside = 0;
+            for c in 0..8 {
+                let ix = b[0] + (c & 1);
+                let iy = b[1] + ((c >> 1) & 1);
+                let iz = b[2] + ((c >> 2) & 1);
+                let w = coarse_w[ix + cx.len() * (iy + cy.len() * iz)];
+                if w >= 0.5 + SIGN_MARGIN {
+                    inside += 1;
+                } else if w > 0.5 - SIGN_MARGIN {
+                    return None;
+                }
+            }
+            match inside {
+                8 => Some(true),
+                0 => Some(false),
+                _ => None,
+            }
+        })
+        .collect();
+    // Pass 3: signs.
+    let evals = std::sync::atomic::AtomicU64::new(0);
+    let block_of = |i: usize, axis: usize| (i / SIGN_BLOCK).min(nb[axis] - 1);
+    values
+        .par_chunks_mut(nx)
+        .enumerate()
+        .for_each(|(row, out)| {
+            let (j, k) = (row % ny, row / ny);
+            let (bj, bk) = (block_of(j, 1), block_of(k, 2));
             let mut n_eval = 0u64;
             for (i, o) in out.iter_mut().enumerate() {
-                let p = min + h * Vec3::new(i as f32, j as f32, k as f32);
-                let (d2, tri) = bvh.closest(p, hint);
-                hint = tri;
-                let w = bvh.winding(p);
-                n_eval += 1;
-                let d = d2.sqrt();
-                *o = if w >= 0.5 { -d } else { d };
+                let inside = match block_sign[block_of(i, 0) + nb[0] * (bj + nb[1] * bk)] {
+                    Some(s) => s,
+                    None => {
+                        n_eval += 1;
+                        bvh.winding(at(i, j, k)) >= 0.5
+                    }
+                };
+                if inside {
+                    *o = -*o;
+                }
             }
             evals.fetch_add(n_eval, std::sync::atomic::Ordering::Relaxed);
         });
+    let evals = evals.into_inner() + coarse_w.len() as u64;
     let stats = BakeStats {
         samples: values.len() as u64,
-        winding_evaluations: evals.into_inner(),
+        winding_evaluations: evals,
         bvh_bytes: bvh.memory_bytes(),
     };
     Ok((
