@@ -1,6 +1,23 @@
 //! The per-ray sphere-tracing state machine. It never evaluates the field itself: it names
 //! the point it needs ([`March::point`]) and consumes the distance there ([`March::feed`]), so
 //! single rays and 8-ray lockstep batches run exactly the same logic.
+//!
+//! # Phases
+//! * `March`: sphere tracing with step `omega * d` (Keinert over-relaxation with the overlap
+//!   fallback). A sample below the hit epsilon `eps` (the *shell*) enters `Fine`.
+//! * `Fine`: decides whether the ray really meets the surface it came close to, instead of
+//!   calling every ray that passes within `eps` a hit (which would grow silhouettes by `eps`
+//!   and let grazing rays stop on the wrong object). While approaching, a secant step
+//!   predicts where the ray crosses the surface; the sample there is a hit if it is within
+//!   the fine threshold `thr`, brackets the crossing if it is inside (then `Bracket`), and
+//!   otherwise means the ray passes the surface by (a near miss): marching goes on from
+//!   there. When not approaching, steps are `max(d, eps / 2)`; leaving the shell
+//!   (`d >= eps`) returns to `March`. Only a feature thinner than `eps / 2` can be stepped
+//!   over in the shell: the same merging the hit epsilon stands for.
+//! * `Bracket`: regula falsi (Illinois) on a sign change, to the fine threshold.
+//! * `Escape`: a ray starting on a surface (secondary rays) first leaves that surface's shell
+//!   stepping by the (safe) distance; a hit there is a distance below half the starting
+//!   clearance (another surface closing in, e.g. at a contact).
 
 use glam::Vec3;
 use marchmesh_core::{Ray, Termination};
@@ -14,9 +31,9 @@ pub(crate) struct Params {
     pub eps_cone: f32,
     /// Relaxation omega.
     pub omega: f32,
-    /// Marching steps allowed.
+    /// Field evaluations allowed per ray.
     pub max_steps: u32,
-    /// Refinement steps after a hit.
+    /// Regula-falsi iterations allowed on a sign change.
     pub refine_steps: u32,
     /// Backend max distance (world units).
     pub max_distance: f32,
@@ -26,23 +43,23 @@ pub(crate) struct Params {
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
-    /// The first evaluation, at `t_min`.
+    /// The first evaluation, at the start.
     Start,
-    /// Leaving the epsilon shell of the surface the ray starts on: hits only below `thr`.
+    /// Leaving the shell of the surface the ray starts on: hits only below `thr`.
     Escape { thr: f32 },
     /// Plain (or relaxed) marching.
     March,
-    /// Moving a found hit onto the surface by secant steps along the ray: `(ta, da)` and
-    /// `(tb, db)` are the last two accepted samples (signed, ray-side positive), `best` the
-    /// accepted sample closest to the surface.
-    Refine {
+    /// In the shell: `(ta, sa)` the previous sample, `trial` whether the current point is a
+    /// secant prediction.
+    Fine { ta: f32, sa: f32, trial: bool },
+    /// A crossing between `lo` (outside) and `hi` (inside); `side` for Illinois.
+    Bracket {
+        lo: f32,
+        slo: f32,
+        hi: f32,
+        shi: f32,
+        side: i8,
         left: u32,
-        ta: f32,
-        da: f32,
-        tb: f32,
-        db: f32,
-        best_t: f32,
-        best_d: f32,
     },
 }
 
@@ -63,6 +80,7 @@ pub(crate) struct March {
     /// Current distance along the ray.
     pub t: f32,
     t_end: f32,
+    t_min: f32,
     end_is_miss: bool,
     base: f32,
     sign: f32,
@@ -70,16 +88,14 @@ pub(crate) struct March {
     t_prev: f32,
     r_prev: f32,
     phase: Phase,
-    /// Marching evaluations so far (what `max_steps` limits).
-    pub steps: u32,
-    /// Every field evaluation fed, refinement included.
+    /// Field evaluations so far.
     pub evals: u32,
-    /// Closest hit (refine) or occlusion (no refine).
+    /// Closest hit (find the crossing) or occlusion (any crossing will do).
     refine: bool,
 }
 
 impl March {
-    /// Starts a ray; `None` when it cannot reach the scene's bounds (a miss with 0 steps).
+    /// Starts a ray; `Err` when it cannot reach the scene's bounds (no evaluation needed).
     pub fn new(ray: &Ray, p: &Params, refine: bool) -> Result<March, Termination> {
         let mut t0 = ray.t_min.max(0.0);
         let mut t1 = ray.t_max.min(p.max_distance);
@@ -97,11 +113,7 @@ impl March {
                 return Err(Termination::Miss);
             }
             if enter > t1 {
-                return Err(if t1 < ray.t_max.min(p.max_distance) {
-                    Termination::Miss
-                } else {
-                    Termination::MaxDistance
-                });
+                return Err(Termination::MaxDistance);
             }
             // Start a little before the box (the field is a bound everywhere anyway).
             t0 = t0.max(enter * 0.999);
@@ -118,6 +130,7 @@ impl March {
             dir: ray.dir,
             t: t0,
             t_end: t1,
+            t_min: ray.t_min.max(0.0),
             end_is_miss,
             base: ray.origin.length(),
             sign: 1.0,
@@ -125,7 +138,6 @@ impl March {
             t_prev: t0,
             r_prev: 0.0,
             phase: Phase::Start,
-            steps: 0,
             evals: 0,
             refine,
         })
@@ -154,6 +166,12 @@ impl March {
         p.eps_abs + p.eps_cone * (self.base + self.t)
     }
 
+    /// The fine threshold: 1e-3 of the shell, but never below f32 resolution of positions.
+    #[inline]
+    fn thr(&self, p: &Params) -> f32 {
+        (self.eps(p) * 1e-3).max(1e-6 * (self.base + self.t))
+    }
+
     #[inline]
     fn end(&self) -> Next {
         Next::Done(if self.end_is_miss {
@@ -163,36 +181,14 @@ impl March {
         })
     }
 
-    /// A hit at the current point with signed value `s`; the previous accepted sample is
-    /// `(t_prev, r_prev)`.
     #[inline]
-    fn hit_found(&mut self, s: f32, p: &Params) -> Next {
-        if !(self.refine && p.refine_steps > 0) {
-            return Next::Done(Termination::Hit);
-        }
-        let (ta, da, tb, db) = (self.t_prev, self.r_prev, self.t, s);
-        self.phase = Phase::Refine {
-            left: p.refine_steps,
-            ta,
-            da,
-            tb,
-            db,
-            best_t: tb,
-            best_d: db.abs(),
-        };
-        self.t = Self::secant(ta, da, tb, db);
-        Next::Continue
-    }
-
-    /// Root of the line through `(ta, da)`, `(tb, db)`, or a plain step when the samples do
-    /// not approach the surface.
-    #[inline]
-    fn secant(ta: f32, da: f32, tb: f32, db: f32) -> f32 {
-        let slope = (da - db) / (tb - ta);
-        if tb > ta && slope > 1e-3 {
-            tb + db / slope
+    fn budget(&self, p: &Params) -> Next {
+        if self.evals >= p.max_steps {
+            Next::Done(Termination::MaxSteps)
+        } else if self.t > self.t_end {
+            self.end()
         } else {
-            tb + db
+            Next::Continue
         }
     }
 
@@ -203,96 +199,37 @@ impl March {
         if d.is_nan() {
             return Next::Done(Termination::Miss);
         }
-        if let Phase::Refine {
-            left,
-            ta,
-            da,
-            tb,
-            db,
-            mut best_t,
-            mut best_d,
-        } = self.phase
-        {
-            // Secant steps onto the surface, not counted against max_steps. The ray is
-            // already within `eps` of a surface, so anything a secant step could jump over
-            // lies within `eps` of it too: the same merging the hit epsilon accepts. A step
-            // that lands outside without getting closer (a silhouette ray passing by) is
-            // rejected and the hit stays where the shell was entered; one landing inside
-            // brackets the surface and the next secant interpolates.
-            let ts = self.t;
-            let ds = d * self.sign;
-            let progress = ds < 0.0 || ds < db.abs();
-            if !progress {
-                // Fall back to a plain (safe) step from the best sample.
-                if left <= 1 {
-                    self.t = best_t;
-                    return Next::Done(Termination::Hit);
-                }
-                self.phase = Phase::Refine {
-                    left: left - 1,
-                    ta,
-                    da,
-                    tb,
-                    db,
-                    best_t,
-                    best_d,
-                };
-                self.t = best_t + best_d;
-                return Next::Continue;
-            }
-            if ds.abs() < best_d {
-                best_t = ts;
-                best_d = ds.abs();
-            }
-            if ds.abs() <= self.eps(p) * 1e-4 || left <= 1 {
-                self.t = best_t;
-                return Next::Done(Termination::Hit);
-            }
-            self.phase = Phase::Refine {
-                left: left - 1,
-                ta: tb,
-                da: db,
-                tb: ts,
-                db: ds,
-                best_t,
-                best_d,
-            };
-            self.t = Self::secant(tb, db, ts, ds);
-            return Next::Continue;
+        if self.phase == Phase::Start {
+            // Start inside a solid: march to its exit surface with the sign flipped.
+            self.sign = if d < 0.0 { -1.0 } else { 1.0 };
         }
-        self.steps += 1;
-        let eps = self.eps(p);
+        let s = d * self.sign;
         match self.phase {
             Phase::Start => {
-                // Start inside a solid: march to its exit surface with the sign flipped.
-                self.sign = if d < 0.0 { -1.0 } else { 1.0 };
-                let s = d * self.sign;
-                if s < eps {
-                    // The ray starts on a surface (secondary rays): leave its epsilon
-                    // shell first, stepping by the (safe) distance; only a distance below
-                    // half the starting clearance (another surface closing in) is a hit.
-                    self.phase = Phase::Escape { thr: s * 0.5 };
+                // Only a ray that starts on a surface (at its own origin, not where the scene
+                // box clipped it) escapes first.
+                self.phase = if s < self.eps(p) && self.t == self.t_min {
+                    Phase::Escape { thr: s * 0.5 }
                 } else {
-                    self.phase = Phase::March;
-                }
-                self.t_prev = self.t;
-                self.r_prev = s;
-                self.advance(s, p)
+                    Phase::March
+                };
+                self.step_from(s, p)
             }
             Phase::Escape { thr } => {
-                let s = d * self.sign;
                 if s < thr {
-                    return self.hit_found(s, p);
+                    // Another surface closing in: pin it down like any shell entry.
+                    return if self.refine {
+                        self.enter_shell(s, p)
+                    } else {
+                        Next::Done(Termination::Hit)
+                    };
                 }
-                if s >= eps {
+                if s >= self.eps(p) {
                     self.phase = Phase::March;
                 }
-                self.t_prev = self.t;
-                self.r_prev = s;
-                self.advance(s, p)
+                self.step_from(s, p)
             }
             Phase::March => {
-                let s = d * self.sign;
                 let r = s.abs();
                 let step = self.t - self.t_prev;
                 if self.omega > 1.0 && r + self.r_prev < step {
@@ -300,21 +237,154 @@ impl March {
                     // take the plain step, and stop relaxing (Keinert et al. 2014).
                     self.omega = 1.0;
                     self.t = self.t_prev + self.r_prev;
-                    return self.check_budget(p);
+                    return self.budget(p);
                 }
-                if s < eps {
-                    return self.hit_found(s, p);
+                if s < self.eps(p) {
+                    return self.enter_shell(s, p);
                 }
-                self.t_prev = self.t;
-                self.r_prev = s;
-                self.advance(s, p)
+                self.step_from(s, p)
             }
-            Phase::Refine { .. } => unreachable!("handled above"),
+            Phase::Fine { ta, sa, trial } => self.fine(s, ta, sa, trial, p),
+            Phase::Bracket {
+                lo,
+                slo,
+                hi,
+                shi,
+                side,
+                left,
+            } => {
+                if s.abs() <= self.thr(p) || left <= 1 {
+                    return Next::Done(Termination::Hit);
+                }
+                let t = self.t;
+                // Illinois: when the same end moves twice, halve the other end's value.
+                if s > 0.0 {
+                    let shi = if side == 1 { shi * 0.5 } else { shi };
+                    self.bracket(t, s, hi, shi, 1, left - 1, p)
+                } else {
+                    let slo = if side == -1 { slo * 0.5 } else { slo };
+                    self.bracket(lo, slo, t, s, -1, left - 1, p)
+                }
+            }
         }
     }
 
+    /// A sample `s < eps` while marching.
     #[inline]
-    fn advance(&mut self, s: f32, p: &Params) -> Next {
+    fn enter_shell(&mut self, s: f32, p: &Params) -> Next {
+        if s < 0.0 {
+            // Stepped inside (relaxation or a bound): the last accepted sample is outside.
+            return self.crossing(self.t_prev, self.r_prev, self.t, s, p);
+        }
+        if s <= self.thr(p) {
+            return Next::Done(Termination::Hit);
+        }
+        let (ta, sa) = (self.t_prev, self.r_prev);
+        self.fine(s, ta, sa, false, p)
+    }
+
+    /// A shell sample `s` at `self.t`; `(ta, sa)` the previous one, `trial` whether `self.t`
+    /// was a secant prediction.
+    #[inline]
+    fn fine(&mut self, s: f32, ta: f32, sa: f32, trial: bool, p: &Params) -> Next {
+        let t = self.t;
+        if s < 0.0 {
+            return self.crossing(ta, sa, t, s, p);
+        }
+        if s <= self.thr(p) {
+            return Next::Done(Termination::Hit);
+        }
+        let eps = self.eps(p);
+        if s >= eps {
+            // Left the shell (a near miss): back to marching.
+            self.phase = Phase::March;
+            return self.step_from(s, p);
+        }
+        self.t_prev = t;
+        self.r_prev = s;
+        let slope = (sa - s) / (t - ta);
+        // After a prediction, keep predicting only while it converges.
+        let converging = !trial || s < 0.5 * sa;
+        if converging && t > ta && slope > 0.01 {
+            // Approaching: jump to the predicted crossing and look.
+            self.phase = Phase::Fine {
+                ta: t,
+                sa: s,
+                trial: true,
+            };
+            self.t = t + s / slope;
+            return self.budget(p);
+        }
+        // A failed prediction (the ray passes the surface by) or not approaching.
+        self.phase = Phase::Fine {
+            ta: t,
+            sa: s,
+            trial: false,
+        };
+        self.t = t + s.max(0.5 * eps);
+        self.budget(p)
+    }
+
+    /// A sign change between `lo` (outside, `slo > 0`) and `hi` (inside).
+    #[inline]
+    fn crossing(&mut self, lo: f32, slo: f32, hi: f32, shi: f32, p: &Params) -> Next {
+        if !self.refine {
+            return Next::Done(Termination::Hit);
+        }
+        if p.refine_steps == 0 {
+            self.t = lo;
+            return Next::Done(Termination::Hit);
+        }
+        self.bracket(lo, slo, hi, shi, 0, p.refine_steps, p)
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn bracket(
+        &mut self,
+        lo: f32,
+        slo: f32,
+        hi: f32,
+        shi: f32,
+        side: i8,
+        left: u32,
+        p: &Params,
+    ) -> Next {
+        let denom = slo - shi;
+        let mut t = if denom > 0.0 {
+            lo + slo * (hi - lo) / denom
+        } else {
+            0.5 * (lo + hi)
+        };
+        if !(t > lo.min(hi) && t < lo.max(hi)) {
+            t = 0.5 * (lo + hi);
+        }
+        if (hi - lo).abs() <= 1e-7 * (self.base + hi.abs()) {
+            self.t = lo;
+            return Next::Done(Termination::Hit);
+        }
+        self.phase = Phase::Bracket {
+            lo,
+            slo,
+            hi,
+            shi,
+            side,
+            left,
+        };
+        self.t = t;
+        if self.evals >= p.max_steps {
+            // Out of budget inside a bracket: the crossing is known to lie in it.
+            self.t = lo;
+            return Next::Done(Termination::Hit);
+        }
+        Next::Continue
+    }
+
+    /// Steps on from an accepted sample `s` at `self.t` (March or Escape).
+    #[inline]
+    fn step_from(&mut self, s: f32, p: &Params) -> Next {
+        self.t_prev = self.t;
+        self.r_prev = s;
         let step = if matches!(self.phase, Phase::March) {
             s * self.omega
         } else {
@@ -327,16 +397,7 @@ impl March {
         }
         // A relaxed step past the end is shortened to the end (and still overlap-checked).
         self.t = (self.t + step).min(self.t_end);
-        self.check_budget(p)
-    }
-
-    #[inline]
-    fn check_budget(&self, p: &Params) -> Next {
-        if self.steps >= p.max_steps {
-            Next::Done(Termination::MaxSteps)
-        } else {
-            Next::Continue
-        }
+        self.budget(p)
     }
 }
 

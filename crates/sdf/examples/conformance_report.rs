@@ -1,0 +1,58 @@
+//! Prints the SDF backend's accuracy against the reference on every conformance case (the
+//! numbers behind the tolerances in `tests/conformance.rs`).
+//!
+//! `cargo run --release -p marchmesh-sdf --example conformance_report`
+
+use marchmesh_conformance::{CASES, run_case};
+use marchmesh_core::Geometry;
+use marchmesh_scene::Scene;
+use marchmesh_sdf::SdfOptions;
+
+fn main() {
+    // MESH_RES overrides the mesh grid resolution (default 64), to measure its effect.
+    let res = std::env::var("MESH_RES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(SdfOptions::DEFAULT.mesh_grid_resolution);
+    let opts = SdfOptions {
+        mesh_grid_resolution: res,
+        ..SdfOptions::DEFAULT
+    };
+    let backend =
+        |s: &Scene| marchmesh_sdf::build(s, &opts).map(|g| Box::new(g) as Box<dyn Geometry>);
+    let reference = |s: &Scene| {
+        marchmesh_reference::build(s, &Default::default()).map(|g| Box::new(g) as Box<dyn Geometry>)
+    };
+    println!(
+        "case | silhouette % | depth rel p95 | normal mean deg | normal p95 deg | material mismatch | exhaustion % | mean steps"
+    );
+    for c in CASES {
+        let scene = marchmesh_conformance::case_scene(c.name);
+        match backend(&scene) {
+            Err(e) => {
+                println!("{} | backend cannot build: {e}", c.name);
+                continue;
+            }
+            Ok(g) => {
+                if std::env::var_os("NOTES").is_some() {
+                    for n in g.report().notes {
+                        println!("  note: {n}");
+                    }
+                }
+            }
+        }
+        let r = run_case(c.name, &backend, &reference);
+        let a = &r.accuracy;
+        println!(
+            "{} | {:.2} | {:.2e} | {:.3} | {:.3} | {} | {:.3} | {:.1}",
+            c.name,
+            a.silhouette_mismatch_pct,
+            a.depth_rel_p95,
+            a.normal_deg_mean,
+            a.normal_deg_p95,
+            a.material_mismatch,
+            100.0 * r.stats.step_exhaustion_rate(),
+            r.stats.mean_steps()
+        );
+    }
+}
