@@ -13,7 +13,9 @@
 //!   otherwise means the ray passes the surface by (a near miss): marching goes on from
 //!   there. When not approaching, steps are `max(d, eps / 2)`; leaving the shell
 //!   (`d >= eps`) returns to `March`. Only a feature thinner than `eps / 2` can be stepped
-//!   over in the shell: the same merging the hit epsilon stands for.
+//!   over in the shell: the same merging the hit epsilon stands for. A visit to the shell
+//!   that cannot decide within 24 evaluations (a long passage nearly parallel to a surface,
+//!   e.g. the horizon of a huge sphere) ends as a hit, as a plain epsilon test would.
 //! * `Bracket`: regula falsi (Illinois) on a sign change, to the fine threshold.
 //! * `Escape`: a ray starting on a surface (secondary rays) first leaves that surface's shell
 //!   stepping by the (safe) distance; a hit there is a distance below half the starting
@@ -41,6 +43,9 @@ pub(crate) struct Params {
     pub bounds: Option<(Vec3, Vec3)>,
 }
 
+/// Field evaluations one visit to the shell may spend deciding hit or near miss.
+const FINE_BUDGET: u32 = 24;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     /// The first evaluation, at the start.
@@ -51,7 +56,12 @@ enum Phase {
     March,
     /// In the shell: `(ta, sa)` the previous sample, `trial` whether the current point is a
     /// secant prediction.
-    Fine { ta: f32, sa: f32, trial: bool },
+    Fine {
+        ta: f32,
+        sa: f32,
+        trial: bool,
+        left: u32,
+    },
     /// A crossing between `lo` (outside) and `hi` (inside); `side` for Illinois.
     Bracket {
         lo: f32,
@@ -244,7 +254,12 @@ impl March {
                 }
                 self.step_from(s, p)
             }
-            Phase::Fine { ta, sa, trial } => self.fine(s, ta, sa, trial, p),
+            Phase::Fine {
+                ta,
+                sa,
+                trial,
+                left,
+            } => self.fine(s, ta, sa, trial, left, p),
             Phase::Bracket {
                 lo,
                 slo,
@@ -280,13 +295,13 @@ impl March {
             return Next::Done(Termination::Hit);
         }
         let (ta, sa) = (self.t_prev, self.r_prev);
-        self.fine(s, ta, sa, false, p)
+        self.fine(s, ta, sa, false, FINE_BUDGET, p)
     }
 
     /// A shell sample `s` at `self.t`; `(ta, sa)` the previous one, `trial` whether `self.t`
     /// was a secant prediction.
     #[inline]
-    fn fine(&mut self, s: f32, ta: f32, sa: f32, trial: bool, p: &Params) -> Next {
+    fn fine(&mut self, s: f32, ta: f32, sa: f32, trial: bool, left: u32, p: &Params) -> Next {
         let t = self.t;
         if s < 0.0 {
             return self.crossing(ta, sa, t, s, p);
@@ -300,6 +315,11 @@ impl March {
             self.phase = Phase::March;
             return self.step_from(s, p);
         }
+        if left == 0 {
+            // A long passage within the shell nearly parallel to a surface (it would cost
+            // length / distance steps): called a hit, as a plain epsilon test would.
+            return Next::Done(Termination::Hit);
+        }
         self.t_prev = t;
         self.r_prev = s;
         let slope = (sa - s) / (t - ta);
@@ -311,15 +331,20 @@ impl March {
                 ta: t,
                 sa: s,
                 trial: true,
+                left: left - 1,
             };
             self.t = t + s / slope;
             return self.budget(p);
         }
         // A failed prediction (the ray passes the surface by) or not approaching.
+        // Receding samples (the ray moving away from the surface, e.g. above a horizon)
+        // step like plain marching and spend no budget; only approaches do.
+        let receding = s >= sa;
         self.phase = Phase::Fine {
             ta: t,
             sa: s,
             trial: false,
+            left: if receding { left.max(1) } else { left - 1 },
         };
         self.t = t + s.max(0.5 * eps);
         self.budget(p)
