@@ -176,6 +176,12 @@ impl March {
         p.eps_abs + p.eps_cone * (self.base + self.t)
     }
 
+    /// Rounding level of field values near the current point (f32 positions).
+    #[inline]
+    fn noise(&self) -> f32 {
+        1e-6 * (self.base + self.t)
+    }
+
     /// The fine threshold: 1e-3 of the shell, but never below f32 resolution of positions.
     #[inline]
     fn thr(&self, p: &Params) -> f32 {
@@ -210,8 +216,11 @@ impl March {
             return Next::Done(Termination::Miss);
         }
         if self.phase == Phase::Start {
-            // Start inside a solid: march to its exit surface with the sign flipped.
-            self.sign = if d < 0.0 { -1.0 } else { 1.0 };
+            // Start inside a solid: march to its exit surface with the sign flipped; but a
+            // ray starting on a surface (within eps of it, at its own origin) keeps the sign
+            // even if rounding or a missing offset put its origin just inside.
+            let on_surface = d.abs() < self.eps(p) && self.t == self.t_min;
+            self.sign = if d < 0.0 && !on_surface { -1.0 } else { 1.0 };
         }
         let s = d * self.sign;
         match self.phase {
@@ -219,7 +228,15 @@ impl March {
                 // Only a ray that starts on a surface (at its own origin, not where the scene
                 // box clipped it) escapes first.
                 self.phase = if s < self.eps(p) && self.t == self.t_min {
-                    Phase::Escape { thr: s * 0.5 }
+                    // Hits count below half the starting clearance; an origin on (or just
+                    // inside) its own surface first has to clear the rounding level.
+                    Phase::Escape {
+                        thr: if s > 4.0 * self.noise() {
+                            s * 0.5
+                        } else {
+                            f32::NEG_INFINITY
+                        },
+                    }
                 } else {
                     Phase::March
                 };
@@ -236,6 +253,9 @@ impl March {
                 }
                 if s >= self.eps(p) {
                     self.phase = Phase::March;
+                } else if thr == f32::NEG_INFINITY && s > 4.0 * self.noise() {
+                    // Clear of the own surface: from now on a closing surface is a hit.
+                    self.phase = Phase::Escape { thr: s * 0.5 };
                 }
                 self.step_from(s, p)
             }
@@ -413,8 +433,8 @@ impl March {
         let step = if matches!(self.phase, Phase::March) {
             s * self.omega
         } else {
-            // Escape: never stall on a zero distance.
-            s.max(1e-7 * (self.base + self.t).max(1e-30))
+            // Escape: |s| is a safe step on either side; never stall on a zero distance.
+            s.abs().max(1e-7 * (self.base + self.t).max(1e-30))
         };
         if self.t + s > self.t_end {
             // Even the plain step leaves the range.

@@ -404,3 +404,43 @@ fn normals_of_unsigned_and_bound_fields() {
         assert!(h.normal.dot(want) > 0.9999, "{:?} vs {want:?}", h.normal);
     }
 }
+
+#[test]
+fn shadow_rays_without_offset_leave_their_surface() {
+    // Unit sphere resting on the plane y = -1 (world); camera at z = -5. Origins exactly on
+    // the surface, or rounded just inside or outside it: lit points stay lit.
+    let s = scene(
+        r#"{"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}},
+           {"shape": {"sphere": {"radius": 1}}}"#,
+        "",
+    );
+    let g = build(&s, &SdfOptions::DEFAULT).unwrap();
+    let cam = Vec3::new(0.0, 0.0, -5.0);
+    for (q, n) in [
+        (Vec3::new(3.0, -1.0, 0.0), Vec3::Y),
+        (Vec3::new(0.6, 0.8, 0.0), Vec3::new(0.6, 0.8, 0.0)),
+        (Vec3::new(-0.48, -0.6, 0.64), Vec3::new(-0.48, -0.6, 0.64)),
+    ] {
+        for nudge in [0.0f32, -1e-6, 1e-6] {
+            // Towards the upper hemisphere, away from the own surface (n.l > 0).
+            let l = (n + Vec3::new(0.1, 1.3, -0.2)).normalize();
+            assert!(n.dot(l) > 0.0 && l.y > 0.0);
+            let r = Ray {
+                origin: q - cam + n * nudge,
+                dir: l,
+                t_min: 0.0,
+                t_max: 100.0,
+            };
+            let o = g.occluded(&r);
+            assert!(!o.occluded, "{q} nudge {nudge}: {o:?}");
+        }
+    }
+    // And a plane point next to the contact, light straight up, is still shadowed.
+    let r = Ray {
+        origin: Vec3::new(0.05, -1.0, 0.0) - cam,
+        dir: Vec3::Y,
+        t_min: 0.0,
+        t_max: 100.0,
+    };
+    assert!(g.occluded(&r).occluded);
+}
