@@ -3,7 +3,7 @@
 //! sphere normals, which is how the default `normal_step` was chosen.
 //!
 //! `cargo run --release -p marchmesh-sdf --example render_sdf -- scenes/seed-spheres.json
-//! [side=128] [normal_step=0.05] [eps=0.5] [relax=1.0] [threads=1] [out.png]`
+//! [side=128] [normal_step=0.02] [eps=0.25] [relax=1.2] [threads=1] [out.png]`
 
 use std::path::Path;
 
@@ -15,7 +15,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first() else {
         eprintln!(
-            "usage: render_sdf SCENE [side=128] [normal_step=0.05] [eps=0.5] [relax=1.0] [threads=1] [out.png]"
+            "usage: render_sdf SCENE [side=128] [normal_step=0.02] [eps=0.25] [relax=1.2] [threads=1] [out.png]"
         );
         std::process::exit(2);
     };
@@ -23,8 +23,8 @@ fn main() {
     let side = arg(1, 128.0) as u32;
     let opts = SdfOptions {
         normal_step: arg(2, SdfOptions::DEFAULT.normal_step),
-        hit_epsilon: HitEpsilon::PixelCone(arg(3, 0.5)),
-        relaxation: arg(4, 1.0),
+        hit_epsilon: HitEpsilon::PixelCone(arg(3, 0.25)),
+        relaxation: arg(4, SdfOptions::DEFAULT.relaxation),
         ..SdfOptions::DEFAULT
     };
     let threads = arg(5, 1.0) as usize;
@@ -132,6 +132,35 @@ fn main() {
                 errs.len()
             );
         }
+    }
+    // OFFSET0=1: render again with render.ray_offset = 0 and count pixels whose colour
+    // changes by more than 1/255 (how much the shadow/reflection rays rely on the offset).
+    if std::env::var_os("OFFSET0").is_some() {
+        let mut s0 = scene.clone();
+        s0.render.ray_offset = 0.0;
+        let g0 = build(&s0, &opts).expect("builds");
+        let o0 = render(
+            &s0,
+            &g0,
+            &bg,
+            &RenderOptions {
+                threads,
+                ..Default::default()
+            },
+            &|| {},
+        )
+        .expect("render");
+        let changed = out
+            .framebuffer
+            .color
+            .iter()
+            .zip(&o0.framebuffer.color)
+            .filter(|(a, b)| (**a - **b).abs().max_element() > 1.0 / 255.0)
+            .count();
+        println!(
+            "ray_offset 0 vs scene offset: {changed} of {} pixels change by > 1/255",
+            out.framebuffer.color.len()
+        );
     }
     if let Some(png) = args.get(6) {
         marchmesh_core::image_io::write_png(&out.framebuffer, Path::new(png)).expect("png");

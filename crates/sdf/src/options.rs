@@ -50,12 +50,14 @@ pub struct SdfOptions {
     pub refine_steps: u32,
     /// Central-difference step for normals as a fraction of the pixel footprint at the hit
     /// (default 0.02). Measured on `seed-spheres` at 256x256 against analytic sphere normals
-    /// (mean / p95 angle error over 39k primary hits): 0.002: 0.54 / 1.30 deg (f32
-    /// cancellation), 0.01: 0.107 / 0.256, 0.02: 0.056 / 0.129, 0.1: 0.029 / 0.024,
-    /// 1.0: 0.166 / 0.011 deg. Larger steps straddle edges: hits within a step of a box edge
-    /// get a blend of both faces' normals, which at 0.1 put the conformance case
-    /// `repeat_infinite` (far, small boxes) at 1.40 deg mean against the reference; 0.02 is
-    /// the largest step that keeps every case under 1 deg.
+    /// (mean / p95 / max angle error over 39k primary hits, `examples/render_sdf.rs`):
+    /// 0.002: 0.086 / 0.194 / 0.40 deg (f32 cancellation), 0.005: 0.033 / 0.076 / 0.15,
+    /// 0.01: 0.014 / 0.036 / 8.8, 0.02: 0.009 / 0.018 / 23.5, 0.05: 0.014 / 0.012 / 35.6,
+    /// 0.1: 0.023 / 0.011 / 40.2, 1.0: 0.171 / 0.011 / 44.8 deg (the max is a silhouette
+    /// or contact pixel whose stencil reaches another surface). Larger steps also straddle
+    /// edges: hits within a step of a box edge get a blend of both faces' normals, which at
+    /// 0.1 put the conformance case `repeat_infinite` (far, small boxes) at 1.4 deg mean
+    /// against the reference (0.035 deg at 0.02).
     pub normal_step: f64,
     /// Trace `closest_hits` batches 8 rays in lockstep (SoA lanes, default true); false
     /// traces them one at a time (same results).
