@@ -438,8 +438,8 @@ pub fn check_options(spec: &BackendSpec) -> Result<(), BackendError> {
 }
 
 /// Whether `kind` is linked into this binary.
-pub fn is_available(kind: BackendKind) -> bool {
-    !matches!(kind, BackendKind::Reference)
+pub fn is_available(_kind: BackendKind) -> bool {
+    true
 }
 
 /// Builds the backend named in `spec` for `scene`.
@@ -452,10 +452,9 @@ pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, Bac
     match kind {
         BackendKind::Reference => {
             reference_options(&spec.options)?;
-            Err(BackendError::Build {
-                backend: kind,
-                reason: NOT_BUILT.into(),
-            })
+            let g = marchmesh_reference::build(scene, &marchmesh_reference::ReferenceOptions::DEFAULT)
+                .map_err(|e| build_err(&e))?;
+            Ok(Box::new(g))
         }
         BackendKind::Sdf => {
             let o = sdf_options(&spec.options)?;
