@@ -452,8 +452,9 @@ pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, Bac
     match kind {
         BackendKind::Reference => {
             reference_options(&spec.options)?;
-            let g = marchmesh_reference::build(scene, &marchmesh_reference::ReferenceOptions::DEFAULT)
-                .map_err(|e| build_err(&e))?;
+            let g =
+                marchmesh_reference::build(scene, &marchmesh_reference::ReferenceOptions::DEFAULT)
+                    .map_err(|e| build_err(&e))?;
             Ok(Box::new(g))
         }
         BackendKind::Sdf => {
