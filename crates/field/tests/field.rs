@@ -562,3 +562,97 @@ fn huge_sphere_near_the_frame_origin_keeps_f32_precision() {
         assert!((d32 - exact).abs() < 2e-6, "{p}: {d32} vs {exact}");
     }
 }
+
+/// Ericson's closest point on triangle `abc` to `p` (f64), for the brute-force mesh check.
+fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return a;
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return b;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        return a + ab * (d1 / (d1 - d3));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return c;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        return a + ac * (d2 / (d2 - d6));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
+    }
+    let denom = 1.0 / (va + vb + vc);
+    a + ab * (vb * denom) + ac * (vc * denom)
+}
+
+#[test]
+fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj");
+    let mesh = marchmesh_meshio::load_mesh(&path).expect("committed bunny");
+    let xf = compose_transform(
+        DVec3::new(0.3, -0.2, 1.0),
+        DVec3::new(0.0, 30.0, 0.0),
+        DVec3::splat(0.25),
+    );
+    let n = node(NodeKind::Mesh { path: path.clone() }, xf, 3);
+    let f = field(&n);
+    let (lo, hi) = mesh.bounds();
+    let cell = (hi - lo).max_element() as f64 / 64.0;
+    let tol = 0.87 * cell * 0.25 + 1e-5;
+    let tris: Vec<[DVec3; 3]> = mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| xf.transform_point3(mesh.positions[i as usize].as_dvec3())))
+        .collect();
+    let (wlo, whi) = f.bounds().expect("a mesh is bounded");
+    let mut rng = 7u64;
+    let mut next = || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for _ in 0..150 {
+        // Points inside the mesh's own box (inside the grid), mapped to the frame.
+        let local = lo.as_dvec3() + (hi - lo).as_dvec3() * DVec3::new(next(), next(), next());
+        let p = xf.transform_point3(local);
+        let exact = tris
+            .iter()
+            .map(|t| (p - closest_on_triangle(p, t[0], t[1], t[2])).length())
+            .fold(f64::INFINITY, f64::min);
+        let d = f.distance_f64(p);
+        // Beyond tau (half the box diagonal) the node's value is capped/boxed: a lower bound.
+        let tau = 0.5 * (whi - wlo).length();
+        if exact < 0.9 * tau {
+            assert!(
+                (d.abs() - exact).abs() <= tol,
+                "{p}: grid {d} brute {exact} tol {tol}"
+            );
+        } else {
+            assert!(
+                d.abs() <= exact + tol,
+                "{p}: grid {d} brute {exact} tol {tol}"
+            );
+        }
+        assert_eq!(f.distance_material(p.as_vec3()).1, 3);
+    }
+    assert!(f.memory_bytes() > 64 * 64 * 4, "the grid is counted");
+    assert!(f.report().notes.iter().any(|n| n.contains("distance grid")));
+}
