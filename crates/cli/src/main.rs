@@ -11,6 +11,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
 use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
 
+mod bench;
+
 #[derive(Parser)]
 #[command(
     name = "marchmesh",
@@ -34,6 +36,67 @@ enum Command {
     },
     /// Print the JSON Schema of the scene format.
     Schema,
+    /// Run a benchmark suite and write bench-results/<run-id>/ (CSV, JSON, summary, plots, images).
+    Bench(BenchArgs),
+    /// Regenerate summary.md and plots/ of a run folder from its results.json.
+    Report {
+        /// The run folder (holding results.json).
+        dir: PathBuf,
+    },
+    /// Print the ratios of two runs, configuration by configuration (B / A).
+    Compare {
+        /// Baseline run folder (or its results.json).
+        a: PathBuf,
+        /// Run folder to compare (or its results.json).
+        b: PathBuf,
+    },
+    /// Run the numerical-stability cases on every backend against the reference.
+    Stability(StabilityArgs),
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Suite name (scenes/suites/NAME.json) or path to a suite file.
+    #[arg(long, default_value = "default")]
+    suite: String,
+    /// Folder the run folder is created in.
+    #[arg(long, default_value = "bench-results")]
+    out: PathBuf,
+    /// Only configurations whose id (group/scene/backend:quality/size/tN) matches this glob
+    /// (without * or ?: substring match).
+    #[arg(long)]
+    filter: Option<String>,
+    /// Render threads for every configuration (overrides the suite's thread counts; 0 = all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Fewer timed repeats (the suite's quick policy, default one repeat).
+    #[arg(long)]
+    quick: bool,
+    /// Only list the configurations.
+    #[arg(long)]
+    list: bool,
+}
+
+#[derive(clap::Args)]
+struct StabilityArgs {
+    /// Output folder (default bench-results/stability-<UTC timestamp>/).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Only cases whose id contains this.
+    #[arg(long)]
+    filter: Option<String>,
+    /// Image side in pixels.
+    #[arg(long, default_value_t = 96)]
+    side: u32,
+    /// Render threads (0 = all cores).
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
+    /// Include the slow cases (1M+ triangle meshes, 10^5 steps).
+    #[arg(long)]
+    large: bool,
+    /// Also write every case's scene JSON into this folder.
+    #[arg(long, value_name = "DIR")]
+    write_scenes: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -72,6 +135,9 @@ struct RenderArgs {
     memory_limit_mib: u64,
 }
 
+#[global_allocator]
+static ALLOC: marchmesh_harness::alloc::CountingAlloc = marchmesh_harness::alloc::CountingAlloc;
+
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -81,6 +147,10 @@ fn main() {
             println!("{}", marchmesh_scene::json_schema());
             Ok(())
         }
+        Command::Bench(args) => bench::bench(args),
+        Command::Report { dir } => bench::report(&dir),
+        Command::Compare { a, b } => bench::compare(&a, &b),
+        Command::Stability(args) => bench::stability(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -113,8 +113,6 @@ pub struct OptionDoc {
     pub key: &'static str,
     /// The value type (`float`, `int`, `bool`, `path|none`, or the accepted words).
     pub ty: &'static str,
-    /// The default value, written as it would be parsed.
-    pub default: &'static str,
     /// What it controls, with units.
     pub doc: &'static str,
 }
@@ -123,61 +121,51 @@ const SDF_OPTIONS: &[OptionDoc] = &[
     OptionDoc {
         key: "eps_px",
         ty: "float",
-        default: "0.5",
         doc: "hit epsilon as a fraction of the pixel footprint at the point (scale invariant)",
     },
     OptionDoc {
         key: "eps_abs",
         ty: "float",
-        default: "none",
         doc: "absolute hit epsilon, world units (replaces eps_px)",
     },
     OptionDoc {
         key: "max_steps",
         ty: "int",
-        default: "512",
         doc: "most field evaluations per ray; rays that run out count as misses",
     },
     OptionDoc {
         key: "max_distance",
         ty: "float|none",
-        default: "none",
         doc: "longest ray, world units; none = the scene's render.max_distance",
     },
     OptionDoc {
         key: "relaxation",
         ty: "float",
-        default: "1",
         doc: "over-relaxation factor in [1, 2) with overlap fallback (1 = off)",
     },
     OptionDoc {
         key: "refine_steps",
         ty: "int",
-        default: "4",
         doc: "plain steps after a hit to move it onto the surface",
     },
     OptionDoc {
         key: "normal_step",
         ty: "float",
-        default: "0.1",
         doc: "central-difference normal step, fraction of the pixel footprint",
     },
     OptionDoc {
         key: "lockstep",
         ty: "bool",
-        default: "true",
         doc: "trace batches 8 rays in lockstep (same results)",
     },
     OptionDoc {
         key: "grid_res",
         ty: "int",
-        default: "64",
         doc: "cells on the longest side of baked mesh distance grids",
     },
     OptionDoc {
         key: "cache_dir",
         ty: "path|none",
-        default: "none",
         doc: "folder caching baked grids (none = no disk cache)",
     },
 ];
@@ -186,61 +174,51 @@ const MESH_OPTIONS: &[OptionDoc] = &[
     OptionDoc {
         key: "preset",
         ty: "fast|default|quality",
-        default: "default",
         doc: "start from MeshOptions::fast()/DEFAULT/quality() (give it first)",
     },
     OptionDoc {
         key: "bvh",
         ty: "bvh2|cwbvh",
-        default: "cwbvh",
         doc: "BVH layout: binary or compressed 8-wide",
     },
     OptionDoc {
         key: "build",
         ty: "fastest|very_fast|fast|medium|slow|very_slow",
-        default: "medium",
         doc: "obvhs build preset",
     },
     OptionDoc {
         key: "tess_px",
         ty: "float",
-        default: "0.25",
         doc: "tessellation chord error on screen, pixels",
     },
     OptionDoc {
         key: "tess_chord",
         ty: "float",
-        default: "none",
         doc: "tessellation chord error, world units (replaces tess_px)",
     },
     OptionDoc {
         key: "tess_level",
         ty: "int",
-        default: "none",
         doc: "fixed tessellation: 8*2^level segments per turn, <= 12 (replaces tess_px)",
     },
     OptionDoc {
         key: "surface_res",
         ty: "int",
-        default: "128",
         doc: "surface-nets cells on the longest side of CSG / smooth-union objects (8..=512)",
     },
     OptionDoc {
         key: "instancing",
         ty: "bool",
-        default: "true",
         doc: "instance repeated shapes under a TLAS (false = flatten into one BVH)",
     },
     OptionDoc {
         key: "max_instances",
         ty: "int",
-        default: "4194304",
         doc: "largest instance count an infinite repetition may expand to",
     },
     OptionDoc {
         key: "max_segments",
         ty: "int",
-        default: "4096",
         doc: "cap on segments per full turn of any parametric direction",
     },
 ];
@@ -256,6 +234,71 @@ pub fn option_table(kind: BackendKind) -> &'static [OptionDoc] {
     }
 }
 
+/// The default value of option `key` of `kind`, written as it would be parsed, read from
+/// the backend's `DEFAULT` options (so it cannot drift from the backend). `none` when the
+/// key is unset by default; `None` for an unknown key.
+pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
+    let f = |x: f64| format!("{x}");
+    Some(match kind {
+        BackendKind::Reference => return None,
+        BackendKind::Sdf => {
+            let o = SdfOptions::DEFAULT;
+            match key {
+                "eps_px" => match o.hit_epsilon {
+                    HitEpsilon::PixelCone(k) => f(k),
+                    HitEpsilon::Absolute(_) => "none".into(),
+                },
+                "eps_abs" => match o.hit_epsilon {
+                    HitEpsilon::Absolute(e) => f(e),
+                    HitEpsilon::PixelCone(_) => "none".into(),
+                },
+                "max_steps" => o.max_steps.to_string(),
+                "max_distance" => o.max_distance.map_or("none".into(), f),
+                "relaxation" => f(o.relaxation),
+                "refine_steps" => o.refine_steps.to_string(),
+                "normal_step" => f(o.normal_step),
+                "lockstep" => o.lockstep.to_string(),
+                "grid_res" => o.mesh_grid_resolution.to_string(),
+                "cache_dir" => o
+                    .cache_dir
+                    .map_or("none".into(), |p| p.display().to_string()),
+                _ => return None,
+            }
+        }
+        BackendKind::Mesh => {
+            let o = MeshOptions::DEFAULT;
+            match key {
+                "preset" => "default".into(),
+                "bvh" => match o.bvh {
+                    BvhKind::Bvh2 => "bvh2",
+                    BvhKind::CwBvh => "cwbvh",
+                }
+                .into(),
+                "build" => match o.build_quality {
+                    BuildQuality::Fastest => "fastest",
+                    BuildQuality::VeryFast => "very_fast",
+                    BuildQuality::Fast => "fast",
+                    BuildQuality::Medium => "medium",
+                    BuildQuality::Slow => "slow",
+                    BuildQuality::VerySlow => "very_slow",
+                }
+                .into(),
+                "tess_px" | "tess_chord" | "tess_level" => match (key, o.tessellation) {
+                    ("tess_px", Tessellation::ScreenError { pixels }) => f(pixels),
+                    ("tess_chord", Tessellation::ChordError { world }) => f(world),
+                    ("tess_level", Tessellation::FixedLevel(l)) => l.to_string(),
+                    _ => "none".into(),
+                },
+                "surface_res" => o.surface_resolution.to_string(),
+                "instancing" => o.instancing.to_string(),
+                "max_instances" => o.max_instances.to_string(),
+                "max_segments" => o.max_segments_per_turn.to_string(),
+                _ => return None,
+            }
+        }
+    })
+}
+
 /// The option table of `kind` as aligned text (for `--opt help`).
 pub fn option_help(kind: BackendKind) -> String {
     let table = option_table(kind);
@@ -266,9 +309,10 @@ pub fn option_help(kind: BackendKind) -> String {
     let tw = table.iter().map(|o| o.ty.len()).max().unwrap_or(0);
     let mut s = format!("options of backend `{kind}` (key=value):\n");
     for o in table {
+        let d = default_value(kind, o.key).unwrap_or_default();
         s += &format!(
             "  {:kw$}  {:tw$}  default {:8}  {}\n",
-            o.key, o.ty, o.default, o.doc
+            o.key, o.ty, d, o.doc
         );
     }
     s
@@ -485,14 +529,15 @@ mod tests {
     fn every_documented_key_parses_its_default_or_an_example() {
         for kind in [BackendKind::Sdf, BackendKind::Mesh] {
             for o in option_table(kind) {
-                let value = match (o.default, o.ty) {
-                    ("none", "float") => "0.01",
-                    ("none", "int") => "3",
-                    (d, _) => d,
+                let d = default_value(kind, o.key).expect("every key has a default");
+                let value = match (d.as_str(), o.ty) {
+                    ("none", "float") => "0.01".to_string(),
+                    ("none", "int") => "3".to_string(),
+                    _ => d,
                 };
                 let spec = BackendSpec {
                     kind: Some(kind),
-                    options: opts(&[(o.key, value)]),
+                    options: opts(&[(o.key, &value)]),
                 };
                 check_options(&spec).unwrap_or_else(|e| panic!("{kind} {}: {e}", o.key));
             }
@@ -504,8 +549,10 @@ mod tests {
         let all_defaults = |kind| -> Vec<(String, String)> {
             option_table(kind)
                 .iter()
-                .filter(|o| o.default != "none" || o.ty.contains("none"))
-                .map(|o| (o.key.to_string(), o.default.to_string()))
+                .filter_map(|o| {
+                    let d = default_value(kind, o.key)?;
+                    (d != "none" || o.ty.contains("none")).then(|| (o.key.to_string(), d))
+                })
                 .collect()
         };
         assert_eq!(

@@ -5,5 +5,10 @@
 
 pub mod alloc;
 pub mod backend;
+pub mod bench;
+pub mod images;
+pub mod report;
+pub mod results;
 pub mod rss;
 pub mod stats;
+pub mod suite;

@@ -1,0 +1,259 @@
+//! `marchmesh bench --suite smoke` end to end: CSV and JSON parse back with every column
+//! filled, `report` regenerates identical tables, `compare` matches every configuration.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use marchmesh_harness::results::{self, Results};
+
+fn marchmesh(args: &[&str], cwd: &Path) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run marchmesh");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("marchmesh-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn only_run(out: &Path) -> PathBuf {
+    let runs: Vec<PathBuf> = std::fs::read_dir(out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    assert_eq!(runs.len(), 1, "{runs:?}");
+    runs[0].clone()
+}
+
+#[test]
+fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
+    let out = tmp("smoke");
+    let out_s = out.to_str().unwrap();
+    let (ok, stdout, stderr) = marchmesh(&["bench", "--suite", "smoke", "--out", out_s], &repo());
+    assert!(ok, "bench failed:\n{stdout}\n{stderr}");
+    let run = only_run(&out);
+    let name = run.file_name().unwrap().to_string_lossy().into_owned();
+    assert!(name.ends_with("-smoke"), "{name}");
+
+    // JSON: every configuration measured, provenance filled.
+    let res = Results::read_json(&run.join("results.json")).unwrap();
+    assert!(res.failures.is_empty(), "{:?}", res.failures);
+    assert!(!res.interrupted);
+    let scenes = std::fs::read_dir(repo().join("scenes"))
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "json")
+        })
+        .count();
+    assert_eq!(
+        res.rows.len(),
+        2 * scenes,
+        "sdf and mesh for every committed scene"
+    );
+    let p = &res.provenance;
+    for (what, v) in [
+        ("date", &p.date_utc),
+        ("cpu", &p.cpu_model),
+        ("rustc", &p.rustc),
+        ("target", &p.target),
+        ("commit", &p.git_commit),
+        ("command", &p.command),
+    ] {
+        assert!(!v.is_empty() && v != "unknown", "{what} = {v:?}");
+    }
+    assert!(p.logical_cores >= 1);
+
+    // CSV: same rows, every column filled unless the row says why it may be empty.
+    let csv_rows = results::read_csv(&run.join("results.csv")).unwrap();
+    assert_eq!(csv_rows.len(), res.rows.len());
+    let text = std::fs::read_to_string(run.join("results.csv")).unwrap();
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    assert_eq!(header, results::csv_header());
+    for (row, line) in csv_rows.iter().zip(text.lines().skip(1)) {
+        assert_eq!(
+            row.config_id,
+            res.rows
+                .iter()
+                .find(|r| r.config_id == row.config_id)
+                .unwrap()
+                .config_id
+        );
+        let cells: Vec<&str> = line.split(',').collect();
+        assert_eq!(cells.len(), header.len(), "{line}");
+        for (col, cell) in header.iter().zip(&cells) {
+            if cell.is_empty() {
+                assert!(
+                    row.why_empty(col).is_some(),
+                    "{}: column {col} is empty",
+                    row.config_id
+                );
+            }
+        }
+        // The reference exists, so accuracy is always measured.
+        assert!(
+            row.psnr_db.is_some() && row.silhouette_mismatch_pct.is_some(),
+            "{}",
+            row.config_id
+        );
+        assert!(row.render_ms_median > 0.0 && row.mrays_per_s > 0.0);
+        assert!(row.peak_heap_bytes_build.is_some() && row.peak_heap_bytes_render.is_some());
+        assert_eq!(row.non_finite_count, 0, "{}", row.config_id);
+        if row.backend == "mesh" {
+            assert!(row.triangles.unwrap() > 0 && row.node_visits_per_ray > 0.0);
+        } else {
+            assert!(row.steps_mean > 0.0);
+        }
+    }
+    assert!(run.join("images").read_dir().unwrap().count() >= 3 * res.rows.len() / 2);
+    assert!(run.join("plots").read_dir().unwrap().count() >= scenes);
+
+    // report regenerates identical tables and plots.
+    let summary = std::fs::read_to_string(run.join("summary.md")).unwrap();
+    assert!(summary.contains("Pareto front") && summary.contains("render ms median"));
+    let plot = std::fs::read_dir(run.join("plots"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let plot_before = std::fs::read(&plot).unwrap();
+    std::fs::remove_file(run.join("summary.md")).unwrap();
+    std::fs::remove_dir_all(run.join("plots")).unwrap();
+    let (ok, stdout, stderr) = marchmesh(&["report", run.to_str().unwrap()], &repo());
+    assert!(ok, "report failed:\n{stdout}\n{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(run.join("summary.md")).unwrap(),
+        summary
+    );
+    assert_eq!(std::fs::read(&plot).unwrap(), plot_before);
+
+    // compare a run with itself: every configuration matched at ratio 1.
+    let (ok, stdout, stderr) = marchmesh(
+        &["compare", run.to_str().unwrap(), run.to_str().unwrap()],
+        &repo(),
+    );
+    assert!(ok, "compare failed:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains(&format!(
+            "{} configurations matched (geometric mean render ratio 1.000x)",
+            res.rows.len()
+        )),
+        "{stdout}"
+    );
+
+    // A second run never overwrites the first.
+    let (ok, _, stderr) = marchmesh(
+        &[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            out_s,
+            "--filter",
+            "*/csg/sdf*",
+            "--quick",
+        ],
+        &repo(),
+    );
+    assert!(ok, "{stderr}");
+    let runs = std::fs::read_dir(&out).unwrap().count();
+    assert_eq!(runs, 2);
+    std::fs::remove_dir_all(&out).ok();
+}
+
+#[test]
+fn bad_suites_and_filters_are_clear_errors() {
+    let dir = tmp("bad");
+    let suite = dir.join("bad.json");
+    std::fs::write(
+        &suite,
+        r#"{"groups": [{"name": "g", "scenes": ["x.json"], "backends": [{"backend": "sdf"}]}]}"#,
+    )
+    .unwrap();
+    let (ok, _, stderr) = marchmesh(&["bench", "--suite", suite.to_str().unwrap()], &dir);
+    assert!(!ok);
+    assert!(
+        stderr.contains("bad.json") && stderr.contains("groups[0].scenes[0]"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = marchmesh(
+        &[
+            "bench",
+            "--suite",
+            "smoke",
+            "--filter",
+            "nothing-matches-this",
+            "--out",
+            dir.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(!ok);
+    assert!(stderr.contains("no configuration"), "{stderr}");
+    let (ok, _, stderr) = marchmesh(&["report", dir.to_str().unwrap()], &dir);
+    assert!(!ok && stderr.contains("results.json"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn render_works_with_every_backend_and_rejects_unknown_options() {
+    let dir = tmp("render");
+    for b in ["sdf", "mesh", "reference"] {
+        let out = dir.join(format!("{b}.png"));
+        let (ok, stdout, stderr) = marchmesh(
+            &[
+                "render",
+                "scenes/seed-spheres.json",
+                "--backend",
+                b,
+                "--width",
+                "24",
+                "--height",
+                "16",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &repo(),
+        );
+        assert!(ok, "{b}: {stdout}{stderr}");
+        assert!(out.is_file());
+    }
+    let (ok, _, stderr) = marchmesh(
+        &[
+            "render",
+            "scenes/seed-spheres.json",
+            "-b",
+            "mesh",
+            "-o",
+            "tess=3",
+            "--out",
+            dir.join("x.png").to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(
+        !ok && stderr.contains("`mesh`")
+            && stderr.contains("`tess`")
+            && stderr.contains("tess_level"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

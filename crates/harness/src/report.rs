@@ -1,0 +1,693 @@
+//! `summary.md` and `plots/*.svg` from [`Results`]; `marchmesh report` regenerates both from
+//! `results.json` alone, so the tables only depend on what the JSON holds.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+use plotters::prelude::*;
+
+use crate::results::{Results, Row};
+
+/// Configurations that differ only in backend and quality: Pareto fronts and verdicts compare
+/// within one setting.
+type SettingKey = (String, String, u32, u32, usize);
+
+fn setting(r: &Row) -> SettingKey {
+    (
+        r.group.clone(),
+        r.scene.clone(),
+        r.width,
+        r.height,
+        r.threads,
+    )
+}
+
+fn mib(b: u64) -> String {
+    format!("{:.2}", b as f64 / (1 << 20) as f64)
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("n/a".into(), |x| {
+        if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) {
+            format!("{x:.2e}")
+        } else {
+            format!("{x:.digits$}")
+        }
+    })
+}
+
+fn opt_mib(v: Option<u64>) -> String {
+    v.map_or("n/a".into(), mib)
+}
+
+/// The rows of one setting on the Pareto front of median render time (lower better) against
+/// PSNR (higher better): no other row is at least as fast and at least as accurate while
+/// strictly better in one. Sorted by time. Rows without PSNR are left out.
+pub fn pareto_front(rows: &[&Row]) -> Vec<usize> {
+    let mut idx: Vec<usize> = (0..rows.len())
+        .filter(|&i| rows[i].psnr_db.is_some())
+        .collect();
+    idx.sort_by(|&a, &b| {
+        rows[a]
+            .render_ms_median
+            .total_cmp(&rows[b].render_ms_median)
+            .then(
+                rows[b]
+                    .psnr_db
+                    .unwrap_or(0.0)
+                    .total_cmp(&rows[a].psnr_db.unwrap_or(0.0)),
+            )
+    });
+    let mut front = Vec::new();
+    let mut best = f64::NEG_INFINITY;
+    for i in idx {
+        let p = rows[i].psnr_db.unwrap_or(f64::NEG_INFINITY);
+        if p > best {
+            front.push(i);
+            best = p;
+        }
+    }
+    front
+}
+
+fn label(r: &Row) -> String {
+    format!("{}:{}", r.backend, r.quality)
+}
+
+/// Plain-language verdict of one setting, each claim with its numbers.
+pub fn verdict(rows: &[&Row]) -> Vec<String> {
+    let mut out = Vec::new();
+    let by_backend = |b: &str| {
+        rows.iter()
+            .copied()
+            .filter(|r| r.backend == b)
+            .collect::<Vec<_>>()
+    };
+    let (sdf, mesh) = (by_backend("sdf"), by_backend("mesh"));
+    let fastest = rows
+        .iter()
+        .min_by(|a, b| a.render_ms_median.total_cmp(&b.render_ms_median));
+    if let Some(f) = fastest {
+        out.push(format!(
+            "Fastest configuration: {} at {:.2} ms ({:.2} Mrays/s, PSNR {} dB).",
+            label(f),
+            f.render_ms_median,
+            f.mrays_per_s,
+            opt(f.psnr_db, 1)
+        ));
+    }
+    if !sdf.is_empty() && !mesh.is_empty() {
+        // Speed at matched accuracy: for each PSNR target reached by some row, which backend
+        // reaches it fastest; runs of the same winner are merged into ranges.
+        let mut targets: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
+        targets.sort_by(|a, b| a.total_cmp(b));
+        targets.dedup();
+        fn best_time<'a>(set: &[&'a Row], q: f64) -> Option<&'a Row> {
+            set.iter()
+                .filter(|r| r.psnr_db.is_some_and(|p| p >= q))
+                .min_by(|a, b| a.render_ms_median.total_cmp(&b.render_ms_median))
+                .copied()
+        }
+        let mut runs: Vec<(String, f64, f64, Option<f64>)> = Vec::new(); // winner, from, to, ratio at `to`
+        for &q in &targets {
+            let (s, m) = (best_time(&sdf, q), best_time(&mesh, q));
+            let (winner, ratio) = match (s, m) {
+                (Some(s), Some(m)) if s.render_ms_median <= m.render_ms_median => {
+                    ("sdf", Some(m.render_ms_median / s.render_ms_median))
+                }
+                (Some(s), Some(m)) => ("mesh", Some(s.render_ms_median / m.render_ms_median)),
+                (Some(_), None) => ("sdf (only sdf reaches it)", None),
+                (None, Some(_)) => ("mesh (only mesh reaches it)", None),
+                (None, None) => continue,
+            };
+            match runs.last_mut() {
+                Some(last) if last.0 == winner => {
+                    last.2 = q;
+                    last.3 = ratio;
+                }
+                _ => runs.push((winner.to_string(), q, q, ratio)),
+            }
+        }
+        if !runs.is_empty() {
+            let parts: Vec<String> = runs
+                .iter()
+                .map(|(w, from, to, ratio)| {
+                    let range = if from == to {
+                        format!("PSNR target {from:.1} dB")
+                    } else {
+                        format!("PSNR targets {from:.1}-{to:.1} dB")
+                    };
+                    match ratio {
+                        Some(x) => format!("{w} is faster for {range} ({x:.2}x at {to:.1} dB)"),
+                        None => format!("{range}: {w}"),
+                    }
+                })
+                .collect();
+            out.push(format!("At matched accuracy: {}.", parts.join("; ")));
+        }
+        let best_psnr = |set: &[&Row]| {
+            set.iter()
+                .filter_map(|r| r.psnr_db)
+                .fold(f64::NEG_INFINITY, f64::max)
+        };
+        let (bs, bm) = (best_psnr(&sdf), best_psnr(&mesh));
+        if bs.is_finite() && bm.is_finite() {
+            out.push(format!(
+                "Best accuracy reached: sdf {bs:.1} dB, mesh {bm:.1} dB PSNR."
+            ));
+        }
+        let median_mem = |set: &[&Row]| {
+            let mut v: Vec<u64> = set.iter().map(|r| r.memory_bytes).collect();
+            v.sort_unstable();
+            v[v.len() / 2]
+        };
+        let (ms, mm) = (median_mem(&sdf), median_mem(&mesh));
+        if ms > 0 && mm > 0 {
+            let (less, more, x) = if mm <= ms {
+                ("mesh", "sdf", ms as f64 / mm as f64)
+            } else {
+                ("sdf", "mesh", mm as f64 / ms as f64)
+            };
+            out.push(format!(
+                "Memory: {less} uses {x:.1}x less than {more} (median over quality levels: sdf {} MiB, mesh {} MiB).",
+                mib(ms),
+                mib(mm)
+            ));
+        }
+    }
+    let exhausted: Vec<&&Row> = rows
+        .iter()
+        .filter(|r| r.step_exhaustion_pct > 0.1)
+        .collect();
+    for r in exhausted {
+        out.push(format!(
+            "{} ends {:.2}% of its rays by step exhaustion (drawn as misses).",
+            label(r),
+            r.step_exhaustion_pct
+        ));
+    }
+    for r in rows.iter().filter(|r| r.non_finite_count > 0) {
+        out.push(format!(
+            "{} produced {} NaN/inf values.",
+            label(r),
+            r.non_finite_count
+        ));
+    }
+    out
+}
+
+/// The Markdown summary of a run.
+pub fn summary_markdown(res: &Results) -> String {
+    let mut s = String::new();
+    let p = &res.provenance;
+    let _ = writeln!(s, "# Benchmark `{}`: run {}\n", res.suite, res.run_id);
+    if !res.description.is_empty() {
+        let _ = writeln!(s, "{}\n", res.description);
+    }
+    let _ = writeln!(
+        s,
+        "| date (UTC) | CPU | logical cores | rustc | target | profile | commit | version |\n|---|---|---|---|---|---|---|---|\n| {} | {} | {} | {} | {} | {} | {}{} | {} |\n",
+        p.date_utc,
+        p.cpu_model,
+        p.logical_cores,
+        p.rustc,
+        p.target,
+        p.profile,
+        &p.git_commit[..p.git_commit.len().min(12)],
+        if p.git_dirty { " (dirty)" } else { "" },
+        p.version
+    );
+    let _ = writeln!(s, "Command: `{}`\n", p.command);
+    let _ = writeln!(
+        s,
+        "{} configurations measured, {} failed, {} scenes skipped{}.\n",
+        res.rows.len(),
+        res.failures.len(),
+        res.skipped.len(),
+        if res.interrupted {
+            "; **interrupted**: only finished configurations are listed"
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        s,
+        "Times are medians of the timed repeats after one untimed warm-up, with the order-statistic 95% confidence interval of the median. Accuracy is against the exact reference render at the same camera: silhouette = % of pixels hit by only one of the two, depth error p95 relative to the diagonal of the visible scene, normal error in degrees, PSNR of the 8-bit images (100 = identical). Heap columns are the peak heap above the phase's start (counting allocator).\n"
+    );
+    for f in &res.failures {
+        let _ = writeln!(s, "- failed: `{}`: {}", f.config_id, f.error);
+    }
+    for k in &res.skipped {
+        let _ = writeln!(s, "- skipped: {k}");
+    }
+    for r in res
+        .references
+        .iter()
+        .filter_map(|r| r.error.as_ref().map(|e| (r, e)))
+    {
+        let _ = writeln!(
+            s,
+            "- reference for {} {}x{}: {}",
+            r.0.scene, r.0.width, r.0.height, r.1
+        );
+    }
+    if !res.failures.is_empty() || !res.skipped.is_empty() {
+        s.push('\n');
+    }
+    // Tables per group and scene, in first-appearance order.
+    let mut order: Vec<(String, String)> = Vec::new();
+    for r in &res.rows {
+        let k = (r.group.clone(), r.scene.clone());
+        if !order.contains(&k) {
+            order.push(k);
+        }
+    }
+    for (group, scene) in &order {
+        let rows: Vec<&Row> = res
+            .rows
+            .iter()
+            .filter(|r| &r.group == group && &r.scene == scene)
+            .collect();
+        let _ = writeln!(s, "## {group} / {scene}\n");
+        let _ = writeln!(
+            s,
+            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory MiB | heap build MiB | heap render MiB | silhouette % | depth p95 / scene | normal mean deg | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
+        );
+        let _ = writeln!(
+            s,
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        );
+        for r in &rows {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {}x{} | {} | {:.1} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
+                r.backend,
+                r.quality,
+                r.width,
+                r.height,
+                r.threads,
+                r.build_ms_total,
+                r.render_ms_median,
+                r.render_ms_ci_low,
+                r.render_ms_ci_high,
+                r.mrays_per_s,
+                mib(r.memory_bytes),
+                opt_mib(r.peak_heap_bytes_build),
+                opt_mib(r.peak_heap_bytes_render),
+                opt(r.silhouette_mismatch_pct, 3),
+                opt(r.depth_err_p95_rel_scene, 5),
+                opt(r.normal_err_deg_mean, 2),
+                opt(r.psnr_db, 1),
+                opt(r.ssim, 4),
+                r.steps_mean,
+                r.step_exhaustion_pct,
+                r.node_visits_per_ray
+            );
+        }
+        s.push('\n');
+        let mut settings: Vec<SettingKey> = Vec::new();
+        for r in &rows {
+            let k = setting(r);
+            if !settings.contains(&k) {
+                settings.push(k);
+            }
+        }
+        for k in settings {
+            let set: Vec<&Row> = rows.iter().copied().filter(|r| setting(r) == k).collect();
+            let _ = writeln!(s, "### {}x{}, {} threads\n", k.2, k.3, k.4);
+            let front = pareto_front(&set);
+            if front.is_empty() {
+                let _ = writeln!(s, "No accuracy measured: no Pareto front.\n");
+            } else {
+                let parts: Vec<String> = front
+                    .iter()
+                    .map(|&i| {
+                        format!(
+                            "{} ({:.2} ms, {:.1} dB)",
+                            label(set[i]),
+                            set[i].render_ms_median,
+                            set[i].psnr_db.unwrap_or(f64::NAN)
+                        )
+                    })
+                    .collect();
+                let _ = writeln!(
+                    s,
+                    "Pareto front (render time vs PSNR, fastest first): {}.\n",
+                    parts.join(" -> ")
+                );
+            }
+            let mut mem: BTreeMap<&str, (u64, u64)> = BTreeMap::new();
+            for r in &set {
+                let e = mem.entry(r.backend.as_str()).or_insert((u64::MAX, 0));
+                e.0 = e.0.min(r.memory_bytes);
+                e.1 = e.1.max(r.memory_bytes);
+            }
+            let mem_parts: Vec<String> = mem
+                .iter()
+                .map(|(b, (lo, hi))| format!("{b} {}-{} MiB", mib(*lo), mib(*hi)))
+                .collect();
+            let _ = writeln!(s, "Memory: {}.\n", mem_parts.join(", "));
+            for v in verdict(&set) {
+                let _ = writeln!(s, "- {v}");
+            }
+            s.push('\n');
+        }
+    }
+    s
+}
+
+fn plot_err(e: impl std::fmt::Display) -> String {
+    e.to_string()
+}
+
+const COLORS: [RGBColor; 4] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+];
+
+fn color_of(backend: &str) -> RGBColor {
+    match backend {
+        "sdf" => COLORS[0],
+        "mesh" => COLORS[1],
+        "reference" => COLORS[2],
+        _ => COLORS[3],
+    }
+}
+
+fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| *v > 0.0 && v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.1, 10.0);
+    }
+    (lo / 1.5, hi * 1.5)
+}
+
+fn lin_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.1).max(1.0);
+    (lo - pad, hi + pad)
+}
+
+fn scatter_by_backend(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    points: &[(String, f64, f64)],
+    y_log: bool,
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let (x0, x1) = log_range(points.iter().map(|p| p.1));
+    let mut backends: Vec<&str> = points.iter().map(|p| p.0.as_str()).collect();
+    backends.sort_unstable();
+    backends.dedup();
+    let mut builder = ChartBuilder::on(&root);
+    builder
+        .caption(title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70);
+    macro_rules! draw {
+        ($chart:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_desc(y_desc)
+                .draw()
+                .map_err(plot_err)?;
+            for b in &backends {
+                let c = color_of(b);
+                chart
+                    .draw_series(
+                        points
+                            .iter()
+                            .filter(|p| p.0 == *b)
+                            .map(|p| Circle::new((p.1, p.2), 5, c.filled())),
+                    )
+                    .map_err(plot_err)?
+                    .label(b.to_string())
+                    .legend(move |(x, y)| Circle::new((x, y), 5, c.filled()));
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(plot_err)?;
+        }};
+    }
+    if y_log {
+        let (y0, y1) = log_range(points.iter().map(|p| p.2));
+        draw!(
+            builder
+                .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+                .map_err(plot_err)?
+        );
+    } else {
+        let (y0, y1) = lin_range(points.iter().map(|p| p.2));
+        draw!(
+            builder
+                .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+                .map_err(plot_err)?
+        );
+    }
+    root.present().map_err(plot_err)
+}
+
+fn lines(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+) -> Result<(), String> {
+    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let (x0, x1) = lin_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
+    let (_, y1) = lin_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0.max(0.0)..x1, 0.0..y1)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(x_desc)
+        .y_desc(y_desc)
+        .draw()
+        .map_err(plot_err)?;
+    for (i, (name, pts)) in series.iter().enumerate() {
+        let c = COLORS[i % COLORS.len()];
+        let style = ShapeStyle::from(&c).stroke_width(2);
+        chart
+            .draw_series(LineSeries::new(pts.iter().copied(), style))
+            .map_err(plot_err)?
+            .label(name.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
+            .map_err(plot_err)?;
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)
+}
+
+/// Writes the plots into `dir` (created), returning the file names. A plot without data is
+/// not written.
+pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let mut written = Vec::new();
+    let slug = crate::bench::slug;
+    // Time vs error per (group, scene).
+    let mut scenes: Vec<(String, String)> = Vec::new();
+    for r in &res.rows {
+        let k = (r.group.clone(), r.scene.clone());
+        if !scenes.contains(&k) {
+            scenes.push(k);
+        }
+    }
+    for (g, sc) in &scenes {
+        let pts: Vec<(String, f64, f64)> = res
+            .rows
+            .iter()
+            .filter(|r| &r.group == g && &r.scene == sc)
+            .filter_map(|r| {
+                r.psnr_db
+                    .map(|p| (r.backend.clone(), r.render_ms_median, p))
+            })
+            .collect();
+        if !pts.is_empty() {
+            let name = format!("time_vs_error_{}_{}.svg", slug(g), slug(sc));
+            scatter_by_backend(
+                &dir.join(&name),
+                &format!("{g}/{sc}: render time vs accuracy"),
+                "median render time, ms (log)",
+                "PSNR vs reference, dB",
+                &pts,
+                false,
+            )?;
+            written.push(name);
+        }
+        // Steps histogram of every sdf configuration of the scene.
+        let series: Vec<(String, Vec<(f64, f64)>)> = res
+            .rows
+            .iter()
+            .filter(|r| &r.group == g && &r.scene == sc && r.backend == "sdf")
+            .filter_map(|r| {
+                let h = res.steps_histograms.get(&r.config_id)?;
+                let total: u64 = h.iter().sum();
+                (total > 0).then(|| {
+                    (
+                        r.quality.clone(),
+                        h.iter()
+                            .enumerate()
+                            .map(|(i, &n)| (i as f64, n as f64 / total as f64))
+                            .collect(),
+                    )
+                })
+            })
+            .take(8)
+            .collect();
+        if !series.is_empty() {
+            let name = format!("steps_histogram_{}_{}.svg", slug(g), slug(sc));
+            lines(
+                &dir.join(&name),
+                &format!("{g}/{sc}: SDF steps per primary ray"),
+                "log2 bin (k: 2^(k-1)..2^k-1 steps)",
+                "fraction of primary rays",
+                &series,
+            )?;
+            written.push(name);
+        }
+    }
+    // Memory vs scene size: x = triangles the mesh backend stores for the scene (largest).
+    let mut tri: BTreeMap<(String, String), u64> = BTreeMap::new();
+    for r in &res.rows {
+        if let Some(t) = r.triangles {
+            let e = tri.entry((r.group.clone(), r.scene.clone())).or_insert(0);
+            *e = (*e).max(t);
+        }
+    }
+    let pts: Vec<(String, f64, f64)> = res
+        .rows
+        .iter()
+        .filter_map(|r| {
+            let t = tri.get(&(r.group.clone(), r.scene.clone()))?;
+            Some((r.backend.clone(), *t as f64, r.memory_bytes.max(1) as f64))
+        })
+        .collect();
+    if !pts.is_empty() {
+        let name = "memory_vs_scene_size.svg".to_string();
+        scatter_by_backend(
+            &dir.join(&name),
+            "representation memory vs scene size",
+            "scene size: triangles the mesh backend stores (log)",
+            "memory, bytes (log)",
+            &pts,
+            true,
+        )?;
+        written.push(name);
+    }
+    // Mrays/s vs threads for configurations measured at several thread counts.
+    let mut by_cfg: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for r in &res.rows {
+        let key = format!(
+            "{}/{}/{}:{} {}x{}",
+            r.group, r.scene, r.backend, r.quality, r.width, r.height
+        );
+        by_cfg
+            .entry(key)
+            .or_default()
+            .push((r.threads as f64, r.mrays_per_s));
+    }
+    let series: Vec<(String, Vec<(f64, f64)>)> = by_cfg
+        .into_iter()
+        .filter(|(_, v)| v.len() > 1)
+        .map(|(k, mut v)| {
+            v.sort_by(|a, b| a.0.total_cmp(&b.0));
+            (k, v)
+        })
+        .take(12)
+        .collect();
+    if !series.is_empty() {
+        let name = "mrays_vs_threads.svg".to_string();
+        lines(
+            &dir.join(&name),
+            "throughput vs render threads",
+            "threads",
+            "Mrays/s (primary + secondary)",
+            &series,
+        )?;
+        written.push(name);
+    }
+    Ok(written)
+}
+
+/// Writes `summary.md` and `plots/` into `dir` from `res`.
+pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    let summary = dir.join("summary.md");
+    std::fs::write(&summary, summary_markdown(res))
+        .map_err(|e| format!("{}: {e}", summary.display()))?;
+    write_plots(res, &dir.join("plots"))
+}
+
+/// Creates a fresh run folder `<out>/<UTC timestamp>-<suite>` (suffix `-2`, `-3`, ... if the
+/// name is taken: runs never overwrite each other) with `images/` inside. Returns the run id
+/// and the folder.
+pub fn create_run_dir(out: &Path, suite: &str) -> std::io::Result<(String, std::path::PathBuf)> {
+    std::fs::create_dir_all(out)?;
+    let stamp = crate::results::utc_strings(crate::results::now_secs()).1;
+    let base = format!("{stamp}-{}", crate::bench::slug(suite));
+    for n in 1..1000 {
+        let id = if n == 1 {
+            base.clone()
+        } else {
+            format!("{base}-{n}")
+        };
+        let dir = out.join(&id);
+        match std::fs::create_dir(&dir) {
+            Ok(()) => {
+                std::fs::create_dir(dir.join("images"))?;
+                return Ok((id, dir));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(std::io::Error::other(format!("too many runs named {base}")))
+}
+
+/// Writes `results.json`, then reads it back and writes `results.csv`, `summary.md` and
+/// `plots/` from what was read, so `marchmesh report` on the folder reproduces them exactly.
+/// Returns the plot file names.
+pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    let json = dir.join("results.json");
+    res.write_json(&json).map_err(|e| e.to_string())?;
+    let back = Results::read_json(&json).map_err(|e| e.to_string())?;
+    back.write_csv(&dir.join("results.csv"))
+        .map_err(|e| e.to_string())?;
+    write_report(&back, dir)
+}

@@ -1,0 +1,570 @@
+//! Suite files: which scenes, backends, quality levels, resolutions and thread counts a
+//! benchmark run measures. The format is documented in `scenes/suites/README.md`.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::backend::{self, BackendKind, BackendSpec};
+use crate::stats::RepeatPolicy;
+
+/// A suite file as written (paths still relative to the file).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SuiteFile {
+    /// Suite name (default: the file stem).
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Free text.
+    #[serde(default)]
+    pub description: String,
+    /// Timed repeats after the warm-up (default: 3 repeats and 1 s, at most 50).
+    #[serde(default)]
+    pub repeats: RepeatPolicy,
+    /// Repeats under `--quick` (default: one repeat).
+    #[serde(default)]
+    pub quick_repeats: Option<RepeatPolicy>,
+    /// Write each configuration's PNG and difference heatmap into `images/` (default true).
+    #[serde(default = "yes")]
+    pub images: bool,
+    /// Groups of configurations (each a cross product).
+    pub groups: Vec<Group>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+/// A cross product: scenes x resolutions x backends x threads.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Group {
+    /// Group name, the first part of every configuration id.
+    pub name: String,
+    /// Scene files or globs (`*`, `?` in the file name), relative to the suite file.
+    pub scenes: Vec<SceneEntry>,
+    /// Image sizes (default: the scene's own).
+    #[serde(default = "default_resolutions")]
+    pub resolutions: Vec<Resolution>,
+    /// Samples per pixel override (default: the scene's own).
+    #[serde(default)]
+    pub spp: Option<u32>,
+    /// Render thread counts (0 = one per logical core). Default `[0]`.
+    #[serde(default = "default_threads")]
+    pub threads: Vec<usize>,
+    /// Backend configurations.
+    pub backends: Vec<BackendEntry>,
+    /// Measure accuracy against the reference backend (default true).
+    #[serde(default = "yes")]
+    pub reference: bool,
+    /// Repeat policy override for this group.
+    #[serde(default)]
+    pub repeats: Option<RepeatPolicy>,
+}
+
+fn default_resolutions() -> Vec<Resolution> {
+    vec![Resolution::Scale { scale: 1.0 }]
+}
+
+fn default_threads() -> Vec<usize> {
+    vec![0]
+}
+
+/// A scene file, a glob, or either with options.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum SceneEntry {
+    /// A path or glob relative to the suite file.
+    Path(String),
+    /// A path or glob with a display name and an optional flag.
+    Detailed {
+        /// Path or glob relative to the suite file.
+        path: String,
+        /// Display name (default: file stem). Only for single files.
+        #[serde(default)]
+        name: Option<String>,
+        /// Skip with a message (instead of failing) when the file or a mesh it uses is
+        /// absent (e.g. the full dragon, fetched by `scripts/fetch_dragon.sh`).
+        #[serde(default)]
+        optional: bool,
+    },
+}
+
+/// An image size.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum Resolution {
+    /// Exact size in pixels.
+    Size {
+        /// Width in pixels.
+        width: u32,
+        /// Height in pixels.
+        height: u32,
+    },
+    /// The longer side in pixels, the scene's aspect ratio kept.
+    MaxSide {
+        /// Longer side in pixels.
+        max_side: u32,
+    },
+    /// The scene's size times `scale` (at least 1 pixel per side).
+    Scale {
+        /// Factor applied to both sides.
+        scale: f64,
+    },
+}
+
+impl Resolution {
+    /// The pixel size for a scene whose own size is `w` x `h`.
+    pub fn apply(self, w: u32, h: u32) -> (u32, u32) {
+        let scaled = |f: f64| {
+            (
+                ((w as f64 * f).round() as u32).max(1),
+                ((h as f64 * f).round() as u32).max(1),
+            )
+        };
+        match self {
+            Resolution::Size { width, height } => (width, height),
+            Resolution::MaxSide { max_side } => scaled(max_side as f64 / w.max(h).max(1) as f64),
+            Resolution::Scale { scale } => scaled(scale),
+        }
+    }
+}
+
+/// One backend configuration of a group.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BackendEntry {
+    /// `sdf`, `mesh` or `reference`.
+    pub backend: String,
+    /// Quality label in reports (default: the options joined, or `default`).
+    #[serde(default)]
+    pub label: Option<String>,
+    /// `key=value` options, applied in order (see `marchmesh render --opt help`).
+    #[serde(default)]
+    pub options: Vec<String>,
+}
+
+/// A validated suite: scene paths resolved, backends parsed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Suite {
+    /// Suite name.
+    pub name: String,
+    /// The file it came from.
+    pub path: PathBuf,
+    /// Description.
+    pub description: String,
+    /// Repeats.
+    pub repeats: RepeatPolicy,
+    /// Repeats under `--quick`.
+    pub quick_repeats: RepeatPolicy,
+    /// Whether to write images.
+    pub images: bool,
+    /// Groups with resolved scenes.
+    pub groups: Vec<ResolvedGroup>,
+    /// Scenes skipped (optional and absent), with the reason.
+    pub skipped: Vec<String>,
+}
+
+/// A group with its scenes found and backends checked.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedGroup {
+    /// Group name.
+    pub name: String,
+    /// (display name, path) of each scene.
+    pub scenes: Vec<(String, PathBuf)>,
+    /// Resolutions.
+    pub resolutions: Vec<Resolution>,
+    /// Samples per pixel override.
+    pub spp: Option<u32>,
+    /// Thread counts.
+    pub threads: Vec<usize>,
+    /// (label, spec) of each backend configuration.
+    pub backends: Vec<(String, BackendSpec)>,
+    /// Accuracy against the reference.
+    pub reference: bool,
+    /// Repeat override.
+    pub repeats: Option<RepeatPolicy>,
+}
+
+/// Why a suite file is unusable. Every variant names the file; parse and validation errors
+/// name the JSON path too.
+#[derive(Debug, thiserror::Error)]
+pub enum SuiteError {
+    /// The file cannot be read.
+    #[error("{file}: {source}")]
+    Io {
+        /// The suite file.
+        file: PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The JSON does not match the format.
+    #[error("{file}: at {path}: {reason}")]
+    Format {
+        /// The suite file.
+        file: PathBuf,
+        /// JSON path of the offending value.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// The label of a backend entry: its own, else its options joined with `,`, else `default`.
+pub fn default_label(options: &[String]) -> String {
+    if options.is_empty() {
+        "default".into()
+    } else {
+        options.join(",")
+    }
+}
+
+/// Matches `text` against a glob with `*` (any run, also across `/`) and `?` (one char).
+pub fn glob_match(pattern: &str, text: &str) -> bool {
+    let (p, t): (Vec<char>, Vec<char>) = (pattern.chars().collect(), text.chars().collect());
+    let (mut pi, mut ti) = (0, 0);
+    let mut star: Option<(usize, usize)> = None;
+    while ti < t.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == t[ti]) {
+            pi += 1;
+            ti += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some((pi, ti));
+            pi += 1;
+        } else if let Some((sp, st)) = star {
+            pi = sp + 1;
+            ti = st + 1;
+            star = Some((sp, st + 1));
+        } else {
+            return false;
+        }
+    }
+    p[pi..].iter().all(|&c| c == '*')
+}
+
+fn expand_glob(base: &Path, pattern: &str) -> std::io::Result<Vec<PathBuf>> {
+    let full = base.join(pattern);
+    let name = full
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    if !name.contains(['*', '?']) {
+        return Ok(vec![full]);
+    }
+    let dir = full.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir)? {
+        let p = e?.path();
+        let n = p
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        if p.is_file() && glob_match(&name, &n) {
+            out.push(p);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Parses suite text; `file` names it in errors and `base` resolves its relative paths.
+pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
+    let fmt_err = |path: String, reason: String| SuiteError::Format {
+        file: file.to_path_buf(),
+        path,
+        reason,
+    };
+    let de = &mut serde_json::Deserializer::from_str(text);
+    let raw: SuiteFile = serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        fmt_err(path, e.into_inner().to_string())
+    })?;
+    let base = file.parent().unwrap_or(Path::new("."));
+    let name = raw.name.clone().unwrap_or_else(|| {
+        file.file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "suite".into())
+    });
+    let check_policy = |p: &RepeatPolicy, path: String| {
+        if p.min_count == 0 || p.max_count < p.min_count || !(p.min_time_s >= 0.0) {
+            return Err(fmt_err(
+                path,
+                "need min_count >= 1, max_count >= min_count, min_time_s >= 0".into(),
+            ));
+        }
+        Ok(())
+    };
+    check_policy(&raw.repeats, "repeats".into())?;
+    if let Some(q) = &raw.quick_repeats {
+        check_policy(q, "quick_repeats".into())?;
+    }
+    if raw.groups.is_empty() {
+        return Err(fmt_err("groups".into(), "no groups".into()));
+    }
+    let mut groups = Vec::new();
+    let mut skipped = Vec::new();
+    for (gi, g) in raw.groups.iter().enumerate() {
+        let gp = format!("groups[{gi}]");
+        if g.name.is_empty() || g.name.contains(['/', '\\']) {
+            return Err(fmt_err(
+                format!("{gp}.name"),
+                "group names must be non-empty without slashes".into(),
+            ));
+        }
+        if let Some(p) = &g.repeats {
+            check_policy(p, format!("{gp}.repeats"))?;
+        }
+        let mut scenes = Vec::new();
+        for (si, s) in g.scenes.iter().enumerate() {
+            let sp = format!("{gp}.scenes[{si}]");
+            let (pattern, name, optional) = match s {
+                SceneEntry::Path(p) => (p.as_str(), None, false),
+                SceneEntry::Detailed {
+                    path,
+                    name,
+                    optional,
+                } => (path.as_str(), name.clone(), *optional),
+            };
+            let found = expand_glob(base, pattern)
+                .map_err(|e| fmt_err(sp.clone(), format!("cannot list `{pattern}`: {e}")))?;
+            if found.is_empty() {
+                return Err(fmt_err(sp, format!("`{pattern}` matches no file")));
+            }
+            if name.is_some() && found.len() > 1 {
+                return Err(fmt_err(
+                    sp,
+                    format!("a name is given but `{pattern}` matches several files"),
+                ));
+            }
+            for path in found {
+                let stem = path
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                let display = name.clone().unwrap_or(stem);
+                if !path.is_file() {
+                    if optional {
+                        skipped.push(format!(
+                            "{}/{display}: {} is absent (optional scene; skipped)",
+                            g.name,
+                            path.display()
+                        ));
+                        continue;
+                    }
+                    return Err(fmt_err(
+                        sp.clone(),
+                        format!("scene file {} does not exist", path.display()),
+                    ));
+                }
+                if optional
+                    && let Ok(text) = std::fs::read_to_string(&path)
+                    && let Some(missing) = missing_mesh(&text, &path)
+                {
+                    skipped.push(format!(
+                        "{}/{display}: mesh {} is absent (optional scene; skipped; scripts/fetch_dragon.sh fetches the full dragon)",
+                        g.name,
+                        missing.display()
+                    ));
+                    continue;
+                }
+                scenes.push((display, path));
+            }
+        }
+        if g.resolutions.is_empty() || g.threads.is_empty() || g.backends.is_empty() {
+            return Err(fmt_err(
+                gp,
+                "resolutions, threads and backends must not be empty".into(),
+            ));
+        }
+        for (ri, r) in g.resolutions.iter().enumerate() {
+            let ok = match *r {
+                Resolution::Size { width, height } => width > 0 && height > 0,
+                Resolution::MaxSide { max_side } => max_side > 0,
+                Resolution::Scale { scale } => scale > 0.0 && scale.is_finite(),
+            };
+            if !ok {
+                return Err(fmt_err(
+                    format!("{gp}.resolutions[{ri}]"),
+                    "sizes must be > 0".into(),
+                ));
+            }
+        }
+        if let Some(spp) = g.spp
+            && !(1..=1024).contains(&spp)
+        {
+            return Err(fmt_err(format!("{gp}.spp"), "must be in 1..=1024".into()));
+        }
+        let mut backends = Vec::new();
+        for (bi, b) in g.backends.iter().enumerate() {
+            let bp = format!("{gp}.backends[{bi}]");
+            let kind: BackendKind = b.backend.parse().map_err(|e: backend::BackendError| {
+                fmt_err(format!("{bp}.backend"), e.to_string())
+            })?;
+            let mut options = Vec::new();
+            for (oi, o) in b.options.iter().enumerate() {
+                options.push(
+                    backend::parse_option(o)
+                        .map_err(|e| fmt_err(format!("{bp}.options[{oi}]"), e))?,
+                );
+            }
+            let spec = BackendSpec {
+                kind: Some(kind),
+                options,
+            };
+            backend::check_options(&spec)
+                .map_err(|e| fmt_err(format!("{bp}.options"), e.to_string()))?;
+            let label = b.label.clone().unwrap_or_else(|| default_label(&b.options));
+            if label.contains('/') {
+                return Err(fmt_err(
+                    format!("{bp}.label"),
+                    "labels must not contain `/`".into(),
+                ));
+            }
+            backends.push((label, spec));
+        }
+        groups.push(ResolvedGroup {
+            name: g.name.clone(),
+            scenes,
+            resolutions: g.resolutions.clone(),
+            spp: g.spp,
+            threads: g.threads.clone(),
+            backends,
+            reference: g.reference,
+            repeats: g.repeats,
+        });
+    }
+    Ok(Suite {
+        name,
+        path: file.to_path_buf(),
+        description: raw.description,
+        repeats: raw.repeats,
+        quick_repeats: raw.quick_repeats.unwrap_or_else(|| raw.repeats.quick()),
+        images: raw.images,
+        groups,
+        skipped,
+    })
+}
+
+/// The first mesh file a scene text refers to that does not exist (lexical scan of
+/// `"path"` values under `"mesh"` objects; the scene loader reports anything subtler).
+fn missing_mesh(text: &str, scene_path: &Path) -> Option<PathBuf> {
+    let v: serde_json::Value = serde_json::from_str(text).ok()?;
+    let base = scene_path.parent().unwrap_or(Path::new("."));
+    fn walk(v: &serde_json::Value, base: &Path) -> Option<PathBuf> {
+        match v {
+            serde_json::Value::Object(m) => {
+                if let Some(serde_json::Value::Object(mesh)) = m.get("mesh")
+                    && let Some(serde_json::Value::String(p)) = mesh.get("path")
+                {
+                    let full = base.join(p);
+                    if !full.is_file() {
+                        return Some(full);
+                    }
+                }
+                m.values().find_map(|c| walk(c, base))
+            }
+            serde_json::Value::Array(a) => a.iter().find_map(|c| walk(c, base)),
+            _ => None,
+        }
+    }
+    walk(&v, base)
+}
+
+/// Loads and validates a suite file.
+pub fn load(path: &Path) -> Result<Suite, SuiteError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SuiteError::Io {
+        file: path.to_path_buf(),
+        source,
+    })?;
+    parse(&text, path)
+}
+
+/// Finds a suite by name (`scenes/suites/NAME.json` under `root`) or takes it as a path.
+pub fn locate(name_or_path: &str, root: &Path) -> PathBuf {
+    let p = PathBuf::from(name_or_path);
+    if p.extension().is_some() || p.components().count() > 1 {
+        p
+    } else {
+        root.join("scenes/suites")
+            .join(format!("{name_or_path}.json"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn globs() {
+        assert!(glob_match("*.json", "a.json"));
+        assert!(!glob_match("*.json", "a.jsonx"));
+        assert!(glob_match("smoke/*/sdf:*", "smoke/primitives/sdf:eps_px=1"));
+        assert!(glob_match("a?c", "abc"));
+        assert!(!glob_match("a?c", "ac"));
+        assert!(glob_match("*", ""));
+        assert!(glob_match("*mesh*", "default/csg/mesh:bvh2/500x300/t2"));
+    }
+
+    fn write_tmp(name: &str, text: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("marchmesh-suite-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("scene.json"), r#"{"objects": []}"#).unwrap();
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    #[test]
+    fn errors_name_file_and_json_path() {
+        let p = write_tmp(
+            "bad1.json",
+            r#"{"groups": [{"name": "g", "scenes": ["scene.json"], "backends": [{"backend": "sdf", "options": ["eps=1"]}]}]}"#,
+        );
+        let e = load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("bad1.json") && e.contains("groups[0].backends[0].options"),
+            "{e}"
+        );
+        assert!(e.contains("eps_px"), "lists valid keys: {e}");
+        let p = write_tmp(
+            "bad2.json",
+            r#"{"groups": [{"name": "g", "scenes": ["scene.json"], "threads": ["x"], "backends": []}]}"#,
+        );
+        let e = load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("bad2.json") && e.contains("groups[0].threads[0]"),
+            "{e}"
+        );
+        let p = write_tmp(
+            "bad3.json",
+            r#"{"groups": [{"name": "g", "scenes": ["nope*.json"], "backends": [{"backend": "mesh"}]}]}"#,
+        );
+        let e = load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("groups[0].scenes[0]") && e.contains("matches no file"),
+            "{e}"
+        );
+        let p = write_tmp("bad4.json", r#"{"groups": [], "colour": 1}"#);
+        let e = load(&p).unwrap_err().to_string();
+        assert!(e.contains("colour"), "{e}");
+    }
+
+    #[test]
+    fn optional_absent_scenes_are_skipped_with_a_message() {
+        let p = write_tmp(
+            "opt.json",
+            r#"{"groups": [{"name": "g", "scenes": ["scene.json", {"path": "absent.json", "optional": true}],
+                 "resolutions": [{"max_side": 32}, {"width": 8, "height": 4}],
+                 "backends": [{"backend": "mesh", "options": ["bvh=bvh2"]}, {"backend": "sdf", "label": "q"}]}]}"#,
+        );
+        let s = load(&p).unwrap();
+        assert_eq!(s.name, "opt");
+        assert_eq!(s.groups[0].scenes.len(), 1);
+        assert_eq!(s.skipped.len(), 1);
+        assert!(s.skipped[0].contains("absent.json"));
+        assert_eq!(s.groups[0].backends[0].0, "bvh=bvh2");
+        assert_eq!(s.groups[0].backends[1].0, "q");
+        assert_eq!(s.groups[0].resolutions[0].apply(500, 400), (32, 26));
+        assert_eq!(s.groups[0].resolutions[1].apply(500, 400), (8, 4));
+    }
+}
