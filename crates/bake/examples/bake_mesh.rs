@@ -13,7 +13,9 @@ use marchmesh_bake::{BakeOptions, bake_with_stats, brute_force_signed_distance};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
-    let path = args.get(1).map_or("scenes/meshes/bunny.obj", |s| s.as_str());
+    let path = args
+        .get(1)
+        .map_or("scenes/meshes/bunny.obj", |s| s.as_str());
     let res: u32 = args.get(2).map_or(Ok(64), |s| s.parse())?;
     let samples: usize = args.get(3).map_or(Ok(2000), |s| s.parse())?;
     let mesh = marchmesh_meshio::load_mesh(Path::new(path))?;

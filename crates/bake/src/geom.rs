@@ -4,15 +4,23 @@
 use glam::{DVec3, Vec3};
 
 macro_rules! closest_point_impl {
-    ($name:ident, $seg:ident, $v:ty, $s:ty) => {
+    ($name:ident, $seg:ident, $edges:ident, $v:ty, $s:ty) => {
         /// The point of triangle `(a, b, c)` closest to `p` (Ericson's Voronoi-region
-        /// routine). Degenerate (zero-area) triangles fall back to the closest point on their
-        /// three edges, so the result is always finite for finite input.
+        /// routine; the face case projects onto the plane, which stays accurate for thin
+        /// triangles). Triangles thinner than `sin(angle at a) < 1e-3` (including
+        /// zero-area ones) use the closest point on their three edges, at most their
+        /// inradius (`<= 1e-3` of the shorter side at `a`) from the exact answer. Always
+        /// finite for finite input.
         #[inline]
         pub fn $name(p: $v, a: $v, b: $v, c: $v) -> $v {
             let ab = b - a;
             let ac = c - a;
             let ap = p - a;
+            let n = ab.cross(ac);
+            let n2 = n.length_squared();
+            if n2.is_nan() || n2 <= 1e-6 * ab.length_squared() * ac.length_squared() {
+                return $edges(p, a, b, c);
+            }
             let d1 = ab.dot(ap);
             let d2 = ac.dot(ap);
             if d1 <= 0.0 && d2 <= 0.0 {
@@ -51,16 +59,17 @@ macro_rules! closest_point_impl {
                     return b + (c - b) * ((d4 - d3) / den);
                 }
             }
-            let sum = va + vb + vc;
-            if sum > 0.0 {
-                let v = vb / sum;
-                let w = vc / sum;
-                let q = a + ab * v + ac * w;
-                if q.is_finite() {
-                    return q;
-                }
+            // Face region: project onto the plane.
+            let q = p - n * (n.dot(ap) / n2);
+            if q.is_finite() {
+                return q;
             }
-            // Degenerate triangle (or round-off left no region): nearest of the edges.
+            $edges(p, a, b, c)
+        }
+
+        /// Nearest of the three edges' closest points.
+        #[inline]
+        fn $edges(p: $v, a: $v, b: $v, c: $v) -> $v {
             let e0 = $seg(p, a, b);
             let e1 = $seg(p, b, c);
             let e2 = $seg(p, c, a);
@@ -91,10 +100,17 @@ macro_rules! closest_point_impl {
     };
 }
 
-closest_point_impl!(closest_point_on_triangle, closest_on_segment, Vec3, f32);
+closest_point_impl!(
+    closest_point_on_triangle,
+    closest_on_segment,
+    closest_on_edges,
+    Vec3,
+    f32
+);
 closest_point_impl!(
     closest_point_on_triangle_f64,
     closest_on_segment_f64,
+    closest_on_edges_f64,
     DVec3,
     f64
 );

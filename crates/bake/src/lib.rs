@@ -13,9 +13,13 @@
 //!   inside a mesh with small holes (the teapot's lid seam, a scan's missing patches) are
 //!   still inside. Evaluated hierarchically (Barill et al. 2018, first-order dipole far
 //!   field, acceptance `|p - c| > 2.5 r`): about `O(log n)` solid angles per sample instead of
-//!   `n`. To save more, `w` is evaluated on every second sample only where the unsigned
-//!   distance proves the 2x2x2 block holds no surface and the block corners agree; see
-//!   [`BakeStats`].
+//!   `n`. To save more, `w` is first evaluated on a coarse lattice (every 4th sample per
+//!   axis); a 4x4x4-cell block whose box provably holds no surface (the unsigned distance at
+//!   its centre sample exceeds the reach to every corner) and whose 8 corners agree on the
+//!   side of 0.5 by a margin of 0.15 gives its side to all its samples, the rest evaluate
+//!   `w` themselves (bunny at 128: 15% of samples). For closed meshes this is exact (`w` is
+//!   constant between surfaces); for open ones it assumes `w` does not cross 0.5 inside a
+//!   surface-free block whose corners are all at least 0.15 away from it. See [`BakeStats`].
 //! - **Limitations of the sign**: near a large hole, `w` crosses 0.5 away from any triangle,
 //!   so the zero set of the grid gets a spurious "cap" across the hole where the distance
 //!   values jump sign (a discontinuity of up to twice the distance to the rim); thin open
@@ -320,7 +324,11 @@ fn bake_grid(
     let coarse_w: Vec<f32> = (0..cx.len() * cy.len() * cz.len())
         .into_par_iter()
         .map(|n| {
-            let (a, b, c) = (n % cx.len(), (n / cx.len()) % cy.len(), n / (cx.len() * cy.len()));
+            let (a, b, c) = (
+                n % cx.len(),
+                (n / cx.len()) % cy.len(),
+                n / (cx.len() * cy.len()),
+            );
             bvh.winding(at(cx[a], cy[b], cz[c]))
         })
         .collect();
