@@ -187,7 +187,7 @@ mod tests {
         // Large n does not underflow into nonsense: about n/2 - 0.98 sqrt(n).
         let (j, c) = median_ci_rank(10_000, 0.95);
         assert!((4900..=4903).contains(&j), "{j}");
-        assert!(c >= 0.95 && c < 0.96, "{c}");
+        assert!((0.95..0.96).contains(&c), "{c}");
     }
 
     #[test]

@@ -286,7 +286,11 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
             .unwrap_or_else(|| "suite".into())
     });
     let check_policy = |p: &RepeatPolicy, path: String| {
-        if p.min_count == 0 || p.max_count < p.min_count || !(p.min_time_s >= 0.0) {
+        if p.min_count == 0
+            || p.max_count < p.min_count
+            || p.min_time_s.is_nan()
+            || p.min_time_s < 0.0
+        {
             return Err(fmt_err(
                 path,
                 "need min_count >= 1, max_count >= min_count, min_time_s >= 0".into(),
