@@ -23,8 +23,24 @@ fn setting(r: &Row) -> SettingKey {
     )
 }
 
-fn mib(b: u64) -> String {
-    format!("{:.2}", b as f64 / (1 << 20) as f64)
+/// Bytes with a binary unit (B, KiB, MiB, GiB), 3 significant digits.
+pub fn bytes(b: u64) -> String {
+    let units = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = b as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u + 1 < units.len() {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{b} B")
+    } else if v >= 100.0 {
+        format!("{v:.0} {}", units[u])
+    } else if v >= 10.0 {
+        format!("{v:.1} {}", units[u])
+    } else {
+        format!("{v:.2} {}", units[u])
+    }
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -37,8 +53,8 @@ fn opt(v: Option<f64>, digits: usize) -> String {
     })
 }
 
-fn opt_mib(v: Option<u64>) -> String {
-    v.map_or("n/a".into(), mib)
+fn opt_bytes(v: Option<u64>) -> String {
+    v.map_or("n/a".into(), bytes)
 }
 
 /// The rows of one setting on the Pareto front of median render time (lower better) against
@@ -170,9 +186,9 @@ pub fn verdict(rows: &[&Row]) -> Vec<String> {
                 ("sdf", "mesh", mm as f64 / ms as f64)
             };
             out.push(format!(
-                "Memory: {less} uses {x:.1}x less than {more} (median over quality levels: sdf {} MiB, mesh {} MiB).",
-                mib(ms),
-                mib(mm)
+                "Memory: {less} uses {x:.1}x less than {more} (median over quality levels: sdf {}, mesh {}).",
+                bytes(ms),
+                bytes(mm)
             ));
         }
     }
@@ -233,7 +249,7 @@ pub fn summary_markdown(res: &Results) -> String {
     );
     let _ = writeln!(
         s,
-        "Times are medians of the timed repeats after one untimed warm-up, with the order-statistic 95% confidence interval of the median. Accuracy is against the exact reference render at the same camera: silhouette = % of pixels hit by only one of the two, depth error p95 relative to the diagonal of the visible scene, normal error in degrees, PSNR of the 8-bit images (100 = identical). Heap columns are the peak heap above the phase's start (counting allocator).\n"
+        "Times are medians of the timed repeats after one untimed warm-up, with the order-statistic 95% confidence interval of the median. Accuracy is against the exact reference render at the same camera: silhouette = % of pixels hit by only one of the two, depth error p95 relative to the diagonal of the visible scene, normal error in degrees, PSNR of the 8-bit images (100 = identical). Memory is the representation's bytes as reported by the backend; heap columns are the peak heap above the phase's start (counting allocator), the render's including its framebuffers.\n"
     );
     for f in &res.failures {
         let _ = writeln!(s, "- failed: `{}`: {}", f.config_id, f.error);
@@ -272,7 +288,7 @@ pub fn summary_markdown(res: &Results) -> String {
         let _ = writeln!(s, "## {group} / {scene}\n");
         let _ = writeln!(
             s,
-            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory MiB | heap build MiB | heap render MiB | silhouette % | depth p95 / scene | normal mean deg | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
+            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
         );
         let _ = writeln!(
             s,
@@ -281,7 +297,7 @@ pub fn summary_markdown(res: &Results) -> String {
         for r in &rows {
             let _ = writeln!(
                 s,
-                "| {} | {} | {}x{} | {} | {:.1} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
+                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
                 r.backend,
                 r.quality,
                 r.width,
@@ -292,9 +308,9 @@ pub fn summary_markdown(res: &Results) -> String {
                 r.render_ms_ci_low,
                 r.render_ms_ci_high,
                 r.mrays_per_s,
-                mib(r.memory_bytes),
-                opt_mib(r.peak_heap_bytes_build),
-                opt_mib(r.peak_heap_bytes_render),
+                bytes(r.memory_bytes),
+                opt_bytes(r.peak_heap_bytes_build),
+                opt_bytes(r.peak_heap_bytes_render),
                 opt(r.silhouette_mismatch_pct, 3),
                 opt(r.depth_err_p95_rel_scene, 5),
                 opt(r.normal_err_deg_mean, 2),
@@ -345,7 +361,7 @@ pub fn summary_markdown(res: &Results) -> String {
             }
             let mem_parts: Vec<String> = mem
                 .iter()
-                .map(|(b, (lo, hi))| format!("{b} {}-{} MiB", mib(*lo), mib(*hi)))
+                .map(|(b, (lo, hi))| format!("{b} {} to {}", bytes(*lo), bytes(*hi)))
                 .collect();
             let _ = writeln!(s, "Memory: {}.\n", mem_parts.join(", "));
             for v in verdict(&set) {
@@ -361,11 +377,15 @@ fn plot_err(e: impl std::fmt::Display) -> String {
     e.to_string()
 }
 
-const COLORS: [RGBColor; 4] = [
+const COLORS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(214, 39, 40),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
 ];
 
 fn color_of(backend: &str) -> RGBColor {
@@ -375,6 +395,27 @@ fn color_of(backend: &str) -> RGBColor {
         "reference" => COLORS[2],
         _ => COLORS[3],
     }
+}
+
+/// Axis numbers: at most 3 significant digits, k/M/G suffixes for large values.
+fn short_num(v: f64) -> String {
+    let a = v.abs();
+    let (x, suffix) = if a >= 1e9 {
+        (v / 1e9, "G")
+    } else if a >= 1e6 {
+        (v / 1e6, "M")
+    } else if a >= 1e4 {
+        (v / 1e3, "k")
+    } else {
+        (v, "")
+    };
+    let t = format!("{x:.3}");
+    let t = if t.contains('.') {
+        t.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        t
+    };
+    format!("{t}{suffix}")
 }
 
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -429,6 +470,8 @@ fn scatter_by_backend(
                 .configure_mesh()
                 .x_desc(x_desc)
                 .y_desc(y_desc)
+                .x_label_formatter(&|v| short_num(*v))
+                .y_label_formatter(&|v| short_num(*v))
                 .draw()
                 .map_err(plot_err)?;
             for b in &backends {
@@ -480,7 +523,13 @@ fn lines(
     let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
     let (x0, x1) = lin_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
-    let (_, y1) = lin_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.1)));
+    let y1 = series
+        .iter()
+        .flat_map(|s| s.1.iter().map(|p| p.1))
+        .filter(|v| v.is_finite())
+        .fold(0.0f64, f64::max)
+        .max(1e-9)
+        * 1.1;
     let mut chart = ChartBuilder::on(&root)
         .caption(title, ("sans-serif", 18))
         .margin(12)
@@ -605,7 +654,7 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
             &dir.join(&name),
             "representation memory vs scene size",
             "scene size: triangles the mesh backend stores (log)",
-            "memory, bytes (log)",
+            "representation memory, bytes (log)",
             &pts,
             true,
         )?;
@@ -690,4 +739,66 @@ pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     back.write_csv(&dir.join("results.csv"))
         .map_err(|e| e.to_string())?;
     write_report(&back, dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::tests_support::row;
+
+    #[test]
+    fn axis_numbers_are_short() {
+        assert_eq!(short_num(10_000_000.0), "10M");
+        assert_eq!(short_num(250.0), "250");
+        assert_eq!(short_num(0.125), "0.125");
+        assert_eq!(short_num(45_000.0), "45k");
+    }
+
+    #[test]
+    fn bytes_are_human_readable() {
+        assert_eq!(bytes(512), "512 B");
+        assert_eq!(bytes(2048), "2.00 KiB");
+        assert_eq!(bytes(45 << 20), "45.0 MiB");
+        assert_eq!(bytes(300 << 30), "300 GiB");
+    }
+
+    #[test]
+    fn pareto_front_keeps_only_undominated_rows() {
+        let a = row("sdf", "a", 10.0, Some(30.0), 100);
+        let b = row("sdf", "b", 20.0, Some(25.0), 100); // slower and worse than a
+        let c = row("mesh", "c", 5.0, Some(20.0), 1000);
+        let d = row("mesh", "d", 30.0, Some(40.0), 1000);
+        let e = row("mesh", "e", 1.0, None, 1000); // no accuracy: not on the front
+        let rows = vec![&a, &b, &c, &d, &e];
+        let front: Vec<&str> = pareto_front(&rows)
+            .iter()
+            .map(|&i| rows[i].quality.as_str())
+            .collect();
+        assert_eq!(front, ["c", "a", "d"]);
+    }
+
+    #[test]
+    fn verdict_states_the_winner_per_accuracy_range_and_memory() {
+        let a = row("sdf", "a", 10.0, Some(30.0), 100);
+        let c = row("mesh", "c", 5.0, Some(20.0), 1000);
+        let d = row("mesh", "d", 30.0, Some(40.0), 1000);
+        let v = verdict(&[&a, &c, &d]).join("\n");
+        assert!(
+            v.contains("Fastest configuration: mesh:c at 5.00 ms"),
+            "{v}"
+        );
+        assert!(
+            v.contains("mesh is faster for PSNR target 20.0 dB (2.00x at 20.0 dB)"),
+            "{v}"
+        );
+        assert!(
+            v.contains("sdf is faster for PSNR target 30.0 dB (3.00x at 30.0 dB)"),
+            "{v}"
+        );
+        assert!(
+            v.contains("PSNR target 40.0 dB: mesh (only mesh reaches it)"),
+            "{v}"
+        );
+        assert!(v.contains("sdf uses 10.0x less than mesh"), "{v}");
+    }
 }

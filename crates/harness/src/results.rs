@@ -451,6 +451,27 @@ impl Provenance {
     }
 }
 
+/// Rows for tests of the report.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use super::*;
+
+    /// A row of `backend:quality` with a median time, PSNR and memory; the rest zero.
+    pub fn row(backend: &str, quality: &str, ms: f64, psnr: Option<f64>, memory: u64) -> Row {
+        Row {
+            config_id: format!("g/s/{backend}:{quality}/x1/t1"),
+            group: "g".into(),
+            scene: "s".into(),
+            backend: backend.into(),
+            quality: quality.into(),
+            render_ms_median: ms,
+            psnr_db: psnr,
+            memory_bytes: memory,
+            ..example_row()
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
