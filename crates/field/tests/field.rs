@@ -354,8 +354,10 @@ proptest! {
             prop_assert!((d64 - d32 as f64).abs() < 1e-5, "{name}: {d64} vs {d32}");
             let pts: [Vec3; 8] = std::array::from_fn(|i| (p + DVec3::new(i as f64 * 0.37, -(i as f64) * 0.21, 0.1)).as_vec3());
             let lanes = f.distance_x8(pts);
+            let (dm, mm) = f.distance_material_x8(pts);
             for i in 0..8 {
                 prop_assert_eq!(lanes[i], f.distance(pts[i]), "{} lane {}", name, i);
+                prop_assert_eq!((dm[i], mm[i]), f.distance_material(pts[i]), "{} lane {}", name, i);
             }
         }
     }

@@ -32,7 +32,7 @@ use marchmesh_core::{
     Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, Termination, TraceResult,
 };
 use marchmesh_field::{Field, FieldError, FieldOptions};
-use marchmesh_scene::Scene;
+use marchmesh_scene::{MaterialId, Scene};
 
 use march::{March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
@@ -182,8 +182,14 @@ impl SdfGeometry {
     /// sides of the hit along the ray (positive on both) together with a gradient shorter
     /// than 0.9, and the normal is then taken at a point backed off `4 h` along the ray.
     pub fn normal_at(&self, p: Vec3, dir: Vec3, h: f32) -> Vec3 {
+        self.normal_material(p, dir, h).0
+    }
+
+    /// [`SdfGeometry::normal_at`] and the material, both from one 8-lane evaluation: the
+    /// material is the field's at `p - 2 h dir`, just in front of the hit along the ray.
+    fn normal_material(&self, p: Vec3, dir: Vec3, h: f32) -> (Vec3, MaterialId) {
         let (x, y, z) = (Vec3::X * h, Vec3::Y * h, Vec3::Z * h);
-        let d = self.field.distance_x8([
+        let (d, m) = self.field.distance_material_x8([
             p + x,
             p - x,
             p + y,
@@ -193,6 +199,7 @@ impl SdfGeometry {
             p - dir * (2.0 * h),
             p + dir * (2.0 * h),
         ]);
+        let material = m[6];
         let g = Vec3::new(d[0] - d[1], d[2] - d[3], d[4] - d[5]) / (2.0 * h);
         let len = g.length();
         let straddles = d[6] > 0.0 && d[7] > 0.0 && len < 0.9;
@@ -200,13 +207,13 @@ impl SdfGeometry {
             let g2 = self.gradient(p - dir * (4.0 * h), h);
             let len2 = g2.length();
             if len2 > 0.0 && len2.is_finite() {
-                return g2 / len2;
+                return (g2 / len2, material);
             }
         }
         if len > 0.0 && len.is_finite() {
-            g / len
+            (g / len, material)
         } else {
-            -dir
+            (-dir, material)
         }
     }
 
@@ -234,8 +241,7 @@ impl SdfGeometry {
         let h = (self.normal_step * m.path_length())
             .max(p.length() * 1e-6)
             .max(1e-30);
-        let normal = self.normal_at(p, m.dir(), h);
-        let material = self.field.distance_material(p).1;
+        let (normal, material) = self.normal_material(p, m.dir(), h);
         TraceResult {
             hit: Some(Hit {
                 t: m.t,
