@@ -171,9 +171,11 @@ impl March {
         self.base + self.t
     }
 
+    /// The shell epsilon, never below f32 resolution of positions here (a smaller one could
+    /// never be reached and would exhaust the steps).
     #[inline]
     fn eps(&self, p: &Params) -> f32 {
-        p.eps_abs + p.eps_cone * (self.base + self.t)
+        (p.eps_abs + p.eps_cone * (self.base + self.t)).max(4.0 * self.noise())
     }
 
     /// Rounding level of field values near the current point (f32 positions).
