@@ -257,3 +257,74 @@ fn render_works_with_every_backend_and_rejects_unknown_options() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_keeps_the_finished_configurations() {
+    let dir = tmp("ctrlc");
+    let scene = repo().join("scenes/seed-spheres.json");
+    let suite = dir.join("slow.json");
+    // Every configuration repeats for at least 30 s: only an interrupt ends the run early.
+    std::fs::write(
+        &suite,
+        format!(
+            r#"{{"repeats": {{"min_count": 1, "min_time_s": 30, "max_count": 100000}}, "images": false,
+                "groups": [{{"name": "g", "scenes": ["{}"], "resolutions": [{{"max_side": 16}}], "spp": 1,
+                "threads": [1], "reference": false,
+                "backends": [{{"backend": "sdf"}}, {{"backend": "mesh"}}, {{"backend": "sdf", "label": "b"}}]}}]}}"#,
+            scene.display()
+        ),
+    )
+    .unwrap();
+    let out = dir.join("out");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args([
+            "bench",
+            "--suite",
+            suite.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the run folder exists and the first configuration is repeating.
+    let start = std::time::Instant::now();
+    while !(out.is_dir() && out.read_dir().unwrap().count() > 0) {
+        assert!(start.elapsed().as_secs() < 60, "run folder never appeared");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let output = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        start.elapsed().as_secs() < 30,
+        "the interrupt did not stop the repeats"
+    );
+    let run = only_run(&out);
+    let res = Results::read_json(&run.join("results.json")).unwrap();
+    assert!(res.interrupted);
+    assert_eq!(
+        res.rows.len(),
+        1,
+        "the configuration in progress finishes, no other starts"
+    );
+    assert!(res.rows[0].render_repeats >= 1);
+    assert_eq!(
+        results::read_csv(&run.join("results.csv")).unwrap().len(),
+        1
+    );
+    assert!(
+        std::fs::read_to_string(run.join("summary.md"))
+            .unwrap()
+            .contains("interrupted")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -391,12 +391,13 @@ fn measure(
             n += 1;
             progress.phase(&format!("repeat {n}"));
             render(scene, geometry.as_ref(), &l.background, &ropts, &|| {})
-                .map(|o| o.elapsed.as_secs_f64() * 1e3)
+                .map(|o| o.elapsed.as_secs_f64())
                 .map_err(|e| format!("render: {e}"))
         },
         || stop.load(Ordering::Relaxed),
     )?;
-    let t = Summary::of(&samples).ok_or("no timed repeat")?;
+    let samples_ms: Vec<f64> = samples.iter().map(|s| s * 1e3).collect();
+    let t = Summary::of(&samples_ms).ok_or("no timed repeat")?;
 
     let s = &warm.stats;
     let fb = &warm.framebuffer;
