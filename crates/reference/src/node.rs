@@ -86,6 +86,9 @@ pub(crate) struct RNode {
     kind: RKind,
 }
 
+/// Most copies of a repeated child that may overlap one cell (see [`Repeat`]).
+pub(crate) const MAX_COPIES_PER_CELL: u32 = 4096;
+
 /// Loads each mesh file once.
 pub(crate) struct Compiler<'a> {
     pub options: &'a ReferenceOptions,
@@ -292,6 +295,22 @@ impl Compiler<'_> {
                             bounded = false;
                         }
                     }
+                }
+                // Copies a cell can see: bounded so a child far larger than its period
+                // cannot make every ray test millions of copies.
+                let per_cell: f64 = (0..3)
+                    .map(|a| {
+                        let width = (reach[a].1 - reach[a].0 + 1) as f64;
+                        match range[a] {
+                            Some((j0, j1, _)) => width.min((j1 - j0 + 1) as f64),
+                            None => 1.0,
+                        }
+                    })
+                    .product();
+                if per_cell > f64::from(MAX_COPIES_PER_CELL) {
+                    return Err(unsupported(&format!(
+                        "the repeated child is so much larger than its period that each cell overlaps {per_cell:.0} copies (limit {MAX_COPIES_PER_CELL}); increase the period or shrink the child"
+                    )));
                 }
                 let rep = Repeat {
                     child: c,
@@ -701,10 +720,19 @@ impl Repeat {
                 work.exhausted = true;
                 break;
             }
-            for dx in self.reach[0].0..=self.reach[0].1 {
-                for dy in self.reach[1].0..=self.reach[1].1 {
-                    for dz in self.reach[2].0..=self.reach[2].1 {
-                        let j = [cell[0] + dx, cell[1] + dy, cell[2] + dz];
+            // Copies that reach into this cell, clipped to the copies that exist.
+            let span = |a: usize| {
+                let (lo, hi) = (cell[a] + self.reach[a].0, cell[a] + self.reach[a].1);
+                match self.range[a] {
+                    Some((j0, j1, _)) => (lo.max(j0), hi.min(j1)),
+                    None => (0, 0),
+                }
+            };
+            let (sx, sy, sz) = (span(0), span(1), span(2));
+            for jx in sx.0..=sx.1 {
+                for jy in sy.0..=sy.1 {
+                    for jz in sz.0..=sz.1 {
+                        let j = [jx, jy, jz];
                         if self.in_range(j) && seen.insert(j) && !visit(j, work) {
                             work.steps = work.steps.saturating_add(cells);
                             return;

@@ -343,3 +343,23 @@ fn grazing_and_tangent_rays() {
     assert!(miss.hit.is_none());
     let _ = ao;
 }
+
+#[test]
+fn a_child_much_larger_than_its_period_is_declined_not_walked_forever() {
+    let scene = scene_with(
+        r#"{"shape": {"repeat": {"child": {"shape": {"torus": {"major_radius": 100000, "minor_radius": 1}}},
+            "period": [1.5, 0, 1]}}}"#,
+    );
+    let err = build(&scene, &Default::default()).unwrap_err().to_string();
+    assert!(
+        err.contains("objects[0]") && err.contains("copies"),
+        "{err}"
+    );
+    // With a finite count the copies that exist are few: fine.
+    let scene = scene_with(
+        r#"{"shape": {"repeat": {"child": {"shape": {"torus": {"major_radius": 100000, "minor_radius": 1}}},
+            "period": [1.5, 0, 1], "count": [3, null, 4]}}}"#,
+    );
+    let g = build(&scene, &Default::default()).unwrap();
+    let _ = g.closest_hit(&ray(DVec3::ZERO, DVec3::Z));
+}

@@ -123,6 +123,9 @@ fn render_everywhere(json: &str, base: &Path) {
         .expect("16x16 is a valid size");
     let background = BackgroundSampler::load(&scene.background).expect("colour background");
     for kind in BackendKind::ALL {
+        if std::env::var_os("MARCHMESH_TRACE_PROPTEST").is_some() {
+            eprintln!("{kind}: {json}");
+        }
         let spec = BackendSpec {
             kind: Some(kind),
             options: Vec::new(),
