@@ -277,7 +277,7 @@ fn ctrl_c_keeps_the_finished_configurations() {
     )
     .unwrap();
     let out = dir.join("out");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+    let child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
         .args([
             "bench",
             "--suite",

@@ -632,7 +632,8 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
             written.push(name);
         }
     }
-    // Memory vs scene size: x = triangles the mesh backend stores for the scene (largest).
+    // Memory vs scene size: x = triangles stored (mesh rows: their own; other rows: the
+    // largest mesh configuration of the same scene).
     let mut tri: BTreeMap<(String, String), u64> = BTreeMap::new();
     for r in &res.rows {
         if let Some(t) = r.triangles {
@@ -644,8 +645,14 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
         .rows
         .iter()
         .filter_map(|r| {
-            let t = tri.get(&(r.group.clone(), r.scene.clone()))?;
-            Some((r.backend.clone(), *t as f64, r.memory_bytes.max(1) as f64))
+            let t = r
+                .triangles
+                .or_else(|| tri.get(&(r.group.clone(), r.scene.clone())).copied())?;
+            Some((
+                r.backend.clone(),
+                t.max(1) as f64,
+                r.memory_bytes.max(1) as f64,
+            ))
         })
         .collect();
     if !pts.is_empty() {
@@ -653,7 +660,7 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
         scatter_by_backend(
             &dir.join(&name),
             "representation memory vs scene size",
-            "scene size: triangles the mesh backend stores (log)",
+            "triangles stored (sdf: the scene's largest mesh configuration) (log)",
             "representation memory, bytes (log)",
             &pts,
             true,
