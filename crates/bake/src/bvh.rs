@@ -239,6 +239,48 @@ impl Bvh {
         best
     }
 
+    /// Every triangle within `radius` of `c`: `(distance to c, triangle index)`, unsorted.
+    /// Gives up (returns false, `out` incomplete) once more than `limit` are found.
+    pub fn gather(&self, c: Vec3, radius: f32, limit: usize, out: &mut Vec<(f32, u32)>) -> bool {
+        out.clear();
+        if self.tris.is_empty() {
+            return true;
+        }
+        let r2 = radius * radius;
+        let mut stack = [0u32; STACK];
+        let mut sp = 1;
+        while sp > 0 {
+            sp -= 1;
+            let nd = &self.nodes[stack[sp] as usize];
+            if box_dist2(c, nd.lo, nd.hi) > r2 {
+                continue;
+            }
+            if nd.count > 0 {
+                for k in nd.first..nd.first + nd.count {
+                    let t = &self.tris[k as usize];
+                    let d2 = point_triangle_distance_squared(c, t[0], t[1], t[2]);
+                    if d2 <= r2 {
+                        out.push((d2.sqrt(), k));
+                    }
+                }
+                if out.len() > limit {
+                    return false;
+                }
+            } else if sp + 2 <= STACK {
+                stack[sp] = nd.first;
+                stack[sp + 1] = nd.first + 1;
+                sp += 2;
+            }
+        }
+        true
+    }
+
+    /// Triangle `k` (leaf order).
+    #[inline]
+    pub fn tri(&self, k: u32) -> &[Vec3; 3] {
+        &self.tris[k as usize]
+    }
+
     /// Generalized winding number at `p` (Jacobson et al. 2013): the sum of signed solid
     /// angles over `4pi`; 1 inside a closed outward mesh, 0 outside, fractional near holes.
     /// Clusters farther than `BETA` radii use their dipole term (Barill et al. 2018).

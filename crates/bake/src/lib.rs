@@ -257,6 +257,10 @@ const SIGN_BLOCK: usize = 4;
 /// How far from 0.5 every block corner's winding number must be for the block to share it.
 const SIGN_MARGIN: f32 = 0.15;
 
+/// A block whose candidate list would exceed this many triangles per sample searches the
+/// BVH per sample instead.
+const CANDIDATES_PER_SAMPLE: usize = 2;
+
 /// Coarse lattice indices along an axis of `n >= 2` samples: multiples of `SIGN_BLOCK`
 /// below `n - 1`, then `n - 1`.
 fn coarse_axis(n: usize) -> Vec<usize> {
@@ -304,18 +308,75 @@ fn bake_grid(
     let bvh = bvh::Bvh::build(tris);
     let [nx, ny, nz] = dims.map(|d| d as usize);
     let at = |i: usize, j: usize, k: usize| min + h * Vec3::new(i as f32, j as f32, k as f32);
-    // Pass 1: unsigned distances, each row seeded with its previous sample's triangle.
+    // Pass 1: unsigned distances, block by block (SIGN_BLOCK samples per axis): the block
+    // centre's exact distance `dc` bounds every sample's, so each sample's closest triangle
+    // is among those within `dc + 2r` of the centre (`r` = reach to the farthest sample);
+    // sorted by distance to the centre, a sample stops at the first candidate that cannot
+    // beat its best (`dist(c) - |p - c| >= best`).
     let mut values = vec![0.0f32; nx * ny * nz];
     values
-        .par_chunks_mut(nx)
+        .par_chunks_mut(nx * ny * SIGN_BLOCK)
         .enumerate()
-        .for_each(|(row, out)| {
-            let (j, k) = (row % ny, row / ny);
+        .for_each(|(slab, out)| {
+            let k0 = slab * SIGN_BLOCK;
+            let kn = out.len() / (nx * ny);
+            let mut cand: Vec<(f32, u32)> = Vec::new();
             let mut hint = u32::MAX;
-            for (i, o) in out.iter_mut().enumerate() {
-                let (d2, tri) = bvh.closest(at(i, j, k), hint);
-                hint = tri;
-                *o = d2.sqrt();
+            for j0 in (0..ny).step_by(SIGN_BLOCK) {
+                let jn = SIGN_BLOCK.min(ny - j0);
+                for i0 in (0..nx).step_by(SIGN_BLOCK) {
+                    let in_ = SIGN_BLOCK.min(nx - i0);
+                    let span = Vec3::new((in_ - 1) as f32, (jn - 1) as f32, (kn - 1) as f32);
+                    let c = at(i0, j0, k0) + 0.5 * h * span;
+                    let r = 0.5 * h * span.length();
+                    let (dc2, t) = bvh.closest(c, hint);
+                    hint = t;
+                    let reach = (dc2.sqrt() + 2.0 * r) * (1.0 + 1e-5) + 1e-6 * h;
+                    let limit = CANDIDATES_PER_SAMPLE * in_ * jn * kn;
+                    if !bvh.gather(c, reach, limit, &mut cand) {
+                        // A wide candidate shell (far from a finely tessellated surface):
+                        // search per sample instead.
+                        let mut ht = t;
+                        for dk in 0..kn {
+                            for dj in 0..jn {
+                                for di in 0..in_ {
+                                    let (d2, tt) = bvh.closest(at(i0 + di, j0 + dj, k0 + dk), ht);
+                                    ht = tt;
+                                    out[(i0 + di) + nx * ((j0 + dj) + ny * dk)] = d2.sqrt();
+                                }
+                            }
+                        }
+                        continue;
+                    }
+                    cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+                    for dk in 0..kn {
+                        for dj in 0..jn {
+                            for di in 0..in_ {
+                                let p = at(i0 + di, j0 + dj, k0 + dk);
+                                let s = (p - c).length();
+                                let mut best2 = f32::INFINITY;
+                                let mut best = f32::INFINITY;
+                                for &(tc, ti) in &cand {
+                                    if tc - s >= best {
+                                        break;
+                                    }
+                                    let tr = bvh.tri(ti);
+                                    let d2 =
+                                        point_triangle_distance_squared(p, tr[0], tr[1], tr[2]);
+                                    if d2 < best2 {
+                                        best2 = d2;
+                                        best = d2.sqrt();
+                                    }
+                                }
+                                if !best.is_finite() {
+                                    // Unreachable for finite input; stay exact regardless.
+                                    best = bvh.closest(p, hint).0.sqrt();
+                                }
+                                out[(i0 + di) + nx * ((j0 + dj) + ny * dk)] = best;
+                            }
+                        }
+                    }
+                }
             }
         });
     // Pass 2: winding numbers on the coarse lattice (every SIGN_BLOCK-th sample + the last).
