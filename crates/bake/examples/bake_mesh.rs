@@ -37,6 +37,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         stats.samples,
         100.0 * stats.winding_evaluations as f64 / stats.samples.max(1) as f64
     );
+    println!(
+        "  phases: bvh {:.1} ms, distance {:.1} ms, sign {:.1} ms",
+        stats.bvh_ms, stats.distance_ms, stats.sign_ms
+    );
     for n in &baked.notes {
         println!("  note: {n}");
     }
