@@ -295,6 +295,10 @@ impl Compiler<'_> {
                 let (grid, bb) = self.meshes.resolve(n)?;
                 (Op::Mesh { grid }, bb)
             }
+            NodeKind::Union(ch) if ch.len() > GROUP => {
+                let items: Vec<(&Node, DAffine3)> = ch.iter().map(|c| (c, c.transform)).collect();
+                (Op::Union, self.grouped_union(&items)?)
+            }
             NodeKind::Union(ch) | NodeKind::Intersection(ch) | NodeKind::Subtraction(ch) => {
                 let boxes = self.children(ch)?;
                 let op = match &n.kind {
@@ -426,7 +430,91 @@ impl Compiler<'_> {
     fn children(&mut self, ch: &[Node]) -> Result<Vec<Aabb>, FieldError> {
         ch.iter().map(|c| self.node(c, c.transform)).collect()
     }
+
+    /// Emits the children of a union with many members under a hierarchy of synthetic
+    /// identity unions (median splits of the box centres, at most [`GROUP`] members each),
+    /// so a point far from a group pays one box test for it. Union is associative and the
+    /// synthetic nodes use only the exact skip (infinite tau): values are unchanged.
+    /// Members with unbounded boxes (planes, infinite repetition) stay at the top. Returns
+    /// the hull of all members.
+    fn grouped_union(&mut self, items: &[(&Node, DAffine3)]) -> Result<Aabb, FieldError> {
+        let mut compiled: Vec<(Vec<Instr<f64>>, Aabb)> = Vec::with_capacity(items.len());
+        for (n, xf) in items {
+            let mut sub = Compiler {
+                instrs: Vec::new(),
+                notes: Vec::new(),
+                meshes: &mut *self.meshes,
+            };
+            let b = sub.node(n, *xf)?;
+            self.notes.append(&mut sub.notes);
+            compiled.push((sub.instrs, b));
+        }
+        let hull = compiled
+            .iter()
+            .skip(1)
+            .fold(compiled[0].1, |a, c| a.hull(&c.1));
+        let (finite, unbounded): (Vec<_>, Vec<_>) =
+            compiled.into_iter().partition(|c| c.1.is_finite());
+        for c in unbounded {
+            self.splice(c.0);
+        }
+        self.emit_group(finite);
+        Ok(hull)
+    }
+
+    fn splice(&mut self, instrs: Vec<Instr<f64>>) {
+        let off = self.instrs.len() as u32;
+        self.instrs.extend(instrs.into_iter().map(|mut i| {
+            i.end += off;
+            i
+        }));
+    }
+
+    fn emit_group(&mut self, mut items: Vec<(Vec<Instr<f64>>, Aabb)>) {
+        if items.len() <= GROUP {
+            for (instrs, _) in items {
+                self.splice(instrs);
+            }
+            return;
+        }
+        let hull = items.iter().skip(1).fold(items[0].1, |a, c| a.hull(&c.1));
+        let idx = self.instrs.len();
+        self.instrs.push(Instr {
+            end: 0,
+            material: items[0].0[0].material,
+            has_bound: true,
+            lo: a3(hull.lo),
+            hi: a3(hull.hi),
+            tau: f64::INFINITY,
+            to_local: Affine {
+                lin: None,
+                trans: [0.0; 3],
+            },
+            dscale: 1.0,
+            op: Op::Union,
+        });
+        let ext = hull.hi - hull.lo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        items.sort_by(|a, b| {
+            let ca = a.1.lo[axis] + a.1.hi[axis];
+            let cb = b.1.lo[axis] + b.1.hi[axis];
+            ca.total_cmp(&cb)
+        });
+        let right = items.split_off(items.len() / 2);
+        self.emit_group(items);
+        self.emit_group(right);
+        self.instrs[idx].end = self.instrs.len() as u32;
+    }
 }
+
+/// Most members of one union node before a hierarchy is built over them.
+pub const GROUP: usize = 8;
 
 /// Builds the program for `nodes` (each with `xf(node)` as its node->frame transform) under
 /// an identity union root; a single node compiles without the root.
@@ -459,25 +547,28 @@ pub(crate) fn compile_roots(
                 dscale: 1.0,
                 op: Op::Union,
             });
-            let mut hull: Option<Aabb> = None;
-            for (n, xf) in nodes {
-                let b = c.node(n, *xf)?;
-                hull = Some(hull.map_or(b, |h| h.hull(&b)));
-            }
+            let h = if nodes.len() > GROUP {
+                c.grouped_union(nodes)?
+            } else {
+                let mut hull: Option<Aabb> = None;
+                for (n, xf) in nodes {
+                    let b = c.node(n, *xf)?;
+                    hull = Some(hull.map_or(b, |h| h.hull(&b)));
+                }
+                hull.expect("at least two roots")
+            };
             let end = c.instrs.len() as u32;
             let root = &mut c.instrs[0];
             root.end = end;
-            if let Some(h) = hull {
-                root.lo = a3(h.lo);
-                root.hi = a3(h.hi);
-                root.has_bound = h.any_finite();
-                root.tau = if h.is_finite() {
-                    ((h.hi - h.lo).length() * 0.5).max(1e-30)
-                } else {
-                    f64::INFINITY
-                };
-            }
-            hull
+            root.lo = a3(h.lo);
+            root.hi = a3(h.hi);
+            root.has_bound = h.any_finite();
+            root.tau = if h.is_finite() {
+                ((h.hi - h.lo).length() * 0.5).max(1e-30)
+            } else {
+                f64::INFINITY
+            };
+            Some(h)
         }
     };
     Ok((Program { instrs: c.instrs }, bb, c.notes))

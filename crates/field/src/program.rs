@@ -239,8 +239,19 @@ impl<S: Scalar> Program<S> {
         grids: &[&dyn GridSampler],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
+        // A union that is combined by `min` (or a smooth minimum) one level up only has to be
+        // exact below the parent's running threshold: it starts its own minimum there, so its
+        // children are skipped against it too. Its result then is `min(thr, value)`, which
+        // leaves the parent's combination unchanged. Only without a distance scale, so the
+        // threshold needs no conversion.
+        let above = match ctx {
+            Ctx::Below(thr) if matches!(ins.op, Op::Union) && ins.dscale.to_f64() == 1.0 => {
+                Some(thr)
+            }
+            _ => None,
+        };
         if !ins.has_bound {
-            return self.node::<T, M>(i, p, grids);
+            return self.node::<T, M>(i, p, above, grids);
         }
         let zero = T::c(0.0);
         let l = shapes::box_distance(p, V3::splat3(ins.lo), V3::splat3(ins.hi));
@@ -254,7 +265,7 @@ impl<S: Scalar> Program<S> {
         if T::all(skip) {
             return (l, mat);
         }
-        let (c, m) = self.node::<T, M>(i, p, grids);
+        let (c, m) = self.node::<T, M>(i, p, above, grids);
         let cc = c.min(tau);
         let g = T::select(outside, l.max(cc), cc);
         (T::select(skip, l, g), msel::<T, M>(skip, mat, m))
@@ -265,6 +276,7 @@ impl<S: Scalar> Program<S> {
         &self,
         i: usize,
         p: V3<T>,
+        above: Option<T>,
         grids: &[&dyn GridSampler],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
@@ -292,8 +304,14 @@ impl<S: Scalar> Program<S> {
             }
             Op::Union => {
                 let mut j = i + 1;
-                let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
-                j = self.instrs[j].end as usize;
+                let (mut best, mut bm) = match above {
+                    Some(thr) => (thr, mat),
+                    None => {
+                        let first = self.child::<T, M>(j, q, Ctx::Plain, grids);
+                        j = self.instrs[j].end as usize;
+                        first
+                    }
+                };
                 while j < end {
                     let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best), grids);
                     let take = T::lt(d, best);
@@ -366,7 +384,7 @@ impl<S: Scalar> Program<S> {
     ) -> (T, T::Mat) {
         let ins = &self.instrs[j];
         if !ins.has_bound {
-            return self.node::<T, M>(j, q, grids);
+            return self.node::<T, M>(j, q, None, grids);
         }
         let zero = T::c(0.0);
         let l = shapes::box_distance(q, V3::splat3(ins.lo), V3::splat3(ins.hi));
@@ -377,7 +395,7 @@ impl<S: Scalar> Program<S> {
         if T::all(skip) {
             return (T::c(BIG), mat);
         }
-        let (c, m) = self.node::<T, M>(j, q, grids);
+        let (c, m) = self.node::<T, M>(j, q, None, grids);
         (T::select(skip, T::c(BIG), c), m)
     }
 

@@ -658,3 +658,57 @@ fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
     assert!(f.memory_bytes() > 64 * 64 * 4, "the grid is counted");
     assert!(f.report().notes.iter().any(|n| n.contains("distance grid")));
 }
+
+#[test]
+fn large_unions_are_grouped_without_changing_values() {
+    let mut rng = 99u64;
+    let mut next = || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut spheres = Vec::new();
+    let mut children = vec![node(
+        NodeKind::Plane {
+            normal: DVec3::Y,
+            offset: -3.0,
+        },
+        DAffine3::IDENTITY,
+        1,
+    )];
+    for i in 0..200 {
+        let c = DVec3::new(
+            next() * 20.0 - 10.0,
+            next() * 4.0 - 2.0,
+            next() * 20.0 - 10.0,
+        );
+        let r = 0.1 + next() * 0.4;
+        spheres.push((c, r, i as u32 + 2));
+        children.push(node(sphere(r), DAffine3::from_translation(c), i as u32 + 2));
+    }
+    let f = field(&node(NodeKind::Union(children), DAffine3::IDENTITY, 0));
+    // The hierarchy adds synthetic nodes.
+    assert!(f.node_count() > 201, "{}", f.node_count());
+    for _ in 0..2000 {
+        let p = DVec3::new(
+            next() * 22.0 - 11.0,
+            next() * 6.0 - 3.5,
+            next() * 22.0 - 11.0,
+        );
+        let (mut e, mut m) = (p.y + 3.0, 1);
+        for (c, r, id) in &spheres {
+            let d = (p - *c).length() - r;
+            if d < e {
+                e = d;
+                m = *id;
+            }
+        }
+        let (d, mat) = f.distance_material_f64(p);
+        // Exact below the union's own tau (half its box diagonal, > 10 here).
+        assert!((d - e).abs() < 1e-9, "{p}: {d} vs {e}");
+        assert_eq!(mat, m, "{p}");
+        let d32 = f.distance(p.as_vec3()) as f64;
+        assert!((d32 - e).abs() < 1e-5, "{p}: f32 {d32} vs {e}");
+    }
+}
