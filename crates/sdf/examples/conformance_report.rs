@@ -35,7 +35,12 @@ fn main() {
             }
             Ok(g) => {
                 if std::env::var_os("NOTES").is_some() {
-                    for n in g.report().notes {
+                    let r = g.report();
+                    println!(
+                        "  {}: memory {} B, phases {:?}, counters {:?}",
+                        c.name, r.memory_bytes, r.build_phases_ms, r.counters
+                    );
+                    for n in r.notes {
                         println!("  note: {n}");
                     }
                 }
