@@ -213,6 +213,64 @@ pub fn verdict(rows: &[&Row]) -> Vec<String> {
     out
 }
 
+/// One line per setting: the fastest sdf and mesh configurations reaching `min_psnr` dB, their
+/// times, memory and the ratio (or which backend does not reach it).
+pub fn headlines(rows: &[Row], min_psnr: f64) -> Vec<String> {
+    let mut settings: Vec<SettingKey> = Vec::new();
+    for r in rows {
+        let k = setting(r);
+        if !settings.contains(&k) {
+            settings.push(k);
+        }
+    }
+    let mut out = Vec::new();
+    for k in settings {
+        let set: Vec<&Row> = rows.iter().filter(|r| setting(r) == k).collect();
+        if set.iter().all(|r| r.psnr_db.is_none()) {
+            continue;
+        }
+        let best = |b: &str| {
+            set.iter()
+                .filter(|r| r.backend == b && r.psnr_db.is_some_and(|p| p >= min_psnr))
+                .min_by(|x, y| x.render_ms_median.total_cmp(&y.render_ms_median))
+                .copied()
+        };
+        let describe = |r: Option<&Row>, b: &str| match r {
+            Some(r) => format!(
+                "{b}:{} {:.1} ms ({:.1} dB, {})",
+                r.quality,
+                r.render_ms_median,
+                r.psnr_db.unwrap_or(f64::NAN),
+                bytes(r.memory_bytes)
+            ),
+            None => format!("{b}: none reaches {min_psnr:.0} dB"),
+        };
+        let (s, m) = (best("sdf"), best("mesh"));
+        let ratio = match (s, m) {
+            (Some(s), Some(m)) if s.render_ms_median <= m.render_ms_median => format!(
+                ": sdf {:.2}x faster",
+                m.render_ms_median / s.render_ms_median
+            ),
+            (Some(s), Some(m)) => format!(
+                ": mesh {:.2}x faster",
+                s.render_ms_median / m.render_ms_median
+            ),
+            _ => String::new(),
+        };
+        out.push(format!(
+            "{}/{} {}x{} t{}: {} vs {}{ratio}",
+            k.0,
+            k.1,
+            k.2,
+            k.3,
+            k.4,
+            describe(s, "sdf"),
+            describe(m, "mesh")
+        ));
+    }
+    out
+}
+
 /// The Markdown summary of a run.
 pub fn summary_markdown(res: &Results) -> String {
     let mut s = String::new();
@@ -269,6 +327,17 @@ pub fn summary_markdown(res: &Results) -> String {
         );
     }
     if !res.failures.is_empty() || !res.skipped.is_empty() {
+        s.push('\n');
+    }
+    let heads = headlines(&res.rows, 40.0);
+    if !heads.is_empty() {
+        let _ = writeln!(
+            s,
+            "## Headlines\n\nFastest configuration of each backend reaching PSNR >= 40 dB against the reference, per scene and setting (memory is that configuration's representation):\n"
+        );
+        for h in heads {
+            let _ = writeln!(s, "- {h}");
+        }
         s.push('\n');
     }
     // Tables per group and scene, in first-appearance order.
@@ -332,6 +401,17 @@ pub fn summary_markdown(res: &Results) -> String {
         for k in settings {
             let set: Vec<&Row> = rows.iter().copied().filter(|r| setting(r) == k).collect();
             let _ = writeln!(s, "### {}x{}, {} threads\n", k.2, k.3, k.4);
+            if let Some(r) = res
+                .references
+                .iter()
+                .find(|r| r.scene == k.1 && (r.width, r.height) == (k.2, k.3))
+                && let (Some(b), Some(t)) = (r.build_ms, r.render_ms)
+            {
+                let _ = writeln!(
+                    s,
+                    "Ground truth: the exact reference backend, build {b:.2} ms, one render {t:.2} ms (all cores).\n"
+                );
+            }
             let front = pareto_front(&set);
             if front.is_empty() {
                 let _ = writeln!(s, "No accuracy measured: no Pareto front.\n");
@@ -767,6 +847,18 @@ mod tests {
         assert_eq!(bytes(2048), "2.00 KiB");
         assert_eq!(bytes(45 << 20), "45.0 MiB");
         assert_eq!(bytes(300 << 30), "300 GiB");
+    }
+
+    #[test]
+    fn headlines_compare_the_fastest_rows_above_the_threshold() {
+        let a = row("sdf", "a", 10.0, Some(45.0), 100);
+        let b = row("sdf", "b", 5.0, Some(30.0), 100);
+        let c = row("mesh", "c", 30.0, Some(41.0), 2048);
+        let h = headlines(&[a.clone(), b, c], 40.0);
+        assert_eq!(h.len(), 1);
+        assert!(h[0].contains("sdf:a 10.0 ms (45.0 dB, 100 B) vs mesh:c 30.0 ms (41.0 dB, 2.00 KiB): sdf 3.00x faster"), "{}", h[0]);
+        let h = headlines(&[a], 40.0);
+        assert!(h[0].contains("mesh: none reaches 40 dB"), "{}", h[0]);
     }
 
     #[test]
