@@ -293,6 +293,18 @@ pub fn summary_markdown(res: &Results) -> String {
         p.version
     );
     let _ = writeln!(s, "Command: `{}`\n", p.command);
+    if let Some(l) = p.load_average_1m {
+        let _ = writeln!(
+            s,
+            "Load average at the start: {l:.2} on {} logical cores{}.\n",
+            p.logical_cores,
+            if l > 0.5 * p.logical_cores as f64 {
+                " (shared machine: other processes competed for the cores, so times are noisier than the confidence intervals of a quiet machine)"
+            } else {
+                ""
+            }
+        );
+    }
     let _ = writeln!(
         s,
         "{} configurations measured, {} failed, {} scenes skipped{}.\n",

@@ -166,6 +166,10 @@ pub struct Provenance {
     pub version: String,
     /// The command line.
     pub command: String,
+    /// 1-minute load average when the run started (`/proc/loadavg`; other processes competing
+    /// for the cores make times noisier). `None` where unavailable.
+    #[serde(default)]
+    pub load_average_1m: Option<f64>,
 }
 
 /// A reference render made for accuracy.
@@ -447,6 +451,9 @@ impl Provenance {
             git_dirty: dirty,
             version: env!("CARGO_PKG_VERSION").to_string(),
             command,
+            load_average_1m: std::fs::read_to_string("/proc/loadavg")
+                .ok()
+                .and_then(|t| t.split_whitespace().next()?.parse().ok()),
         }
     }
 }
