@@ -25,10 +25,30 @@ pub(crate) enum Tree {
     CwBvh(CwBvh),
 }
 
+/// Smallest extent (world units, largest side of the triangles' bounding box) for which a
+/// CwBvh is built. obvhs 0.4's compressed nodes quantise child boxes against the parent and
+/// miss every ray when the whole tree is smaller than about 1e-5 units (measured with the
+/// stability study: a sphere of radius 1e-5 gets no hits, 3e-5 does); below this margin the
+/// builder falls back to a Bvh2, which is exact at any scale.
+pub(crate) const CWBVH_MIN_EXTENT: f32 = 1e-3;
+
 impl Tree {
-    /// Builds over triangles with the given preset (inside the current rayon pool).
+    /// Builds over triangles with the given preset (inside the current rayon pool). A CwBvh
+    /// request over triangles smaller than [`CWBVH_MIN_EXTENT`] builds a Bvh2 instead.
     pub(crate) fn build(kind: BvhKind, tris: &[Triangle], params: BvhBuildParams) -> Self {
         let mut t = Duration::default();
+        let (mut lo, mut hi) = (Vec3A::splat(f32::INFINITY), Vec3A::splat(f32::NEG_INFINITY));
+        for tri in tris {
+            for v in [tri.v0, tri.v1, tri.v2] {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        let kind = if kind == BvhKind::CwBvh && (hi - lo).max_element() < CWBVH_MIN_EXTENT {
+            BvhKind::Bvh2
+        } else {
+            kind
+        };
         match kind {
             BvhKind::Bvh2 => {
                 let mut b = build_bvh2_from_tris(tris, params, &mut t);
@@ -55,6 +75,14 @@ impl Tree {
         match self {
             Tree::Bvh2(b) => &b.primitive_indices,
             Tree::CwBvh(b) => &b.primitive_indices,
+        }
+    }
+
+    /// Which layout was built (a CwBvh request may have fallen back to Bvh2).
+    pub(crate) fn kind(&self) -> BvhKind {
+        match self {
+            Tree::Bvh2(_) => BvhKind::Bvh2,
+            Tree::CwBvh(_) => BvhKind::CwBvh,
         }
     }
 

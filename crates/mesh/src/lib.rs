@@ -373,6 +373,17 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         options.build_quality,
         if options.instancing { "on" } else { "off" }
     ));
+    let fell_back = flat_blas
+        .iter()
+        .chain(blases.iter())
+        .filter(|b| b.tree.kind() != options.bvh)
+        .count();
+    if fell_back > 0 {
+        report.notes.push(format!(
+            "{fell_back} BVH(s) smaller than {} units built as Bvh2: obvhs CwBvh loses rays on tiny trees",
+            blas::CWBVH_MIN_EXTENT
+        ));
+    }
     Ok(MeshGeometry {
         flat: flat_blas,
         flat_materials_default: 0,

@@ -3,7 +3,7 @@
 
 mod common;
 
-use marchmesh_core::{BackgroundSampler, RenderOptions, render};
+use marchmesh_core::{BackgroundSampler, Geometry, RenderOptions, render};
 use marchmesh_mesh::{MeshError, MeshOptions, build};
 
 fn render_file(name: &str, side: u32) -> Result<marchmesh_core::RenderOutput, MeshError> {
@@ -156,4 +156,28 @@ fn instanced_and_flattened_images_match() {
     assert!(acc.depth_rel_p95 < 1e-5, "{acc:#?}");
     assert!(acc.normal_deg_mean < 0.01, "{acc:#?}");
     assert_eq!(acc.material_mismatch, 0, "{acc:#?}");
+}
+
+#[test]
+fn tiny_scenes_render_with_the_default_cwbvh_request() {
+    // A sphere of radius 1e-6 seen from 6e-6: obvhs CwBvh alone misses every ray here.
+    let scene = common::scene(
+        r#"{"camera": {"position": [0, 0, -6e-6], "width": 16, "height": 16},
+            "objects": [{"shape": {"sphere": {"radius": 1e-6}}}], "render": {"max_distance": 1e-4}}"#,
+    );
+    let g = build(&scene, &MeshOptions::DEFAULT).unwrap();
+    let bg = BackgroundSampler::load(&scene.background).expect("background");
+    let out = render(
+        &scene,
+        &g,
+        &bg,
+        &RenderOptions {
+            threads: 1,
+            ..Default::default()
+        },
+        &|| {},
+    )
+    .unwrap();
+    assert!(out.stats.hits > 8, "only {} hits", out.stats.hits);
+    assert!(g.report().notes.iter().any(|n| n.contains("built as Bvh2")));
 }
