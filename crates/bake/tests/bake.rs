@@ -353,8 +353,11 @@ fn flat_mesh_gets_a_padded_grid() {
     m.triangles = vec![[0, 1, 2], [0, 2, 3]];
     let g = bake(&m, &opts(8)).unwrap().grid;
     assert!(g.dims[2] >= 7, "{:?}", g.dims);
-    let d = g.sample(Vec3::new(0.5, 0.5, 0.25)).abs();
-    assert!((d - 0.25).abs() <= bound(&g), "{d}");
+    // An open sheet has no inside: both sides are outside, |distance| as usual.
+    for z in [0.25f32, -0.25] {
+        let d = g.sample(Vec3::new(0.5, 0.5, z));
+        assert!(d > 0.0 && (d - 0.25).abs() <= bound(&g), "{z}: {d}");
+    }
 }
 
 #[test]
