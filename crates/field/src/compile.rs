@@ -215,13 +215,29 @@ impl Compiler<'_> {
                     (Op::Sphere { r: *radius }, Aabb::sym(DVec3::splat(*radius)))
                 }
             }
-            NodeKind::Plane { normal, offset } => (
-                Op::Plane {
-                    n: a3(*normal),
-                    offset: *offset,
-                },
-                Aabb::INFINITE,
-            ),
+            NodeKind::Plane { normal, offset } => {
+                // A plane stays a plane under any affine map: express it in the parent frame
+                // in f64 (`n.(A x + b) = offset`) and evaluate it there, exactly. Moving the
+                // point into the local frame in f32 instead would add the camera's world
+                // position back (1e5 units away: 0.008-unit rounding, step exhaustion).
+                let a = inv.matrix3;
+                let n_parent = a.transpose() * *normal;
+                let len = n_parent.length();
+                let offset_parent = (offset - normal.dot(inv.translation)) / len;
+                let ins = &mut self.instrs[idx];
+                ins.to_local = Affine {
+                    lin: None,
+                    trans: [0.0; 3],
+                };
+                ins.dscale = 1.0;
+                (
+                    Op::Plane {
+                        n: a3(n_parent / len),
+                        offset: offset_parent,
+                    },
+                    Aabb::INFINITE,
+                )
+            }
             NodeKind::Box { half_extents } => (
                 Op::Box {
                     b: a3(*half_extents),

@@ -178,16 +178,20 @@ impl March {
         (p.eps_abs + p.eps_cone * (self.base + self.t)).max(4.0 * self.noise())
     }
 
-    /// Rounding level of field values near the current point (f32 positions).
+    /// Rounding level of field values near the current point: two f32 ulps of the
+    /// position's magnitude (2 * 2^-23 relative), which bounds the error of `p - c` in every
+    /// primitive. (It was 1e-6: 8x larger, which at 1e5 units from the camera made the shell
+    /// wider than the pixel footprint of a narrow camera and inflated silhouettes by
+    /// several pixels; see the stability study's `distance` family.)
     #[inline]
     fn noise(&self) -> f32 {
-        1e-6 * (self.base + self.t)
+        2.4e-7 * (self.base + self.t)
     }
 
     /// The fine threshold: 1e-3 of the shell, but never below f32 resolution of positions.
     #[inline]
     fn thr(&self, p: &Params) -> f32 {
-        (self.eps(p) * 1e-3).max(1e-6 * (self.base + self.t))
+        (self.eps(p) * 1e-3).max(self.noise())
     }
 
     #[inline]

@@ -9,8 +9,8 @@ use std::path::PathBuf;
 pub enum HitEpsilon {
     /// A fixed distance in world units (> 0), whatever the distance from the camera. Fails
     /// at both ends of scale (merged features on tiny scenes, many steps on huge ones). Both
-    /// kinds are floored at 4e-6 times the distance from the camera (about 32 f32 ulps of
-    /// the position), below which no surface could be resolved.
+    /// kinds are floored at about 1e-6 times the distance from the camera (8 f32 ulps of the
+    /// position), below which no surface could be resolved.
     Absolute(f64),
     /// A fraction `k` (> 0) of the pixel footprint at the point:
     /// `eps = k * camera.pixel_angle() * (|ray origin| + t)` (`|ray origin|` is the distance

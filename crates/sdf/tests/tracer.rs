@@ -490,6 +490,9 @@ fn absolute_epsilon_extremes_still_converge() {
         // Tiny epsilons are floored at f32 resolution, so surfaces are still reached; only
         // rays grazing the plane far away (where a fixed epsilon needs ~ln(h/eps)/sin(angle)
         // steps) may run out.
-        assert!(exhausted <= 32, "eps {eps}: {exhausted} of 1024 rays exhausted");
+        assert!(
+            exhausted <= 32,
+            "eps {eps}: {exhausted} of 1024 rays exhausted"
+        );
     }
 }
