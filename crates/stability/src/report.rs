@@ -107,7 +107,9 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
          mean normal error <= 1 deg, step exhaustion <= 0.1%; **degraded** = silhouette <= 5%, depth \
          p95 <= 1e-2, normal <= 5 deg, exhaustion <= 5%; **broken** = worse or any NaN/inf; \
          **refused** = the backend declined to build (clear error). Image-judged families (acne) \
-         use PSNR >= 40 dB / >= 25 dB.\n"
+         use PSNR >= 40 dB / >= 25 dB against each backend's own render at the default offset. \
+         The mesh backend runs at a 0.05 px chord budget (its accuracy setting) so that its \
+         tessellation error does not hide the numerical effects.\n"
     );
     let _ = writeln!(s, "## Ranges per family and backend\n");
     let _ = writeln!(

@@ -265,15 +265,18 @@ pub fn run_case(case: &StabilityCase, options: &RunOptions) -> Result<Vec<Row>, 
         Some(json) => load(case, json, options.side)?,
         None => scene.clone(),
     };
-    let truth = build_and_render(
-        &truth_scene,
-        &Variant::default_of(BackendKind::Reference),
-        options,
-    )
-    .map_err(|reason| CaseError::Truth {
-        case: case.id(),
-        reason,
-    })?;
+    let truth_of = |variant: &Variant| {
+        build_and_render(&truth_scene, variant, options).map_err(|reason| CaseError::Truth {
+            case: case.id(),
+            reason,
+        })
+    };
+    let reference = Variant::default_of(BackendKind::Reference);
+    let shared_truth = if case.self_truth {
+        None
+    } else {
+        Some(truth_of(&reference)?)
+    };
     let mut rows = Vec::new();
     for variant in &case.variants {
         let row = |verdict, metrics, r: Option<&Rendered>, error| Row {
@@ -290,6 +293,14 @@ pub fn run_case(case: &StabilityCase, options: &RunOptions) -> Result<Vec<Row>, 
             memory_bytes: r.map_or(0, |r| r.memory_bytes),
             error,
             notes: r.map_or_else(Vec::new, |r| r.notes.clone()),
+        };
+        let own_truth;
+        let truth = match &shared_truth {
+            Some(t) => t,
+            None => {
+                own_truth = truth_of(variant)?;
+                &own_truth
+            }
         };
         match build_and_render(&scene, variant, options) {
             Ok(r) => {
