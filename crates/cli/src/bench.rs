@@ -208,16 +208,45 @@ pub fn report(dir: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Appends a formatted line to a `String`.
+macro_rules! outln {
+    ($out:expr, $($arg:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
+/// Writes `text` to stdout; a closed pipe (`marchmesh compare A B | head`) is not an error.
+fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
+    use std::io::Write as _;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("writing to stdout"),
+        _ => Ok(()),
+    }
+}
+
 pub fn compare(a: &Path, b: &Path) -> Result<()> {
     let ra = Results::read_json(&results_path(a))?;
     let rb = Results::read_json(&results_path(b))?;
-    println!(
+    let mut out = String::new();
+    outln!(
+        out,
         "A = {} ({}), B = {} ({}); ratios are B / A",
-        ra.run_id, ra.provenance.git_commit, rb.run_id, rb.provenance.git_commit
+        ra.run_id,
+        ra.provenance.git_commit,
+        rb.run_id,
+        rb.provenance.git_commit
     );
-    println!(
+    outln!(
+        out,
         "{:<60} {:>10} {:>10} {:>9} {:>9} {:>9} {:>10}",
-        "configuration", "render A", "render B", "render", "build", "memory", "PSNR B-A"
+        "configuration",
+        "render A",
+        "render B",
+        "render",
+        "build",
+        "memory",
+        "PSNR B-A"
     );
     let mut matched = 0;
     let mut log_sum = 0.0;
@@ -232,7 +261,8 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
             (Some(p), Some(q)) => format!("{:+.2}", q - p),
             _ => "n/a".into(),
         };
-        println!(
+        outln!(
+            out,
             "{:<60} {:>8.2}ms {:>8.2}ms {:>8.3}x {:>8.3}x {:>8.3}x {:>10}",
             x.config_id,
             x.render_ms_median,
@@ -256,11 +286,12 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
     if matched == 0 {
         bail!("the runs share no configuration ({only_a} only in A, {only_b} only in B)");
     }
-    println!(
+    outln!(
+        out,
         "{matched} configurations matched (geometric mean render ratio {:.3}x); {only_a} only in A, {only_b} only in B",
         (log_sum / matched as f64).exp()
     );
-    Ok(())
+    print_ignoring_broken_pipe(&out)
 }
 
 pub fn stability(args: StabilityArgs) -> Result<()> {

@@ -328,3 +328,45 @@ fn ctrl_c_keeps_the_finished_configurations() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn stability_runs_a_filtered_family_and_writes_its_report() {
+    let dir = tmp("stability");
+    let out = dir.join("run");
+    let scenes = dir.join("scenes");
+    let (ok, stdout, stderr) = marchmesh(
+        &[
+            "stability",
+            "--filter",
+            "scale/",
+            "--side",
+            "12",
+            "--out",
+            out.to_str().unwrap(),
+            "--write-scenes",
+            scenes.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(ok, "{stdout}{stderr}");
+    for f in ["stability.csv", "stability.json", "summary.md"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+    assert!(scenes.read_dir().unwrap().count() > 0);
+    assert!(stdout.contains("rows"), "{stdout}");
+    // A second run into the same folder is refused rather than overwriting it.
+    let (ok, _, stderr) = marchmesh(
+        &[
+            "stability",
+            "--filter",
+            "scale/",
+            "--side",
+            "12",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(!ok && stderr.contains("already holds"), "{stderr}");
+    std::fs::remove_dir_all(&dir).ok();
+}
