@@ -565,44 +565,6 @@ fn huge_sphere_near_the_frame_origin_keeps_f32_precision() {
     }
 }
 
-/// Ericson's closest point on triangle `abc` to `p` (f64), for the brute-force mesh check.
-fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> DVec3 {
-    let ab = b - a;
-    let ac = c - a;
-    let ap = p - a;
-    let d1 = ab.dot(ap);
-    let d2 = ac.dot(ap);
-    if d1 <= 0.0 && d2 <= 0.0 {
-        return a;
-    }
-    let bp = p - b;
-    let d3 = ab.dot(bp);
-    let d4 = ac.dot(bp);
-    if d3 >= 0.0 && d4 <= d3 {
-        return b;
-    }
-    let vc = d1 * d4 - d3 * d2;
-    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
-        return a + ab * (d1 / (d1 - d3));
-    }
-    let cp = p - c;
-    let d5 = ab.dot(cp);
-    let d6 = ac.dot(cp);
-    if d6 >= 0.0 && d5 <= d6 {
-        return c;
-    }
-    let vb = d5 * d2 - d1 * d6;
-    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
-        return a + ac * (d2 / (d2 - d6));
-    }
-    let va = d3 * d6 - d5 * d4;
-    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
-        return b + (c - b) * ((d4 - d3) / ((d4 - d3) + (d5 - d6)));
-    }
-    let denom = 1.0 / (va + vb + vc);
-    a + ab * (vb * denom) + ac * (vc * denom)
-}
-
 #[test]
 fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
     let path =
@@ -637,7 +599,9 @@ fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
         let p = xf.transform_point3(local);
         let exact = tris
             .iter()
-            .map(|t| (p - closest_on_triangle(p, t[0], t[1], t[2])).length())
+            .map(|t| {
+                (p - marchmesh_bake::closest_point_on_triangle_f64(p, t[0], t[1], t[2])).length()
+            })
             .fold(f64::INFINITY, f64::min);
         let d = f.distance_f64(p);
         // Beyond tau (half the box diagonal) the node's value is capped/boxed: a lower bound.
