@@ -75,8 +75,11 @@ mod tests {
     #[cfg(target_os = "linux")]
     #[test]
     fn linux_reports_a_plausible_peak() {
-        let rss = peak_rss_bytes().expect("procfs");
-        assert!(rss > 100 * 1024, "{rss}");
-        assert!(current_rss_bytes().expect("procfs") <= rss);
+        // Other tests in this binary allocate and reset the high-water mark concurrently, so
+        // only read current before peak and check both are plausible.
+        let current = current_rss_bytes().expect("procfs");
+        let peak = peak_rss_bytes().expect("procfs");
+        assert!(current > 100 * 1024, "{current}");
+        assert!(peak > 100 * 1024, "{peak}");
     }
 }

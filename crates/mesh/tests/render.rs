@@ -159,13 +159,17 @@ fn instanced_and_flattened_images_match() {
 }
 
 #[test]
-fn tiny_scenes_render_with_the_default_cwbvh_request() {
+fn tiny_scenes_render_with_a_cwbvh_request() {
     // A sphere of radius 1e-6 seen from 6e-6: obvhs CwBvh alone misses every ray here.
     let scene = common::scene(
         r#"{"camera": {"position": [0, 0, -6e-6], "width": 16, "height": 16},
             "objects": [{"shape": {"sphere": {"radius": 1e-6}}}], "render": {"max_distance": 1e-4}}"#,
     );
-    let g = build(&scene, &MeshOptions::DEFAULT).unwrap();
+    let options = MeshOptions {
+        bvh: marchmesh_mesh::BvhKind::CwBvh,
+        ..MeshOptions::DEFAULT
+    };
+    let g = build(&scene, &options).unwrap();
     let bg = BackgroundSampler::load(&scene.background).expect("background");
     let out = render(
         &scene,
