@@ -86,6 +86,12 @@ pub(crate) struct RNode {
     kind: RKind,
 }
 
+/// Most iterative work (repetition cells walked plus smooth-union field evaluations) one
+/// query may spend before it gives up with `MaxSteps`: bounds the time of pathological but
+/// valid scenes (an infinite repetition of a squashed smooth union) to about a second per
+/// ray instead of hours.
+pub(crate) const MAX_WORK_PER_QUERY: u32 = 4_000_000;
+
 /// Most copies of a repeated child that may overlap one cell (see [`Repeat`]).
 pub(crate) const MAX_COPIES_PER_CELL: u32 = 4096;
 
@@ -612,7 +618,7 @@ impl Smooth {
         let mut steps = 0u32;
         while t < t_end {
             steps += 1;
-            if steps > self.max_steps {
+            if steps > self.max_steps || work.steps.saturating_add(steps) > MAX_WORK_PER_QUERY {
                 work.exhausted = true;
                 break;
             }
@@ -716,7 +722,7 @@ impl Repeat {
         let mut cells = 0u32;
         loop {
             cells += 1;
-            if cells > self.max_cells {
+            if cells > self.max_cells || work.steps.saturating_add(cells) > MAX_WORK_PER_QUERY {
                 work.exhausted = true;
                 break;
             }
