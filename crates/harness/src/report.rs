@@ -353,13 +353,7 @@ pub fn summary_markdown(res: &Results) -> String {
         s.push('\n');
     }
     // Tables per group and scene, in first-appearance order.
-    let mut order: Vec<(String, String)> = Vec::new();
-    for r in &res.rows {
-        let k = (r.group.clone(), r.scene.clone());
-        if !order.contains(&k) {
-            order.push(k);
-        }
-    }
+    let order = group_scenes(res);
     for (group, scene) in &order {
         let rows: Vec<&Row> = res
             .rows
@@ -663,13 +657,7 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let mut written = Vec::new();
     let slug = crate::bench::slug;
     // Time vs error per (group, scene).
-    let mut scenes: Vec<(String, String)> = Vec::new();
-    for r in &res.rows {
-        let k = (r.group.clone(), r.scene.clone());
-        if !scenes.contains(&k) {
-            scenes.push(k);
-        }
-    }
+    let scenes = group_scenes(res);
     for (g, sc) in &scenes {
         let pts: Vec<(String, f64, f64)> = res
             .rows
@@ -838,6 +826,18 @@ pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     back.write_csv(&dir.join("results.csv"))
         .map_err(|e| e.to_string())?;
     write_report(&back, dir)
+}
+
+/// The distinct `(group, scene)` pairs of a run, in first-appearance order.
+fn group_scenes(res: &Results) -> Vec<(String, String)> {
+    let mut order: Vec<(String, String)> = Vec::new();
+    for r in &res.rows {
+        let k = (r.group.clone(), r.scene.clone());
+        if !order.contains(&k) {
+            order.push(k);
+        }
+    }
+    order
 }
 
 #[cfg(test)]
