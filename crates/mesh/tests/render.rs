@@ -3,7 +3,7 @@
 
 mod common;
 
-use marchmesh_core::{BackgroundSampler, Geometry, RenderOptions, render};
+use marchmesh_core::Geometry;
 use marchmesh_mesh::{MeshError, MeshOptions, build};
 
 fn render_file(name: &str, side: u32) -> Result<marchmesh_core::RenderOutput, MeshError> {
@@ -12,12 +12,7 @@ fn render_file(name: &str, side: u32) -> Result<marchmesh_core::RenderOutput, Me
         .with_image_size(side, side)
         .expect("size");
     let g = build(&scene, &MeshOptions::DEFAULT)?;
-    let bg = BackgroundSampler::load(&scene.background).expect("background");
-    let opts = RenderOptions {
-        threads: 1,
-        ..Default::default()
-    };
-    Ok(render(&scene, &g, &bg, &opts, &|| {}).expect("render"))
+    Ok(common::render_1t(&scene, &g))
 }
 
 #[test]
@@ -73,18 +68,7 @@ fn mesh_scenes_render() {
         );
         let scene = common::scene(&json);
         let g = build(&scene, &MeshOptions::DEFAULT).unwrap_or_else(|e| panic!("{file}: {e}"));
-        let bg = BackgroundSampler::load(&scene.background).expect("background");
-        let out = render(
-            &scene,
-            &g,
-            &bg,
-            &RenderOptions {
-                threads: 1,
-                ..Default::default()
-            },
-            &|| {},
-        )
-        .expect("render");
+        let out = common::render_1t(&scene, &g);
         assert_eq!(out.stats.non_finite_pixels, 0, "{file}");
         assert!(out.stats.hits > 100, "{file}: {} hits", out.stats.hits);
         let report = marchmesh_core::Geometry::report(&g);
@@ -134,11 +118,6 @@ fn instanced_and_flattened_images_match() {
                 {"shape": {"plane": {}}, "transform": {"translate": [0, -0.9, 0]}}],
             "render": {"max_distance": 30}}"#,
     );
-    let bg = BackgroundSampler::load(&s.background).expect("background");
-    let opts = RenderOptions {
-        threads: 1,
-        ..Default::default()
-    };
     let inst = build(&s, &MeshOptions::DEFAULT).expect("instanced");
     let flat = build(
         &s,
@@ -149,8 +128,8 @@ fn instanced_and_flattened_images_match() {
     )
     .expect("flat");
     assert!(inst.instance_count() > 100);
-    let a = render(&s, &inst, &bg, &opts, &|| {}).expect("render");
-    let b = render(&s, &flat, &bg, &opts, &|| {}).expect("render");
+    let a = common::render_1t(&s, &inst);
+    let b = common::render_1t(&s, &flat);
     let acc = marchmesh_core::compare(&a.framebuffer, &b.framebuffer).expect("same size");
     assert!(acc.silhouette_mismatch_pct < 0.1, "{acc:#?}");
     assert!(acc.depth_rel_p95 < 1e-5, "{acc:#?}");
@@ -170,18 +149,7 @@ fn tiny_scenes_render_with_a_cwbvh_request() {
         ..MeshOptions::DEFAULT
     };
     let g = build(&scene, &options).unwrap();
-    let bg = BackgroundSampler::load(&scene.background).expect("background");
-    let out = render(
-        &scene,
-        &g,
-        &bg,
-        &RenderOptions {
-            threads: 1,
-            ..Default::default()
-        },
-        &|| {},
-    )
-    .unwrap();
+    let out = common::render_1t(&scene, &g);
     assert!(out.stats.hits > 8, "only {} hits", out.stats.hits);
     assert!(g.report().notes.iter().any(|n| n.contains("built as Bvh2")));
 }

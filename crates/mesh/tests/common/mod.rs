@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec3};
-use marchmesh_core::Ray;
+use marchmesh_core::{BackgroundSampler, Geometry, Ray, RenderOptions, RenderOutput, render};
 use marchmesh_scene::Scene;
 
 /// The repository's `scenes/` folder.
@@ -15,6 +15,16 @@ pub fn scenes_dir() -> PathBuf {
 /// Parses a scene given as JSON (mesh paths relative to `scenes/`).
 pub fn scene(json: &str) -> Scene {
     marchmesh_scene::parse_scene(json, "test", &scenes_dir()).expect("valid test scene")
+}
+
+/// Renders `scene` with `geometry` on one thread (deterministic counters).
+pub fn render_1t(scene: &Scene, geometry: &dyn Geometry) -> RenderOutput {
+    let bg = BackgroundSampler::load(&scene.background).expect("background");
+    let opts = RenderOptions {
+        threads: 1,
+        ..Default::default()
+    };
+    render(scene, geometry, &bg, &opts, &|| {}).expect("render")
 }
 
 /// Primary rays (render space) through an `n x n` grid of pixel centres of the scene camera.
