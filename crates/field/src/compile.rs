@@ -197,12 +197,7 @@ impl Compiler<'_> {
                 if conformal && r >= 16.0 * (c.length() - r).abs() {
                     // Rotation and uniform scale: a sphere in the parent frame, evaluated
                     // without moving the point into the local frame first (see Op::SphereAt).
-                    let ins = &mut self.instrs[idx];
-                    ins.to_local = Affine {
-                        lin: None,
-                        trans: [0.0; 3],
-                    };
-                    ins.dscale = 1.0;
+                    self.instrs[idx].evaluate_in_parent_frame();
                     (
                         Op::SphereAt {
                             c: a3(c),
@@ -224,12 +219,7 @@ impl Compiler<'_> {
                 let n_parent = a.transpose() * *normal;
                 let len = n_parent.length();
                 let offset_parent = (offset - normal.dot(inv.translation)) / len;
-                let ins = &mut self.instrs[idx];
-                ins.to_local = Affine {
-                    lin: None,
-                    trans: [0.0; 3],
-                };
-                ins.dscale = 1.0;
+                self.instrs[idx].evaluate_in_parent_frame();
                 (
                     Op::Plane {
                         n: a3(n_parent / len),

@@ -168,6 +168,19 @@ pub struct Instr<S> {
     pub op: Op<S>,
 }
 
+impl Instr<f64> {
+    /// Makes the node read points in its parent's frame unchanged (identity transform,
+    /// distance scale 1): for leaves whose parameters were already expressed in the parent
+    /// frame in f64 (spheres near the camera, planes), which avoids f32 cancellation.
+    pub fn evaluate_in_parent_frame(&mut self) {
+        self.to_local = Affine {
+            lin: None,
+            trans: [0.0; 3],
+        };
+        self.dscale = 1.0;
+    }
+}
+
 /// A mesh distance grid sampler, in the mesh's local frame.
 pub trait GridSampler: Send + Sync {
     /// Signed distance at a local point (f64).
