@@ -36,7 +36,7 @@ enum Command {
     },
     /// Print the JSON Schema of the scene format.
     Schema,
-    /// Run a benchmark suite and write bench-results/<run-id>/ (CSV, JSON, summary, plots, images).
+    /// Run a benchmark suite and write bench-results/RUN_ID/ (CSV, JSON, summary, plots, images).
     Bench(BenchArgs),
     /// Regenerate summary.md and plots/ of a run folder from its results.json.
     Report {
@@ -79,7 +79,7 @@ struct BenchArgs {
 
 #[derive(clap::Args)]
 struct StabilityArgs {
-    /// Output folder (default bench-results/stability-<UTC timestamp>/).
+    /// Output folder (default bench-results/stability-TIMESTAMP/ in UTC).
     #[arg(long)]
     out: Option<PathBuf>,
     /// Only cases whose id contains this.

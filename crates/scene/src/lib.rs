@@ -1,6 +1,6 @@
 //! The marchmesh scene model.
 //!
-//! A scene is a JSON file ([`format`]) that states only what it needs; [`load`] parses it,
+//! A scene is a JSON file ([`format`](mod@format)) that states only what it needs; [`load`] parses it,
 //! checks every value ([`validate`]) and returns the resolved [`Scene`] that backends build
 //! from. Errors name the file, the line and column (for syntax and type errors) and the JSON
 //! path of the offending value. The format is described for users in `scenes/README.md`;
