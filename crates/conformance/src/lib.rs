@@ -211,6 +211,45 @@ pub const CASES: &[Case] = &[
         json: r#"{"camera": {"position": [1e5, 1e5, 1e5], "look_at": [1e5, 1e5, 1.00005e5]},
             "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [1e5, 1e5, 1.00005e5]}}]}"#,
     },
+    // A ray starting inside a solid (scenes/README.md, "Rays that start inside a solid"):
+    // top-level objects are independent surfaces, so a ray sees the first boundary crossing
+    // of any object; a CSG node is one solid whose boundary is seen.
+    Case {
+        name: "camera_inside_one",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60},
+            "objects": [{"shape": {"sphere": {"radius": 5}}},
+                        {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [0, 0, 2]}, "material": {"color": [1, 0, 0]}}]}"#,
+    },
+    Case {
+        name: "camera_inside_two",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"sphere": {"radius": 3}}, "transform": {"translate": [0, 0, 0.5]}},
+                        {"shape": {"box": {"half_extents": [1.5, 1.2, 4]}}, "transform": {"translate": [0.4, 0.2, 0], "rotate_deg": [0, 15, 10]}, "material": {"color": [1, 0, 0]}}]}"#,
+    },
+    Case {
+        name: "camera_inside_subtraction",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"subtraction": {"children": [
+                {"shape": {"box": {"half_extents": [3, 3, 4]}}},
+                {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0.3, 0, 2.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
+    },
+    Case {
+        name: "camera_inside_union",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"union": {"children": [
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 0.5]}},
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [1.5, 0, 1.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
+    },
+    // A flattened, rotated sphere in front of a two-sided triangle, seen with a 5 degree
+    // field of view: sphere tracing once reported interior pixels of the triangle as misses.
+    Case {
+        name: "flat_ellipsoid_before_triangle",
+        json: r#"{"camera": {"position": [6, 8, -60], "look_at": [0, 0.5, 0], "vfov_deg": 5},
+            "objects": [
+                {"shape": {"triangle": {"vertices": [[-2, -1, 1], [2, -0.8, 1.5], [0.2, 2.2, 2]]}}},
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0.3, -1.2, -0.5],
+                    "rotate_deg": [-10, 0, 5], "scale": [0.6, 0.08, 0.5]}, "material": {"color": [1, 0, 0]}}]}"#,
+    },
     Case {
         name: "bunny",
         json: r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40},
@@ -332,7 +371,9 @@ macro_rules! conformance_suite {
         $crate::conformance_suite!(@cases $backend, $reference, $tol;
             sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
             nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
-            repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny);
+            repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one,
+            camera_inside_two, camera_inside_subtraction, camera_inside_union,
+            flat_ellipsoid_before_triangle, bunny);
     };
     (@cases $backend:expr, $reference:expr, $tol:expr; $($name:ident),* $(,)?) => {
         $(
@@ -355,7 +396,7 @@ mod tests {
 
     #[test]
     fn every_case_parses_and_is_listed_in_the_macro() {
-        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny";
+        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one, camera_inside_two, camera_inside_subtraction, camera_inside_union, flat_ellipsoid_before_triangle, bunny";
         let names: Vec<&str> = listed.split(", ").collect();
         assert_eq!(names.len(), CASES.len());
         for c in CASES {

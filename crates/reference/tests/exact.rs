@@ -435,3 +435,55 @@ fn far_off_axis_silhouette_matches_an_f64_pinhole() {
         "only {f32_mismatches} px differ with f32 rays"
     );
 }
+
+/// The semantics of scenes/README.md "Rays that start inside a solid": top-level objects are
+/// independent surfaces (the first boundary crossing of any object); a CSG node and a
+/// repetition (the union of whole copies) are one solid whose boundary is seen.
+#[test]
+fn rays_starting_inside_see_each_objects_boundary_but_one_boundary_per_csg_node() {
+    let t = |objects: &str, d: DVec3| {
+        let scene = scene_with(objects);
+        let h = geometry(&scene).closest_hit(&ray(DVec3::ZERO, d)).hit;
+        h.map(|h| h.t).unwrap_or(f32::INFINITY)
+    };
+    let near = |a: f32, b: f32| (a - b).abs() < 1e-5;
+    // A small sphere inside the big one the camera is in: seen (its entry at 1.5).
+    let got = t(
+        r#"{"shape": {"sphere": {"radius": 5}}},
+           {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [0, 0, 2]}}"#,
+        DVec3::Z,
+    );
+    assert!(near(got, 1.5), "{got}");
+    // Inside two top-level solids: the nearer exit.
+    let two = r#"{"shape": {"sphere": {"radius": 3}}}, {"shape": {"sphere": {"radius": 2}}}"#;
+    let got = t(two, DVec3::Z);
+    assert!(near(got, 2.0), "{got}");
+    // The same two as one union node: its boundary only.
+    let got = t(
+        &format!(r#"{{"shape": {{"union": {{"children": [{two}]}}}}}}"#),
+        DVec3::Z,
+    );
+    assert!(near(got, 3.0), "{got}");
+    // Inside a subtraction's solid part: the hole's surface (entering the removed sphere).
+    let got = t(
+        r#"{"shape": {"subtraction": {"children": [{"shape": {"box": {"half_extents": [4, 4, 4]}}},
+            {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0, 0, 2.5]}}]}}}"#,
+        DVec3::Z,
+    );
+    assert!(near(got, 1.5), "{got}");
+    // Inside overlapping copies of a repetition: the union of the copies ends at 1.8
+    // (the copy at x = 1 would be entered at 0.2 if the copies were separate surfaces).
+    let got = t(
+        r#"{"shape": {"repeat": {"period": [1, 0, 0], "count": [3, null, null],
+            "child": {"shape": {"sphere": {"radius": 0.8}}}}}}"#,
+        DVec3::X,
+    );
+    assert!(near(got, 1.8), "{got}");
+    // A union holding a triangle has no inside: the first surface of any child.
+    let got = t(
+        r#"{"shape": {"union": {"children": [{"shape": {"sphere": {"radius": 3}}},
+            {"shape": {"triangle": {"vertices": [[-1, -1, 1], [1, -1, 1], [0, 1, 1]]}}}]}}}"#,
+        DVec3::Z,
+    );
+    assert!(near(got, 1.0), "{got}");
+}
