@@ -312,10 +312,24 @@ pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
     }
 }
 
-/// Panics with every violated bound of `tol`.
+/// Cases whose silhouette must match the reference to [`TWO_PIXEL_SILHOUETTE`] pixels on every
+/// backend, whatever its tolerance says: minimal scenes where any disagreement is a bug in
+/// what the scene means, not an approximation (issue 10's camera-inside and sdf-holes scenes).
+pub const TWO_PIXEL_CASES: &[&str] = &["camera_inside_one", "flat_ellipsoid_before_triangle"];
+
+/// Silhouette pixels allowed on [`TWO_PIXEL_CASES`].
+pub const TWO_PIXEL_SILHOUETTE: usize = 2;
+
+/// Panics with every violated bound of `tol` (and of [`TWO_PIXEL_CASES`]).
 pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
     let a = &r.accuracy;
     let mut failures = Vec::new();
+    if TWO_PIXEL_CASES.contains(&name) && a.silhouette_mismatch > TWO_PIXEL_SILHOUETTE {
+        failures.push(format!(
+            "{} silhouette pixels > {TWO_PIXEL_SILHOUETTE}",
+            a.silhouette_mismatch
+        ));
+    }
     let material_pct = 100.0 * a.material_mismatch as f64 / a.both_hit.max(1) as f64;
     let exhaustion_pct = 100.0 * r.stats.step_exhaustion_rate();
     if a.non_finite > 0 || r.stats.non_finite_hits > 0 || r.stats.non_finite_pixels > 0 {
@@ -365,19 +379,35 @@ pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
 ///
 /// `backend` and `reference` are closures `Fn(&Scene) -> Result<Box<dyn Geometry>, E>`;
 /// `tolerance` is a closure `Fn(&str) -> Tolerance` giving the bounds for each case name.
+/// Two groups can be marked `#[ignore = reason]` for a backend that does not meet them yet:
+/// `ignore_inside_overlapping = "reason"` (a camera inside overlapping solids:
+/// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`) and
+/// `ignore_flat_ellipsoid = "reason"` (`flat_ellipsoid_before_triangle`).
 #[macro_export]
 macro_rules! conformance_suite {
-    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr $(,)?) => {
-        $crate::conformance_suite!(@cases $backend, $reference, $tol;
+    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr
+     $(, ignore_inside_overlapping = $inside:literal)? $(, ignore_flat_ellipsoid = $flat:literal)? $(,)?) => {
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [];
             sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
             nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
-            repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one,
-            camera_inside_two, camera_inside_subtraction, camera_inside_union,
-            flat_ellipsoid_before_triangle, bunny);
+            repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_subtraction,
+            bunny);
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($inside)?];
+            camera_inside_one, camera_inside_two, camera_inside_union);
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($flat)?];
+            flat_ellipsoid_before_triangle);
     };
-    (@cases $backend:expr, $reference:expr, $tol:expr; $($name:ident),* $(,)?) => {
+    (@group $backend:expr, $reference:expr, $tol:expr, []; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $backend, $reference, $tol, any(), ""; $($name),*);
+    };
+    (@group $backend:expr, $reference:expr, $tol:expr, [$reason:literal]; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $backend, $reference, $tol, all(), $reason; $($name),*);
+    };
+    (@cases $backend:expr, $reference:expr, $tol:expr, $ignore:meta, $reason:literal;
+     $($name:ident),* $(,)?) => {
         $(
             #[test]
+            #[cfg_attr($ignore, ignore = $reason)]
             fn $name() {
                 let name = stringify!($name);
                 let backend = $backend;

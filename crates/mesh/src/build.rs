@@ -260,9 +260,24 @@ fn visit<'a>(
             to_render: m,
             material: node.material,
         }),
+        NodeKind::Union(_) if camera_inside_union(node, parent, ctx) => {
+            // A union is one solid: a camera inside it sees its boundary, never the inner
+            // faces the children's own surfaces would show (scenes/README.md).
+            w.notes.push(format!(
+                "{}: the camera is inside this union: extracted as one surface so its inner faces stay hidden",
+                node.json_path
+            ));
+            w.placements.push(Placement {
+                node,
+                key: ShapeKey::Composite(node as *const Node as usize),
+                to_render: m,
+                material: node.material,
+            })
+        }
         NodeKind::Union(children) => {
             // Tracing the children's surfaces gives the union's first hit for rays starting
-            // outside every child (only rays starting inside see inner faces).
+            // outside every child; the arm above handles a camera inside. Secondary rays start
+            // on the union's boundary, outside every child.
             for c in children {
                 visit(c, m, ctx, w)?;
             }
@@ -299,6 +314,32 @@ fn visit<'a>(
         }
     }
     Ok(())
+}
+
+/// Whether the camera (the render-space origin) lies inside `node`, a bounded union of
+/// analytic solids whose parent-to-render transform is `parent`. Unions holding a plane,
+/// a mesh, a triangle or an infinite repetition are never extracted here (false).
+fn camera_inside_union(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
+    fn analytic_solids(n: &Node) -> bool {
+        match &n.kind {
+            NodeKind::Sphere { .. }
+            | NodeKind::Ellipsoid { .. }
+            | NodeKind::Box { .. }
+            | NodeKind::Cylinder { .. }
+            | NodeKind::Torus { .. } => true,
+            NodeKind::Plane { .. } | NodeKind::Triangle { .. } | NodeKind::Mesh { .. } => false,
+            NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
+                c.iter().all(analytic_solids)
+            }
+            NodeKind::SmoothUnion { children, .. } => children.iter().all(analytic_solids),
+            NodeKind::Repeat { child, .. } => analytic_solids(child),
+        }
+    }
+    if !analytic_solids(node) || node_bounds(node, ctx.mesh_bounds).is_none() {
+        return false;
+    }
+    marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
+        .is_ok_and(|f| f.distance_f64(DVec3::ZERO) < 0.0)
 }
 
 /// Cell offsets (repeat node's frame) of a repetition: all cells of finite axes; on infinite
