@@ -367,14 +367,15 @@ fn repeat_offsets(
                     .into(),
         });
     };
-    // Clipping check: the SDF semantics clip each copy to its cell.
+    // A child wider than its cell: copies overlap (the repetition is the union of whole
+    // copies, as in every backend); say so, since it often means a mistyped period.
     for a in 0..3 {
         if period[a] > 0.0
             && child_bounds.is_some()
             && (clo[a] < -period[a] * 0.5 - 1e-12 || chi[a] > period[a] * 0.5 + 1e-12)
         {
             w.notes.push(format!(
-                "{}: the child exceeds its repetition cell on axis {a}; the mesh backend instances whole copies (no clipping at cell borders)",
+                "{}: the child exceeds its repetition cell on axis {a}: neighbouring copies overlap (a repetition is the union of whole copies)",
                 node.json_path
             ));
             break;
