@@ -37,8 +37,8 @@ use std::time::Instant;
 
 use glam::{DAffine3, DVec3};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, OcclusionResult, PrimarySamples, Ray, RayWork, RenderSpace, Termination,
-    TraceResult,
+    Geometry, GeometryReport, Hit, OcclusionResult, PrimarySamples, Ray, RayWork, RenderSpace,
+    Termination, TraceResult,
 };
 use marchmesh_scene::Scene;
 

@@ -404,9 +404,14 @@ fn far_off_axis_silhouette_matches_an_f64_pinhole() {
     .unwrap();
     let truth = f64_pinhole_hits(&scene);
     let hits = truth.iter().filter(|h| **h).count();
-    assert!(hits > 10_000, "the sphere covers {hits} px; the case is broken");
+    assert!(
+        hits > 10_000,
+        "the sphere covers {hits} px; the case is broken"
+    );
     let rendered = |i: usize| out.framebuffer.depth[i].is_finite();
-    let mismatches = (0..truth.len()).filter(|&i| rendered(i) != truth[i]).count();
+    let mismatches = (0..truth.len())
+        .filter(|&i| rendered(i) != truth[i])
+        .count();
     assert!(
         mismatches <= 2,
         "{mismatches} silhouette pixels differ from the f64 pinhole"

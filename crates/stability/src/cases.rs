@@ -240,13 +240,7 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
             )],
             2.0 * d + 10.0,
         );
-        out.push(case(
-            "distance_off_axis",
-            "camera_distance",
-            d,
-            json,
-            2.0,
-        ));
+        out.push(case("distance_off_axis", "camera_distance", d, json, 2.0));
     }
 
     // Large coordinates: the scaled scene moved far from the origin (camera with it).

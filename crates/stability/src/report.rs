@@ -138,7 +138,10 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
         s,
         "| case | configuration | verdict | NaN | silhouette % | holes px | depth rel p95 | depth rel max | tail px depth / normal | normal deg mean | PSNR dB | exhaustion % | mean steps | render ms |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     for r in rows {
         match &r.metrics {
             Some(m) => {
