@@ -240,6 +240,12 @@ pub const CASES: &[Case] = &[
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 0.5]}},
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [1.5, 0, 1.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
     },
+    Case {
+        name: "camera_inside_repeat",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0.3, 0.2, 1], "vfov_deg": 80},
+            "objects": [{"shape": {"repeat": {"period": [1.2, 0, 1.2], "count": [3, null, 3],
+                "child": {"shape": {"sphere": {"radius": 1}}}}}}]}"#,
+    },
     // A flattened, rotated sphere in front of a two-sided triangle, seen with a 5 degree
     // field of view: sphere tracing once reported interior pixels of the triangle as misses.
     Case {
@@ -381,7 +387,7 @@ pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
 /// `tolerance` is a closure `Fn(&str) -> Tolerance` giving the bounds for each case name.
 /// Two groups can be marked `#[ignore = reason]` for a backend that does not meet them yet:
 /// `ignore_inside_overlapping = "reason"` (a camera inside overlapping solids:
-/// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`) and
+/// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`, `camera_inside_repeat`) and
 /// `ignore_flat_ellipsoid = "reason"` (`flat_ellipsoid_before_triangle`).
 #[macro_export]
 macro_rules! conformance_suite {
@@ -393,7 +399,7 @@ macro_rules! conformance_suite {
             repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_subtraction,
             bunny);
         $crate::conformance_suite!(@group $backend, $reference, $tol, [$($inside)?];
-            camera_inside_one, camera_inside_two, camera_inside_union);
+            camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat);
         $crate::conformance_suite!(@group $backend, $reference, $tol, [$($flat)?];
             flat_ellipsoid_before_triangle);
     };
@@ -426,7 +432,7 @@ mod tests {
 
     #[test]
     fn every_case_parses_and_is_listed_in_the_macro() {
-        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one, camera_inside_two, camera_inside_subtraction, camera_inside_union, flat_ellipsoid_before_triangle, bunny";
+        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one, camera_inside_two, camera_inside_subtraction, camera_inside_union, camera_inside_repeat, flat_ellipsoid_before_triangle, bunny";
         let names: Vec<&str> = listed.split(", ").collect();
         assert_eq!(names.len(), CASES.len());
         for c in CASES {

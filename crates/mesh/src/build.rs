@@ -260,9 +260,12 @@ fn visit<'a>(
             to_render: m,
             material: node.material,
         }),
-        NodeKind::Union(_) if camera_inside_union(node, parent, ctx) => {
-            // A union is one solid: a camera inside it sees its boundary, never the inner
-            // faces the children's own surfaces would show (scenes/README.md).
+        NodeKind::Union(_) | NodeKind::Repeat { .. }
+            if may_show_inner_faces(node, ctx) && camera_inside_solid(node, parent, ctx) =>
+        {
+            // A union (and a repetition, the union of its copies) is one solid: a camera
+            // inside it sees its boundary, never the inner faces that separately placed
+            // children or overlapping copies would show (scenes/README.md).
             w.notes.push(format!(
                 "{}: the camera is inside this union: extracted as one surface so its inner faces stay hidden",
                 node.json_path
@@ -316,10 +319,25 @@ fn visit<'a>(
     Ok(())
 }
 
-/// Whether the camera (the render-space origin) lies inside `node`, a bounded union of
-/// analytic solids whose parent-to-render transform is `parent`. Unions holding a plane,
-/// a mesh, a triangle or an infinite repetition are never extracted here (false).
-fn camera_inside_union(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
+/// Whether placing `node`'s parts separately can show faces inside the solid: always for a
+/// union, for a repetition only when the child exceeds its cell (copies overlap).
+fn may_show_inner_faces(node: &Node, ctx: &Ctx) -> bool {
+    match &node.kind {
+        NodeKind::Repeat { child, period, .. } => {
+            node_bounds(child, ctx.mesh_bounds).is_some_and(|(lo, hi)| {
+                (0..3).any(|a| {
+                    period[a] > 0.0 && (lo[a] < -0.5 * period[a] || hi[a] > 0.5 * period[a])
+                })
+            })
+        }
+        _ => true,
+    }
+}
+
+/// Whether the camera (the render-space origin) lies inside `node`, a bounded union or
+/// repetition of analytic solids whose parent-to-render transform is `parent`. Nodes holding
+/// a plane, a mesh, a triangle or an infinite repetition are never extracted here (false).
+fn camera_inside_solid(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
     fn analytic_solids(n: &Node) -> bool {
         match &n.kind {
             NodeKind::Sphere { .. }
