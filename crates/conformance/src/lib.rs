@@ -185,6 +185,17 @@ pub const CASES: &[Case] = &[
                 "child": {"shape": {"sphere": {"radius": 0.35}}}}}}]}"#
         ),
     },
+    // Copies wider than their cells: the union of whole copies, never clipped at the border
+    // (a clipped rendering of this scene differs on ~400 px at 256x256).
+    Case {
+        name: "repeat_overlapping",
+        json: concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"repeat": {"period": [1, 0, 1], "count": [3, null, 3],
+                "child": {"shape": {"sphere": {"radius": 0.45}}, "transform": {"translate": [0.3, 0, 0.2]}}}}}]}"#
+        ),
+    },
     Case {
         name: "repeat_infinite",
         json: r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50},
@@ -210,6 +221,51 @@ pub const CASES: &[Case] = &[
         name: "far_from_origin",
         json: r#"{"camera": {"position": [1e5, 1e5, 1e5], "look_at": [1e5, 1e5, 1.00005e5]},
             "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [1e5, 1e5, 1.00005e5]}}]}"#,
+    },
+    // A ray starting inside a solid (scenes/README.md, "Rays that start inside a solid"):
+    // top-level objects are independent surfaces, so a ray sees the first boundary crossing
+    // of any object; a CSG node is one solid whose boundary is seen.
+    Case {
+        name: "camera_inside_one",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60},
+            "objects": [{"shape": {"sphere": {"radius": 5}}},
+                        {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [0, 0, 2]}, "material": {"color": [1, 0, 0]}}]}"#,
+    },
+    Case {
+        name: "camera_inside_two",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"sphere": {"radius": 3}}, "transform": {"translate": [0, 0, 0.5]}},
+                        {"shape": {"box": {"half_extents": [1.5, 1.2, 4]}}, "transform": {"translate": [0.4, 0.2, 0], "rotate_deg": [0, 15, 10]}, "material": {"color": [1, 0, 0]}}]}"#,
+    },
+    Case {
+        name: "camera_inside_subtraction",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"subtraction": {"children": [
+                {"shape": {"box": {"half_extents": [3, 3, 4]}}},
+                {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0.3, 0, 2.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
+    },
+    Case {
+        name: "camera_inside_union",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+            "objects": [{"shape": {"union": {"children": [
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 0.5]}},
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [1.5, 0, 1.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
+    },
+    Case {
+        name: "camera_inside_repeat",
+        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0.3, 0.2, 1], "vfov_deg": 80},
+            "objects": [{"shape": {"repeat": {"period": [1.2, 0, 1.2], "count": [3, null, 3],
+                "child": {"shape": {"sphere": {"radius": 1}}}}}}]}"#,
+    },
+    // A flattened, rotated sphere in front of a two-sided triangle, seen with a 5 degree
+    // field of view: sphere tracing once reported interior pixels of the triangle as misses.
+    Case {
+        name: "flat_ellipsoid_before_triangle",
+        json: r#"{"camera": {"position": [6, 8, -60], "look_at": [0, 0.5, 0], "vfov_deg": 5},
+            "objects": [
+                {"shape": {"triangle": {"vertices": [[-2, -1, 1], [2, -0.8, 1.5], [0.2, 2.2, 2]]}}},
+                {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0.3, -1.2, -0.5],
+                    "rotate_deg": [-10, 0, 5], "scale": [0.6, 0.08, 0.5]}, "material": {"color": [1, 0, 0]}}]}"#,
     },
     Case {
         name: "bunny",
@@ -273,10 +329,24 @@ pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
     }
 }
 
-/// Panics with every violated bound of `tol`.
+/// Cases whose silhouette must match the reference to [`TWO_PIXEL_SILHOUETTE`] pixels on every
+/// backend, whatever its tolerance says: minimal scenes where any disagreement is a bug in
+/// what the scene means, not an approximation (issue 10's camera-inside and sdf-holes scenes).
+pub const TWO_PIXEL_CASES: &[&str] = &["camera_inside_one", "flat_ellipsoid_before_triangle"];
+
+/// Silhouette pixels allowed on [`TWO_PIXEL_CASES`].
+pub const TWO_PIXEL_SILHOUETTE: usize = 2;
+
+/// Panics with every violated bound of `tol` (and of [`TWO_PIXEL_CASES`]).
 pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
     let a = &r.accuracy;
     let mut failures = Vec::new();
+    if TWO_PIXEL_CASES.contains(&name) && a.silhouette_mismatch > TWO_PIXEL_SILHOUETTE {
+        failures.push(format!(
+            "{} silhouette pixels > {TWO_PIXEL_SILHOUETTE}",
+            a.silhouette_mismatch
+        ));
+    }
     let material_pct = 100.0 * a.material_mismatch as f64 / a.both_hit.max(1) as f64;
     let exhaustion_pct = 100.0 * r.stats.step_exhaustion_rate();
     if a.non_finite > 0 || r.stats.non_finite_hits > 0 || r.stats.non_finite_pixels > 0 {
@@ -326,17 +396,35 @@ pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
 ///
 /// `backend` and `reference` are closures `Fn(&Scene) -> Result<Box<dyn Geometry>, E>`;
 /// `tolerance` is a closure `Fn(&str) -> Tolerance` giving the bounds for each case name.
+/// Two groups can be marked `#[ignore = reason]` for a backend that does not meet them yet:
+/// `ignore_inside_overlapping = "reason"` (a camera inside overlapping solids:
+/// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`, `camera_inside_repeat`) and
+/// `ignore_flat_ellipsoid = "reason"` (`flat_ellipsoid_before_triangle`).
 #[macro_export]
 macro_rules! conformance_suite {
-    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr $(,)?) => {
-        $crate::conformance_suite!(@cases $backend, $reference, $tol;
+    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr
+     $(, ignore_inside_overlapping = $inside:literal)? $(, ignore_flat_ellipsoid = $flat:literal)? $(,)?) => {
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [];
             sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
             nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
-            repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny);
+            repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_subtraction,
+            bunny);
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($inside)?];
+            camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat);
+        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($flat)?];
+            flat_ellipsoid_before_triangle);
     };
-    (@cases $backend:expr, $reference:expr, $tol:expr; $($name:ident),* $(,)?) => {
+    (@group $backend:expr, $reference:expr, $tol:expr, []; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $backend, $reference, $tol, any(), ""; $($name),*);
+    };
+    (@group $backend:expr, $reference:expr, $tol:expr, [$reason:literal]; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $backend, $reference, $tol, all(), $reason; $($name),*);
+    };
+    (@cases $backend:expr, $reference:expr, $tol:expr, $ignore:meta, $reason:literal;
+     $($name:ident),* $(,)?) => {
         $(
             #[test]
+            #[cfg_attr($ignore, ignore = $reason)]
             fn $name() {
                 let name = stringify!($name);
                 let backend = $backend;
@@ -355,7 +443,7 @@ mod tests {
 
     #[test]
     fn every_case_parses_and_is_listed_in_the_macro() {
-        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_infinite, tiny_scale, huge_scale, far_from_origin, bunny";
+        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one, camera_inside_two, camera_inside_subtraction, camera_inside_union, camera_inside_repeat, flat_ellipsoid_before_triangle, bunny";
         let names: Vec<&str> = listed.split(", ").collect();
         assert_eq!(names.len(), CASES.len());
         for c in CASES {

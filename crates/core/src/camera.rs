@@ -1,6 +1,6 @@
 //! Primary ray generation and the Halton sample sequence.
 
-use glam::DVec2;
+use glam::{DVec2, DVec3};
 use marchmesh_scene::Camera;
 
 use crate::geometry::Ray;
@@ -31,10 +31,17 @@ pub fn sample_offset(sample: u32) -> DVec2 {
     }
 }
 
+/// Exact unit direction (f64, render space) of the camera ray through pixel `(column, row)`
+/// (row 0 at the top) at sub-pixel `offset`: the README's camera model, before any rounding.
+pub fn primary_direction(camera: &Camera, column: u32, row: u32, offset: DVec2) -> DVec3 {
+    camera.direction(column as f64 + offset.x, row as f64 + offset.y)
+}
+
 /// Primary ray through pixel `(column, row)` (row 0 at the top) at sub-pixel `offset`, in render
-/// space (camera at the origin). `t_max` is the scene's maximum distance.
+/// space (camera at the origin): [`primary_direction`] rounded to f32. `t_max` is the scene's
+/// maximum distance.
 pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max: f64) -> Ray {
-    let d = camera.direction(column as f64 + offset.x, row as f64 + offset.y);
+    let d = primary_direction(camera, column, row, offset);
     Ray {
         origin: glam::Vec3::ZERO,
         dir: d.as_vec3().normalize(),
@@ -43,10 +50,41 @@ pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max:
     }
 }
 
+/// The camera samples behind one batch of primary rays (one image row), so a backend that
+/// computes in f64 can trace the exact camera ray instead of widening its f32 rounding
+/// (which turns an off-axis ray by up to ~3e-8 rad: whole silhouette pixels at 1e5 units).
+///
+/// Ray `i` of the batch is anti-aliasing sample `i / width` ([`sample_offset`]) of pixel
+/// column `i % width` in `row`, and starts at the camera (the render-space origin).
+#[derive(Debug, Clone, Copy)]
+pub struct PrimarySamples<'a> {
+    camera: &'a Camera,
+    row: u32,
+}
+
+impl<'a> PrimarySamples<'a> {
+    /// The samples of image row `row` of `camera`, ordered as the integrator batches them.
+    pub fn row(camera: &'a Camera, row: u32) -> Self {
+        Self { camera, row }
+    }
+
+    /// Exact unit direction (f64, render space) of ray `index` of the batch; the batch's f32
+    /// ray `index` is its rounding. An index past the row's samples wraps to further samples.
+    pub fn direction(&self, index: usize) -> DVec3 {
+        let width = self.camera.width.max(1) as usize;
+        let sample = u32::try_from(index / width).unwrap_or(u32::MAX);
+        primary_direction(
+            self.camera,
+            (index % width) as u32,
+            self.row,
+            sample_offset(sample),
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::DVec3;
 
     fn study_camera() -> Camera {
         // The source study: 1x1 viewport at distance 1, looking along +z.
@@ -98,6 +136,30 @@ mod tests {
         for s in 1..64 {
             let o = sample_offset(s);
             assert!((0.0..1.0).contains(&o.x) && (0.0..1.0).contains(&o.y));
+        }
+    }
+
+    #[test]
+    fn primary_samples_are_the_exact_directions_the_f32_rays_round() {
+        let cam = Camera::look_at(
+            DVec3::new(1.0, 2.0, -3.0),
+            DVec3::new(0.3, 0.1, 0.7),
+            DVec3::Y,
+            35.0,
+            7,
+            5,
+        )
+        .unwrap();
+        let samples = PrimarySamples::row(&cam, 3);
+        for s in 0..3u32 {
+            for col in 0..7u32 {
+                let exact = samples.direction((s * 7 + col) as usize);
+                let expect = primary_direction(&cam, col, 3, sample_offset(s));
+                assert_eq!(exact, expect);
+                assert!((exact.length() - 1.0).abs() < 1e-15);
+                let ray = primary_ray(&cam, col, 3, sample_offset(s), 10.0);
+                assert!((ray.dir.as_dvec3() - exact).length() < 1e-6);
+            }
         }
     }
 }

@@ -28,17 +28,31 @@ pub struct Accuracy {
     pub depth_rel_mean: f64,
     /// 95th percentile of |depth error| / reference depth.
     pub depth_rel_p95: f64,
+    /// Largest |depth error| / reference depth: a few wrong pixels hide below the p95.
+    pub depth_rel_max: f64,
+    /// Pixels hit by both whose relative depth error exceeds [`DEPTH_REL_TAIL`].
+    pub depth_rel_tail_px: usize,
     /// Mean angle between normals in degrees.
     pub normal_deg_mean: f64,
     /// 95th percentile of the normal angle error in degrees.
     pub normal_deg_p95: f64,
     /// Largest normal angle error in degrees.
     pub normal_deg_max: f64,
+    /// Pixels hit by both whose normals differ by more than [`NORMAL_DEG_TAIL`] degrees.
+    pub normal_deg_tail_px: usize,
     /// Peak signal-to-noise ratio of the 8-bit colour images in dB (infinite if identical).
     pub psnr_db: f64,
     /// NaN or infinite values in the test render's colour, or in its depth where it hit.
     pub non_finite: usize,
 }
+
+/// Relative depth error beyond which a pixel counts in [`Accuracy::depth_rel_tail_px`]: 1e-3,
+/// the stability study's "exact" bound on the p95.
+pub const DEPTH_REL_TAIL: f64 = 1e-3;
+
+/// Normal angle error in degrees beyond which a pixel counts in
+/// [`Accuracy::normal_deg_tail_px`]: 5, the stability study's "degraded" bound on the mean.
+pub const NORMAL_DEG_TAIL: f64 = 5.0;
 
 /// Why two framebuffers cannot be compared.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -121,6 +135,9 @@ pub fn compare(test: &Framebuffer, reference: &Framebuffer) -> Result<Accuracy, 
     a.normal_deg_mean = mean(&normal_deg);
     a.depth_abs_max = depth_abs.iter().copied().fold(0.0, f64::max);
     a.normal_deg_max = normal_deg.iter().copied().fold(0.0, f64::max);
+    a.depth_rel_max = depth_rel.iter().copied().fold(0.0, f64::max);
+    a.depth_rel_tail_px = depth_rel.iter().filter(|e| **e > DEPTH_REL_TAIL).count();
+    a.normal_deg_tail_px = normal_deg.iter().filter(|e| **e > NORMAL_DEG_TAIL).count();
     a.depth_abs_p95 = quantile(&mut depth_abs, 0.95);
     a.depth_rel_p95 = quantile(&mut depth_rel, 0.95);
     a.normal_deg_p95 = quantile(&mut normal_deg, 0.95);
@@ -187,7 +204,30 @@ mod tests {
         assert!((acc.depth_rel_p95 - 0.5).abs() < 1e-9);
         assert!((acc.normal_deg_max - 45.0).abs() < 1e-4);
         assert!((acc.normal_deg_mean - 15.0).abs() < 1e-4);
+        assert!((acc.depth_rel_max - 0.5).abs() < 1e-9);
+        assert_eq!(acc.depth_rel_tail_px, 1);
+        assert_eq!(acc.normal_deg_tail_px, 1);
         assert!(acc.psnr_db.is_finite());
+    }
+
+    #[test]
+    fn tail_counts_see_the_few_large_errors_a_p95_hides() {
+        // 100 pixels: 97 exact, 3 with a 20% depth error and a 90-degree normal.
+        let r = fb_with(&[10.0; 100], &[Vec3::Z; 100]);
+        let mut depths = [10.0f32; 100];
+        let mut normals = [Vec3::Z; 100];
+        for i in [3, 50, 97] {
+            depths[i] = 12.0;
+            normals[i] = Vec3::X;
+        }
+        // Just inside both bounds: not counted.
+        depths[10] = 10.0 + 0.9e-2;
+        normals[10] = Vec3::new(0.0, 4.9f32.to_radians().sin(), 4.9f32.to_radians().cos());
+        let acc = compare(&fb_with(&depths, &normals), &r).unwrap();
+        assert!(acc.depth_rel_p95 < 1e-3, "the p95 hides them: {acc:?}");
+        assert!((acc.depth_rel_max - 0.2).abs() < 1e-6);
+        assert_eq!(acc.depth_rel_tail_px, 3);
+        assert_eq!(acc.normal_deg_tail_px, 3);
     }
 
     #[test]

@@ -10,6 +10,8 @@
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_scene::{MaterialId, Scene};
 
+use crate::camera::PrimarySamples;
+
 /// A ray in render space. `dir` is unit length; valid hits have `t_min <= t <= t_max`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ray {
@@ -132,6 +134,21 @@ pub trait Geometry: Send + Sync {
         for (r, o) in rays.iter().zip(out.iter_mut()) {
             *o = self.closest_hit(r);
         }
+    }
+
+    /// [`Geometry::closest_hits`] for one row's primary rays, with the camera samples they
+    /// were rounded from: `rays[i]` is the f32 rounding of the exact camera ray
+    /// `samples.direction(i)` from the origin. The default ignores `samples` (an f32 backend
+    /// pays nothing); a backend that computes in f64 (the reference) overrides it to trace the
+    /// exact camera rays, so ground truth is exact for the camera model, not for its rounding.
+    fn closest_hits_primary(
+        &self,
+        rays: &[Ray],
+        samples: PrimarySamples<'_>,
+        out: &mut [TraceResult],
+    ) {
+        let _ = samples;
+        self.closest_hits(rays, out);
     }
 
     /// [`Geometry::occluded`] for many rays.

@@ -16,7 +16,7 @@ use marchmesh_scene::{Light, Material, Scene};
 use rayon::prelude::*;
 
 use crate::background::BackgroundSampler;
-use crate::camera::{primary_ray, sample_offset};
+use crate::camera::{PrimarySamples, primary_ray, sample_offset};
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::{Geometry, OcclusionResult, Ray, RayWork, Termination, TraceResult};
 use crate::stats::RenderStats;
@@ -280,10 +280,14 @@ fn trace_row(
     while !paths.is_empty() {
         results.clear();
         results.resize(paths.len(), TraceResult::default());
-        geometry.closest_hits(
-            &paths.iter().map(|p| p.ray).collect::<Vec<_>>(),
-            &mut results,
-        );
+        let rays = paths.iter().map(|p| p.ray).collect::<Vec<_>>();
+        if depth == 0 {
+            // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
+            let samples = PrimarySamples::row(&scene.camera, row);
+            geometry.closest_hits_primary(&rays, samples, &mut results);
+        } else {
+            geometry.closest_hits(&rays, &mut results);
+        }
         shadow_rays.clear();
         pending.clear();
         next.clear();

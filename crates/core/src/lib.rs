@@ -15,6 +15,7 @@ pub mod integrator;
 pub mod stats;
 
 pub use background::{BackgroundError, BackgroundSampler};
+pub use camera::PrimarySamples;
 pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;

@@ -254,3 +254,69 @@ fn render_refuses_buffers_over_the_memory_limit() {
     .unwrap_err();
     assert!(err.to_string().contains("over the limit"), "{err}");
 }
+
+/// Checks that each primary batch's `PrimarySamples` are the exact rays the f32 rays round,
+/// in the documented order (sample-major, then column), and counts the primary batches.
+struct PrimaryOrderProbe {
+    batches: std::sync::atomic::AtomicUsize,
+    rays: std::sync::atomic::AtomicUsize,
+}
+
+impl Geometry for PrimaryOrderProbe {
+    fn closest_hit(&self, _ray: &Ray) -> TraceResult {
+        TraceResult::default()
+    }
+
+    fn occluded(&self, _ray: &Ray) -> OcclusionResult {
+        OcclusionResult::default()
+    }
+
+    fn closest_hits_primary(
+        &self,
+        rays: &[Ray],
+        samples: marchmesh_core::PrimarySamples<'_>,
+        out: &mut [TraceResult],
+    ) {
+        for (i, r) in rays.iter().enumerate() {
+            let exact = samples.direction(i);
+            assert!(
+                (r.dir.as_dvec3() - exact).length() < 1e-6,
+                "ray {i}: f32 {:?} is not the rounding of {exact:?}",
+                r.dir
+            );
+            assert_eq!(r.origin, Vec3::ZERO);
+        }
+        self.batches
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        self.rays
+            .fetch_add(rays.len(), std::sync::atomic::Ordering::Relaxed);
+        self.closest_hits(rays, out);
+    }
+
+    fn report(&self) -> GeometryReport {
+        GeometryReport::default()
+    }
+}
+
+#[test]
+fn primary_batches_carry_their_exact_camera_samples_in_order() {
+    let scene = parse_scene(
+        r#"{"camera": {"position": [3, 1, -2], "look_at": [0, 0.5, 1], "vfov_deg": 50, "width": 13, "height": 7},
+            "objects": [{"shape": {"sphere": {}}}], "render": {"samples_per_pixel": 3}}"#,
+        "<test>",
+        std::path::Path::new("."),
+    )
+    .unwrap();
+    let probe = PrimaryOrderProbe {
+        batches: 0.into(),
+        rays: 0.into(),
+    };
+    let bg = BackgroundSampler::load(&scene.background).unwrap();
+    let opts = RenderOptions {
+        threads: 1,
+        ..Default::default()
+    };
+    render(&scene, &probe, &bg, &opts, &|| {}).unwrap();
+    assert_eq!(probe.batches.into_inner(), 7, "one primary batch per row");
+    assert_eq!(probe.rays.into_inner(), 13 * 7 * 3);
+}

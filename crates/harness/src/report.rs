@@ -43,6 +43,14 @@ pub fn bytes(b: u64) -> String {
     }
 }
 
+/// `depth / normal` tail pixel counts of a row, `n/a` without a reference.
+fn tail_px(r: &Row) -> String {
+    match (r.depth_err_rel_tail_px, r.normal_err_deg_tail_px) {
+        (Some(d), Some(n)) => format!("{d} / {n}"),
+        _ => "n/a".into(),
+    }
+}
+
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or("n/a".into(), |x| {
         if x != 0.0 && (x.abs() < 1e-3 || x.abs() >= 1e6) {
@@ -319,7 +327,7 @@ pub fn summary_markdown(res: &Results) -> String {
     );
     let _ = writeln!(
         s,
-        "Times are medians of the timed repeats after one untimed warm-up, with the order-statistic 95% confidence interval of the median. Accuracy is against the exact reference render at the same camera: silhouette = % of pixels hit by only one of the two, depth error p95 relative to the diagonal of the visible scene, normal error in degrees, PSNR of the 8-bit images (100 = identical). Memory is the representation's bytes as reported by the backend; heap columns are the peak heap above the phase's start (counting allocator), the render's including its framebuffers.\n"
+        "Times are medians of the timed repeats after one untimed warm-up, with the order-statistic 95% confidence interval of the median. Accuracy is against the exact reference render at the same camera: silhouette = % of pixels hit by only one of the two, depth error p95 relative to the diagonal of the visible scene, normal error in degrees, PSNR of the 8-bit images (100 = identical); rare large errors a p95 hides show as the largest depth error relative to the reference depth and the tail counts: pixels beyond 1e-3 relative depth / beyond 5 degrees normal. Memory is the representation's bytes as reported by the backend; heap columns are the peak heap above the phase's start (counting allocator), the render's including its framebuffers.\n"
     );
     for f in &res.failures {
         let _ = writeln!(s, "- failed: `{}`: {}", f.config_id, f.error);
@@ -363,16 +371,16 @@ pub fn summary_markdown(res: &Results) -> String {
         let _ = writeln!(s, "## {group} / {scene}\n");
         let _ = writeln!(
             s,
-            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
+            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | depth rel max | tail px depth / normal | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
         );
         let _ = writeln!(
             s,
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &rows {
             let _ = writeln!(
                 s,
-                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
+                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
                 r.backend,
                 r.quality,
                 r.width,
@@ -389,6 +397,8 @@ pub fn summary_markdown(res: &Results) -> String {
                 opt(r.silhouette_mismatch_pct, 3),
                 opt(r.depth_err_p95_rel_scene, 5),
                 opt(r.normal_err_deg_mean, 2),
+                opt(r.depth_err_rel_max, 4),
+                tail_px(r),
                 opt(r.psnr_db, 1),
                 opt(r.ssim, 4),
                 r.steps_mean,

@@ -88,6 +88,19 @@ pub struct Row {
     pub normal_err_deg_mean: Option<f64>,
     /// 95th percentile normal angle error, degrees.
     pub normal_err_deg_p95: Option<f64>,
+    /// Largest |depth - reference depth| / reference depth where both hit (the tail a p95
+    /// hides). Empty in results written before the column existed.
+    #[serde(default)]
+    pub depth_err_rel_max: Option<f64>,
+    /// Pixels hit by both with relative depth error above 1e-3 (`core::compare::DEPTH_REL_TAIL`).
+    #[serde(default)]
+    pub depth_err_rel_tail_px: Option<u64>,
+    /// Largest normal angle error, degrees.
+    #[serde(default)]
+    pub normal_err_deg_max: Option<f64>,
+    /// Pixels hit by both with normal error above 5 degrees (`core::compare::NORMAL_DEG_TAIL`).
+    #[serde(default)]
+    pub normal_err_deg_tail_px: Option<u64>,
     /// 8-bit PSNR against the reference image, dB (capped at 100 = identical).
     pub psnr_db: Option<f64>,
     /// Mean SSIM of the luma (8x8 windows, stride 4) against the reference image.
@@ -139,6 +152,10 @@ pub const ACCURACY_COLUMNS: &[&str] = &[
     "scene_size_world",
     "normal_err_deg_mean",
     "normal_err_deg_p95",
+    "depth_err_rel_max",
+    "depth_err_rel_tail_px",
+    "normal_err_deg_max",
+    "normal_err_deg_tail_px",
     "psnr_db",
     "ssim",
 ];
@@ -359,6 +376,10 @@ fn example_row() -> Row {
         scene_size_world: None,
         normal_err_deg_mean: None,
         normal_err_deg_p95: None,
+        depth_err_rel_max: None,
+        depth_err_rel_tail_px: None,
+        normal_err_deg_max: None,
+        normal_err_deg_tail_px: None,
         psnr_db: None,
         ssim: None,
         steps_mean: 0.0,
@@ -493,7 +514,7 @@ mod tests {
     #[test]
     fn header_has_units_and_every_field() {
         let h = csv_header();
-        assert_eq!(h.len(), 48);
+        assert_eq!(h.len(), 52);
         for c in [
             "render_ms_median",
             "peak_heap_bytes_render",

@@ -260,9 +260,27 @@ fn visit<'a>(
             to_render: m,
             material: node.material,
         }),
+        NodeKind::Union(_) | NodeKind::Repeat { .. }
+            if may_show_inner_faces(node, ctx) && camera_inside_solid(node, parent, ctx) =>
+        {
+            // A union (and a repetition, the union of its copies) is one solid: a camera
+            // inside it sees its boundary, never the inner faces that separately placed
+            // children or overlapping copies would show (scenes/README.md).
+            w.notes.push(format!(
+                "{}: the camera is inside this union: extracted as one surface so its inner faces stay hidden",
+                node.json_path
+            ));
+            w.placements.push(Placement {
+                node,
+                key: ShapeKey::Composite(node as *const Node as usize),
+                to_render: m,
+                material: node.material,
+            })
+        }
         NodeKind::Union(children) => {
             // Tracing the children's surfaces gives the union's first hit for rays starting
-            // outside every child (only rays starting inside see inner faces).
+            // outside every child; the arm above handles a camera inside. Secondary rays start
+            // on the union's boundary, outside every child.
             for c in children {
                 visit(c, m, ctx, w)?;
             }
@@ -301,6 +319,47 @@ fn visit<'a>(
     Ok(())
 }
 
+/// Whether placing `node`'s parts separately can show faces inside the solid: always for a
+/// union, for a repetition only when the child exceeds its cell (copies overlap).
+fn may_show_inner_faces(node: &Node, ctx: &Ctx) -> bool {
+    match &node.kind {
+        NodeKind::Repeat { child, period, .. } => {
+            node_bounds(child, ctx.mesh_bounds).is_some_and(|(lo, hi)| {
+                (0..3).any(|a| {
+                    period[a] > 0.0 && (lo[a] < -0.5 * period[a] || hi[a] > 0.5 * period[a])
+                })
+            })
+        }
+        _ => true,
+    }
+}
+
+/// Whether the camera (the render-space origin) lies inside `node`, a bounded union or
+/// repetition of analytic solids whose parent-to-render transform is `parent`. Nodes holding
+/// a plane, a mesh, a triangle or an infinite repetition are never extracted here (false).
+fn camera_inside_solid(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
+    fn analytic_solids(n: &Node) -> bool {
+        match &n.kind {
+            NodeKind::Sphere { .. }
+            | NodeKind::Ellipsoid { .. }
+            | NodeKind::Box { .. }
+            | NodeKind::Cylinder { .. }
+            | NodeKind::Torus { .. } => true,
+            NodeKind::Plane { .. } | NodeKind::Triangle { .. } | NodeKind::Mesh { .. } => false,
+            NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
+                c.iter().all(analytic_solids)
+            }
+            NodeKind::SmoothUnion { children, .. } => children.iter().all(analytic_solids),
+            NodeKind::Repeat { child, .. } => analytic_solids(child),
+        }
+    }
+    if !analytic_solids(node) || node_bounds(node, ctx.mesh_bounds).is_none() {
+        return false;
+    }
+    marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
+        .is_ok_and(|f| f.distance_f64(DVec3::ZERO) < 0.0)
+}
+
 /// Cell offsets (repeat node's frame) of a repetition: all cells of finite axes; on infinite
 /// axes the cells whose copy of the child comes within `max_distance` of the camera.
 fn repeat_offsets(
@@ -326,14 +385,15 @@ fn repeat_offsets(
                     .into(),
         });
     };
-    // Clipping check: the SDF semantics clip each copy to its cell.
+    // A child wider than its cell: copies overlap (the repetition is the union of whole
+    // copies, as in every backend); say so, since it often means a mistyped period.
     for a in 0..3 {
         if period[a] > 0.0
             && child_bounds.is_some()
             && (clo[a] < -period[a] * 0.5 - 1e-12 || chi[a] > period[a] * 0.5 + 1e-12)
         {
             w.notes.push(format!(
-                "{}: the child exceeds its repetition cell on axis {a}; the mesh backend instances whole copies (no clipping at cell borders)",
+                "{}: the child exceeds its repetition cell on axis {a}: neighbouring copies overlap (a repetition is the union of whole copies)",
                 node.json_path
             ));
             break;

@@ -52,6 +52,8 @@ pub(crate) struct Repeat {
     child_bounds: (DVec3, DVec3),
     /// Neighbour offsets whose copies can reach into a cell, per axis.
     reach: [(i64, i64); 3],
+    /// Some copy reaches beyond its cell (`reach` is not all zero), so copies may overlap.
+    copies_overlap: bool,
     max_cells: u32,
 }
 
@@ -324,6 +326,7 @@ impl Compiler<'_> {
                     range,
                     child_bounds: cb,
                     reach,
+                    copies_overlap: reach.iter().any(|r| *r != (0, 0)),
                     max_cells: self.options.max_repeat_cells,
                 };
                 let solid = rep.child.solid;
@@ -460,7 +463,10 @@ impl RNode {
                     material: self.material,
                 })
             }
-            RKind::Union(children) => {
+            // A union of solids is one solid (a ray starting inside sees its boundary, not
+            // the inner faces): the spans arm below. A union holding a surface (triangle,
+            // open mesh) has no inside: the first surface of any child.
+            RKind::Union(children) if !self.solid => {
                 let mut best: Option<Boundary> = None;
                 for c in children {
                     let hi = best.map_or(t_max, |b| b.t);
@@ -789,6 +795,18 @@ impl Repeat {
         t_max: f64,
         work: &mut Work,
     ) -> Option<Boundary> {
+        // The repetition is the union of whole copies. Copies that fit their cells are
+        // disjoint, so the first surface of any copy is the union's; overlapping solid
+        // copies seen from inside one need the union's spans (inner faces are not seen).
+        if self.copies_overlap && self.child.solid {
+            let starts_inside = self
+                .spans(o, d, t_min, t_min, work)
+                .iter()
+                .any(|s| s.enter.t <= t_min && t_min < s.exit.t);
+            if starts_inside {
+                return first_boundary(&self.spans(o, d, t_min, t_max, work), t_min, t_max);
+            }
+        }
         let (a, b) = self.range_t(o, d, t_min, t_max)?;
         let best = std::cell::Cell::new(None::<Boundary>);
         self.walk(

@@ -260,7 +260,8 @@ pub struct ObjectSpec {
 pub enum ShapeSpec {
     /// A sphere centred on the origin.
     Sphere(SphereSpec),
-    /// An infinite plane `dot(normal, p) = offset`; the solid side is opposite the normal.
+    /// An infinite plane `dot(normalize(normal), p) = offset`: `offset` is along the *unit*
+    /// normal, whatever the length of `normal`; the solid side is opposite the normal.
     Plane(PlaneSpec),
     /// A single two-sided triangle (no volume).
     Triangle(TriangleSpec),
@@ -379,16 +380,18 @@ pub struct CsgSpec {
 pub struct SmoothUnionSpec {
     /// At least one child.
     pub children: Vec<ObjectSpec>,
-    /// Blend radius k in world units, > 0: the polynomial smooth minimum
-    /// `h = max(k - |a - b|, 0) / k; min(a, b) - h^2 k / 4` (Quilez).
+    /// Blend radius k, > 0, in the smooth union's local units (before its transform): a
+    /// `scale` on this node or an ancestor scales the blend with the shape, as every backend
+    /// renders it. The polynomial smooth minimum `h = max(k - |a - b|, 0) / k;
+    /// min(a, b) - h^2 k / 4` (Quilez).
     pub blend_radius: f64,
 }
 
 /// Domain repetition: copies of `child` at `index * period` on each repeated axis.
 ///
-/// The child should fit inside one cell (`|x| <= period/2` on each repeated axis); a child that
-/// crosses its cell is clipped at the cell border (the semantics of `p - period * round(p /
-/// period)`), and the mesh backend, which instances whole copies, then differs.
+/// The result is the union of whole copies: a child larger than its cell is not clipped at
+/// the cell border, neighbouring copies overlap (every backend renders this; it is not the
+/// naive `p - period * round(p / period)` fold, which would clip).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RepeatSpec {

@@ -164,7 +164,7 @@ pub enum NodeKind {
         /// Radius > 0.
         radius: f64,
     },
-    /// Plane `dot(normal, p) = offset`, solid below.
+    /// Plane `dot(normal, p) = offset` with the normal made unit length, solid below.
     Plane {
         /// Unit normal.
         normal: DVec3,

@@ -225,6 +225,24 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         out.push(case("distance", "camera_distance", d, json, 2.0));
     }
 
+    // Distance off-axis: the same sphere seen along the (1, 1, -1) diagonal, where rounding a
+    // camera ray to f32 turns it by ~2e-8 rad (on-axis that rounding vanishes); the exact
+    // reference traces the f64 camera rays, so any silhouette error here is the backend's.
+    for d in [10.0, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7] {
+        let vfov = 2.0 * (1.6f64 / d).atan().to_degrees();
+        let c = d / 3f64.sqrt();
+        let json = scene(
+            camera([c, c, -c], [0.0, 0.0, 0.0], vfov),
+            vec![obj(
+                json!({ "sphere": { "radius": 1 } }),
+                [0.0, 0.0, 0.0],
+                [0.9, 0.8, 0.3],
+            )],
+            2.0 * d + 10.0,
+        );
+        out.push(case("distance_off_axis", "camera_distance", d, json, 2.0));
+    }
+
     // Large coordinates: the scaled scene moved far from the origin (camera with it).
     for o in [0.0, 1e3, 1e5, 1e7] {
         out.push(case("far_origin", "offset", o, scaled_scene(1.0, o), 6.0));

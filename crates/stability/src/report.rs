@@ -10,7 +10,7 @@ use crate::cases::fmt_value;
 use crate::runner::{CaseError, Row, Verdict};
 
 /// CSV header; one row per case x configuration, units in the names.
-pub const CSV_HEADER: &str = "case,family,parameter,value,backend,configuration,verdict,non_finite,silhouette_mismatch_pct,interior_holes_px,depth_rel_p95,depth_max_over_scene,normal_deg_mean,normal_deg_p95,psnr_db,step_exhaustion_pct,mean_steps,build_ms,render_ms,memory_bytes,error";
+pub const CSV_HEADER: &str = "case,family,parameter,value,backend,configuration,verdict,non_finite,silhouette_mismatch_pct,interior_holes_px,depth_rel_p95,depth_max_over_scene,depth_rel_max,depth_rel_tail_px,normal_deg_mean,normal_deg_tail_px,normal_deg_p95,psnr_db,step_exhaustion_pct,mean_steps,build_ms,render_ms,memory_bytes,error";
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -41,7 +41,10 @@ pub fn to_csv(rows: &[Row]) -> String {
             m(&|m| m.interior_holes.to_string()),
             m(&|m| format!("{:.3e}", m.depth_rel_p95)),
             m(&|m| format!("{:.3e}", m.depth_max_over_scene)),
+            m(&|m| format!("{:.3e}", m.depth_rel_max)),
+            m(&|m| m.depth_rel_tail_px.to_string()),
             m(&|m| format!("{:.4}", m.normal_deg_mean)),
+            m(&|m| m.normal_deg_tail_px.to_string()),
             m(&|m| format!("{:.4}", m.normal_deg_p95)),
             m(&|m| format!("{:.2}", m.psnr_db)),
             m(&|m| format!("{:.4}", m.step_exhaustion_pct)),
@@ -108,6 +111,8 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
          p95 <= 1e-2, normal <= 5 deg, exhaustion <= 5%; **broken** = worse or any NaN/inf; \
          **refused** = the backend declined to build (clear error). Image-judged families (acne) \
          use PSNR >= 40 dB / >= 25 dB against each backend's own render at the default offset. \
+         Rare large errors a p95 hides are reported beside the verdict (not judged): the largest \
+         relative depth error and the tail pixels beyond 1e-3 relative depth / 5 deg normal. \
          The mesh backend runs at a 0.05 px chord budget (its accuracy setting) so that its \
          tessellation error does not hide the numerical effects.\n"
     );
@@ -131,15 +136,18 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
     let _ = writeln!(s, "\n## All rows\n");
     let _ = writeln!(
         s,
-        "| case | configuration | verdict | NaN | silhouette % | holes px | depth rel p95 | normal deg mean | PSNR dB | exhaustion % | mean steps | render ms |"
+        "| case | configuration | verdict | NaN | silhouette % | holes px | depth rel p95 | depth rel max | tail px depth / normal | normal deg mean | PSNR dB | exhaustion % | mean steps | render ms |"
     );
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(
+        s,
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+    );
     for r in rows {
         match &r.metrics {
             Some(m) => {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | {} | {:.2} | {} | {:.2e} | {:.3} | {:.1} | {:.2} | {:.1} | {:.1} |",
+                    "| {} | {} | {} | {} | {:.2} | {} | {:.2e} | {:.2e} | {} / {} | {:.3} | {:.1} | {:.2} | {:.1} | {:.1} |",
                     r.case,
                     r.configuration,
                     r.verdict.name(),
@@ -147,6 +155,9 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
                     m.silhouette_mismatch_pct,
                     m.interior_holes,
                     m.depth_rel_p95,
+                    m.depth_rel_max,
+                    m.depth_rel_tail_px,
+                    m.normal_deg_tail_px,
                     m.normal_deg_mean,
                     m.psnr_db,
                     m.step_exhaustion_pct,
@@ -157,7 +168,7 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
             None => {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {} | | | | | | | | | | {} |",
+                    "| {} | {} | {} | | | | | | | | | | | | {} |",
                     r.case,
                     r.configuration,
                     r.verdict.name(),

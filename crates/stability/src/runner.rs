@@ -73,6 +73,12 @@ pub struct Metrics {
     pub depth_rel_p95: f64,
     /// Largest |depth - true depth| over pixels both hit, relative to the scene size.
     pub depth_max_over_scene: f64,
+    /// Largest |depth - true depth| / true depth over pixels both hit (reported, not judged).
+    pub depth_rel_max: f64,
+    /// Pixels both hit with relative depth error above 1e-3 (reported, not judged).
+    pub depth_rel_tail_px: u64,
+    /// Pixels both hit with normal error above 5 degrees (reported, not judged).
+    pub normal_deg_tail_px: u64,
     /// Mean normal angle error, degrees.
     pub normal_deg_mean: f64,
     /// 95th percentile normal angle error, degrees.
@@ -97,6 +103,9 @@ impl Metrics {
             interior_holes: interior_holes(&test.framebuffer, &truth.framebuffer),
             depth_rel_p95: acc.depth_rel_p95,
             depth_max_over_scene: acc.depth_abs_max / scene_size.max(f64::MIN_POSITIVE),
+            depth_rel_max: acc.depth_rel_max,
+            depth_rel_tail_px: acc.depth_rel_tail_px as u64,
+            normal_deg_tail_px: acc.normal_deg_tail_px as u64,
             normal_deg_mean: acc.normal_deg_mean,
             normal_deg_p95: acc.normal_deg_p95,
             psnr_db: acc.psnr_db,

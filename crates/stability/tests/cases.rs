@@ -45,6 +45,7 @@ fn every_generated_case_is_a_valid_scene_with_a_unique_id() {
     for family in [
         "scale",
         "distance",
+        "distance_off_axis",
         "far_origin",
         "grazing_plane",
         "grazing_box",
@@ -108,6 +109,9 @@ fn metrics() -> Metrics {
         interior_holes: 0,
         depth_rel_p95: 1e-5,
         depth_max_over_scene: 1e-4,
+        depth_rel_max: 1e-4,
+        depth_rel_tail_px: 0,
+        normal_deg_tail_px: 0,
         normal_deg_mean: 0.1,
         normal_deg_p95: 0.3,
         psnr_db: 50.0,
