@@ -166,6 +166,43 @@ impl Emitter {
         }
     }
 
+    /// The cone from `p` towards the light's centre that subtends about the light's solid
+    /// angle: `(unit axis, distance to the centre, tangent of the half angle)`. A sphere's cone
+    /// is exact; a rectangle becomes the disk of its projected area. `None` when `p` is
+    /// inside the sphere or behind the rectangle.
+    pub fn cone_from(&self, p: Vec3) -> Option<(Vec3, f32, f32)> {
+        match *self {
+            Emitter::Sphere { center, radius, .. } => {
+                let to = center - p;
+                let d2 = to.length_squared();
+                let r2 = radius * radius;
+                if d2 <= r2 {
+                    return None;
+                }
+                let d = d2.sqrt();
+                Some((to / d, d, radius / (d2 - r2).sqrt()))
+            }
+            Emitter::Rectangle {
+                corner,
+                edge_u,
+                edge_v,
+                normal,
+                area,
+                ..
+            } => {
+                let to = corner + 0.5 * (edge_u + edge_v) - p;
+                let d = to.length();
+                let dir = to / d;
+                let cos_light = -normal.dot(dir);
+                if d.is_nan() || d <= 0.0 || cos_light.is_nan() || cos_light <= 0.0 {
+                    return None;
+                }
+                let radius = (area * cos_light / std::f32::consts::PI).sqrt();
+                Some((dir, d, radius / d))
+            }
+        }
+    }
+
     /// The distance along the ray `origin + t dir` (unit `dir`) at which it meets the light's
     /// emitting side, if within `(0, t_max)`.
     pub fn intersect(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<f32> {

@@ -28,7 +28,10 @@ use crate::camera::{primary_ray, sample_offset};
 use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::RenderSpace;
-use crate::geometry::{Geometry, OcclusionResult, Ray, RayWork, Termination, TraceResult};
+use crate::geometry::{
+    Cone, Geometry, OcclusionResult, Ray, RayWork, SurfacePoint, Termination, TraceResult,
+    Visibility,
+};
 use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key, unit_from_key};
 use crate::stats::RenderStats;
 
@@ -381,6 +384,14 @@ fn trace_row(
     let mut occlusion: Vec<OcclusionResult> = Vec::new();
     let mut ao_rays: Vec<Ray> = Vec::new();
     let mut ao_pending: Vec<PendingLight> = Vec::new();
+    // Geometry shortcuts: one cone per shading point and area light, one AO estimate per
+    // shading point; their pending amounts are scaled by the visible fraction.
+    let shortcuts = geometry.shortcuts();
+    let mut cones: Vec<Cone> = Vec::new();
+    let mut cone_pending: Vec<PendingLight> = Vec::new();
+    let mut ao_points: Vec<SurfacePoint> = Vec::new();
+    let mut ao_point_pending: Vec<PendingLight> = Vec::new();
+    let mut visibility: Vec<Visibility> = Vec::new();
     let mut next: Vec<Path> = Vec::new();
     let mut depth = 0;
     while !paths.is_empty() {
@@ -395,6 +406,10 @@ fn trace_row(
         pending.clear();
         ao_rays.clear();
         ao_pending.clear();
+        cones.clear();
+        cone_pending.clear();
+        ao_points.clear();
+        ao_point_pending.clear();
         next.clear();
         for (pi, (path, res)) in paths.iter().zip(&results).enumerate() {
             out.stats.add_work(&res.work);
@@ -445,6 +460,16 @@ fn trace_row(
             let pixel_key = sample_key(sh.seed, path.pixel, row, path.sample) ^ mix64(depth as u64);
             let ambient = local_weight * sh.ambient * color;
             match sh.ambient_occlusion {
+                Some(_) if sh.ambient > 0.0 && shortcuts.ambient_occlusion => {
+                    ao_points.push(SurfacePoint {
+                        position: origin,
+                        normal: n,
+                    });
+                    ao_point_pending.push(PendingLight {
+                        path: pi as u32,
+                        amount: ambient,
+                    });
+                }
                 Some((n_rays, distance)) if sh.ambient > 0.0 => {
                     let rotation = rotation_of(pixel_key, u64::MAX);
                     let share = ambient / n_rays as f32;
@@ -480,6 +505,39 @@ fn trace_row(
                         intensity,
                         shadows,
                     } => (to_light, intensity, shadows, sh.max_distance),
+                    ShadingLight::Area(emitter)
+                        if emitter.casts_shadows() && shortcuts.cone_shadows =>
+                    {
+                        // Shade the sampled points without rays, then scale the sum by one
+                        // cone-visibility estimate towards the light.
+                        let rotation = rotation_of(pixel_key, li as u64);
+                        let share = local_weight / sh.area_samples as f32;
+                        let mut total = Vec3::ZERO;
+                        for k in 0..sh.area_samples {
+                            let (u, v) = hammersley(k, sh.area_samples, rotation);
+                            if let Some(s) = emitter.sample(hit.position, u, v) {
+                                total += share
+                                    * phong(n, d, s.dir, 1.0, m.specular_exponent)
+                                    * color
+                                    * emitter.emission();
+                            }
+                        }
+                        if let (true, Some((dir, dist, tan_half_angle))) =
+                            (total != Vec3::ZERO, emitter.cone_from(hit.position))
+                        {
+                            cones.push(Cone {
+                                origin,
+                                dir,
+                                t_max: (dist - offset).max(0.0),
+                                tan_half_angle,
+                            });
+                            cone_pending.push(PendingLight {
+                                path: pi as u32,
+                                amount: total,
+                            });
+                        }
+                        continue;
+                    }
                     ShadingLight::Area(emitter) => {
                         let rotation = rotation_of(pixel_key, li as u64);
                         let share = local_weight / sh.area_samples as f32;
@@ -559,6 +617,33 @@ fn trace_row(
                 if !o.occluded {
                     sum[paths[p.path as usize].pixel as usize] += p.amount;
                 }
+            }
+        }
+        if !cones.is_empty() {
+            visibility.clear();
+            visibility.resize(cones.len(), Visibility::default());
+            let start = Instant::now();
+            geometry.cone_visibility(&cones, &mut visibility);
+            out.stats.trace_time.shadow_ns += start.elapsed().as_nanos() as u64;
+            out.stats.shadow_rays += cones.len() as u64;
+            for (p, v) in cone_pending.iter().zip(&visibility) {
+                out.stats.add_work(&v.work);
+                out.stats.add_termination(v.termination, true);
+                sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
+            }
+        }
+        if !ao_points.is_empty() {
+            visibility.clear();
+            visibility.resize(ao_points.len(), Visibility::default());
+            let distance = sh.ambient_occlusion.map_or(0.0, |a| a.1);
+            let start = Instant::now();
+            geometry.ambient_openness(&ao_points, distance, &mut visibility);
+            out.stats.trace_time.ambient_occlusion_ns += start.elapsed().as_nanos() as u64;
+            out.stats.ao_rays += ao_points.len() as u64;
+            for (p, v) in ao_point_pending.iter().zip(&visibility) {
+                out.stats.add_work(&v.work);
+                out.stats.add_termination(v.termination, true);
+                sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
             }
         }
         if !ao_rays.is_empty() {

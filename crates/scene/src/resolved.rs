@@ -362,6 +362,30 @@ impl Scene {
         self.camera.height = height;
         Ok(self)
     }
+
+    /// Replaces the samples per pixel (a CLI override); errors as in validation (the cap
+    /// depends on the integrator).
+    pub fn with_samples_per_pixel(mut self, samples: u32) -> Result<Self, String> {
+        let max = crate::validate::max_samples_per_pixel(self.render.integrator);
+        if !(1..=max).contains(&samples) {
+            return Err(format!(
+                "samples per pixel must be in 1..={max} for the {} integrator, got {samples}",
+                self.render.integrator.name()
+            ));
+        }
+        self.render.samples_per_pixel = samples;
+        Ok(self)
+    }
+}
+
+impl Integrator {
+    /// The name used in scene files.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Integrator::Whitted => "whitted",
+            Integrator::Path => "path",
+        }
+    }
 }
 
 /// `translate * Rz Ry Rx * scale` with angles in degrees.

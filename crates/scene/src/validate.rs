@@ -29,6 +29,13 @@ pub const MAX_SAMPLES_PER_PIXEL: u32 = 1024;
 /// Most samples per pixel for the path tracer (traced in bounded chunks, for converged
 /// ground truth).
 pub const MAX_PATH_SAMPLES_PER_PIXEL: u32 = 65_536;
+/// The samples-per-pixel cap of `integrator`.
+pub fn max_samples_per_pixel(integrator: Integrator) -> u32 {
+    match integrator {
+        Integrator::Whitted => MAX_SAMPLES_PER_PIXEL,
+        Integrator::Path => MAX_PATH_SAMPLES_PER_PIXEL,
+    }
+}
 /// Most area-light shadow rays or ambient-occlusion rays per shading point.
 pub const MAX_LIGHT_SAMPLES: u32 = 4096;
 /// Most path-tracer bounces.
@@ -496,19 +503,13 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
         IntegratorSpec::Whitted => Integrator::Whitted,
         IntegratorSpec::Path => Integrator::Path,
     };
-    let max_spp = match integrator {
-        Integrator::Whitted => MAX_SAMPLES_PER_PIXEL,
-        Integrator::Path => MAX_PATH_SAMPLES_PER_PIXEL,
-    };
+    let max_spp = max_samples_per_pixel(integrator);
     if !(1..=max_spp).contains(&r.samples_per_pixel) {
         cx.fail(
             "render.samples_per_pixel",
             format!(
                 "must be in 1..={max_spp} for the {} integrator, got {}",
-                match integrator {
-                    Integrator::Whitted => "whitted",
-                    Integrator::Path => "path",
-                },
+                integrator.name(),
                 r.samples_per_pixel
             ),
         );
