@@ -305,6 +305,20 @@ fn render(args: RenderArgs) -> Result<()> {
         s.total_rays(),
         report.memory_bytes
     );
+    if s.shadow_rays + s.ao_rays + s.reflection_rays + s.bounce_rays > 0 {
+        let r = s.mrays_per_thread_second();
+        let rate = |rays: u64, mrays: Option<f64>| match mrays {
+            Some(m) => format!("{rays} ({m:.2} Mrays per thread-second)"),
+            None => rays.to_string(),
+        };
+        println!(
+            "  rays: camera {}, shadow {}, ambient occlusion {}, reflection/bounce {}",
+            rate(s.primary_rays, r.camera),
+            rate(s.shadow_rays, r.shadow),
+            rate(s.ao_rays, r.ambient_occlusion),
+            rate(s.reflection_rays + s.bounce_rays, r.bounce),
+        );
+    }
     if s.steps > 0 {
         println!(
             "  sdf steps: mean {:.1}, max {}",
