@@ -118,7 +118,7 @@ struct RenderArgs {
     /// Override the scene's image height in pixels.
     #[arg(long)]
     height: Option<u32>,
-    /// Override the scene's samples per pixel.
+    /// Override the scene's samples per pixel (1..=1024; 1..=65536 with the path tracer).
     #[arg(long)]
     spp: Option<u32>,
     /// Worker threads (0 = one per logical core).
@@ -244,10 +244,10 @@ fn render(args: RenderArgs) -> Result<()> {
         .map_err(anyhow::Error::msg)
         .context("--width/--height")?;
     if let Some(spp) = args.spp {
-        if !(1..=1024).contains(&spp) {
-            bail!("--spp must be in 1..=1024, got {spp}");
-        }
-        scene.render.samples_per_pixel = spp;
+        scene = scene
+            .with_samples_per_pixel(spp)
+            .map_err(anyhow::Error::msg)
+            .context("--spp")?;
     }
     let background = BackgroundSampler::load(&scene.background)
         .with_context(|| format!("scene {}", args.scene.display()))?;
@@ -305,6 +305,20 @@ fn render(args: RenderArgs) -> Result<()> {
         s.total_rays(),
         report.memory_bytes
     );
+    if s.shadow_rays + s.ao_rays + s.reflection_rays + s.bounce_rays > 0 {
+        let r = s.mrays_per_thread_second();
+        let rate = |rays: u64, mrays: Option<f64>| match mrays {
+            Some(m) => format!("{rays} ({m:.2} Mrays per thread-second)"),
+            None => rays.to_string(),
+        };
+        println!(
+            "  rays: camera {}, shadow {}, ambient occlusion {}, reflection/bounce {}",
+            rate(s.primary_rays, r.camera),
+            rate(s.shadow_rays, r.shadow),
+            rate(s.ao_rays, r.ambient_occlusion),
+            rate(s.reflection_rays + s.bounce_rays, r.bounce),
+        );
+    }
     if s.steps > 0 {
         println!(
             "  sdf steps: mean {:.1}, max {}",

@@ -60,19 +60,35 @@ pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max:
 pub struct PrimarySamples<'a> {
     camera: &'a Camera,
     row: u32,
+    first_sample: u32,
 }
 
 impl<'a> PrimarySamples<'a> {
     /// The samples of image row `row` of `camera`, ordered as the integrator batches them.
     pub fn row(camera: &'a Camera, row: u32) -> Self {
-        Self { camera, row }
+        Self {
+            camera,
+            row,
+            first_sample: 0,
+        }
+    }
+
+    /// The same row's samples from sample `first` on (a batch holding samples `first..`, as
+    /// the path tracer's chunks do): ray `i` is sample `first + i / width`.
+    pub fn starting_at(self, first: u32) -> Self {
+        Self {
+            first_sample: first,
+            ..self
+        }
     }
 
     /// Exact unit direction (f64, render space) of ray `index` of the batch; the batch's f32
     /// ray `index` is its rounding. An index past the row's samples wraps to further samples.
     pub fn direction(&self, index: usize) -> DVec3 {
         let width = self.camera.width.max(1) as usize;
-        let sample = u32::try_from(index / width).unwrap_or(u32::MAX);
+        let sample = u32::try_from(index / width)
+            .unwrap_or(u32::MAX)
+            .saturating_add(self.first_sample);
         primary_direction(
             self.camera,
             (index % width) as u32,

@@ -96,6 +96,50 @@ pub struct OcclusionResult {
     pub work: RayWork,
 }
 
+/// A cone from a surface point towards an area light, for one-query soft-shadow estimates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cone {
+    /// Apex: the shading point moved off its surface, render space.
+    pub origin: Vec3,
+    /// Unit axis towards the light's centre.
+    pub dir: Vec3,
+    /// Distance to the light along the axis; nothing farther blocks it.
+    pub t_max: f32,
+    /// Tangent of the half angle the light subtends at the apex (> 0).
+    pub tan_half_angle: f32,
+}
+
+/// A surface point for few-tap ambient-occlusion estimates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfacePoint {
+    /// The point moved off its surface, render space.
+    pub position: Vec3,
+    /// Unit normal facing the side the point was seen from.
+    pub normal: Vec3,
+}
+
+/// An approximate visibility from one query.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Visibility {
+    /// Unblocked fraction in [0, 1].
+    pub fraction: f32,
+    /// How the query ended.
+    pub termination: Termination,
+    /// Work done.
+    pub work: RayWork,
+}
+
+/// Approximate queries a geometry answers in one query where other representations need
+/// many rays (a distance field gives cone visibility from one march). The integrator uses a
+/// shortcut only when the geometry offers it; otherwise it samples rays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Shortcuts {
+    /// [`Geometry::cone_visibility`] estimates soft shadows of area lights.
+    pub cone_shadows: bool,
+    /// [`Geometry::ambient_openness`] estimates ambient occlusion.
+    pub ambient_occlusion: bool,
+}
+
 /// What a built geometry holds and what building it cost, for reports.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct GeometryReport {
@@ -165,6 +209,59 @@ pub trait Geometry: Send + Sync {
 
     /// Memory, build phases and counts of the built representation.
     fn report(&self) -> GeometryReport;
+
+    /// The one-query approximations this geometry answers (none by default).
+    fn shortcuts(&self) -> Shortcuts {
+        Shortcuts::default()
+    }
+
+    /// Approximate unblocked fraction of each cone; called only when
+    /// [`Shortcuts::cone_shadows`] is set. The default is the hard shadow of the cone's axis
+    /// (0 or 1 from one occlusion ray).
+    fn cone_visibility(&self, cones: &[Cone], out: &mut [Visibility]) {
+        assert_eq!(
+            cones.len(),
+            out.len(),
+            "cone_visibility: cones and out differ in length"
+        );
+        for (c, o) in cones.iter().zip(out.iter_mut()) {
+            let r = self.occluded(&Ray {
+                origin: c.origin,
+                dir: c.dir,
+                t_min: 0.0,
+                t_max: c.t_max,
+            });
+            *o = Visibility {
+                fraction: if r.occluded { 0.0 } else { 1.0 },
+                termination: r.termination,
+                work: r.work,
+            };
+        }
+    }
+
+    /// Approximate fraction of each point's hemisphere that is open within `distance`;
+    /// called only when [`Shortcuts::ambient_occlusion`] is set. The default is 0 or 1 from
+    /// one occlusion ray along the normal.
+    fn ambient_openness(&self, points: &[SurfacePoint], distance: f32, out: &mut [Visibility]) {
+        assert_eq!(
+            points.len(),
+            out.len(),
+            "ambient_openness: points and out differ in length"
+        );
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            let r = self.occluded(&Ray {
+                origin: p.position,
+                dir: p.normal,
+                t_min: 0.0,
+                t_max: distance,
+            });
+            *o = Visibility {
+                fraction: if r.occluded { 0.0 } else { 1.0 },
+                termination: r.termination,
+                work: r.work,
+            };
+        }
+    }
 }
 
 /// The translation between world space and render space for one scene.

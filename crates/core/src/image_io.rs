@@ -137,13 +137,15 @@ pub fn read_pfm(path: &Path) -> Result<PfmImage, ImageIoError> {
     Ok((width, height, channels, data))
 }
 
-/// Writes the AOVs of `fb` into `dir` (created if missing): `depth.pfm` (distance along the
-/// primary ray, +inf for no hit), `normal.pfm` (unit normal facing the camera, xyz),
+/// Writes the AOVs of `fb` into `dir` (created if missing): `color.pfm` (the linear, unclamped
+/// radiance of each pixel, RGB), `depth.pfm` (distance along the primary ray, +inf for no hit), `normal.pfm` (unit normal facing the camera, xyz),
 /// `mask.pfm` (1 hit, 0 no hit), `work.pfm` (steps, node visits, primitive tests) and
 /// `termination.pfm` (0 hit, 1 miss, 2 max steps, 3 max distance).
 pub fn write_aovs(fb: &Framebuffer, dir: &Path) -> Result<(), ImageIoError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
     let (w, h) = (fb.width, fb.height);
+    let colors: Vec<f32> = fb.color.iter().flat_map(|c: &Vec3| c.to_array()).collect();
+    write_pfm(&dir.join("color.pfm"), w, h, 3, &colors)?;
     write_pfm(&dir.join("depth.pfm"), w, h, 1, &fb.depth)?;
     let normals: Vec<f32> = fb.normal.iter().flat_map(|n: &Vec3| n.to_array()).collect();
     write_pfm(&dir.join("normal.pfm"), w, h, 3, &normals)?;

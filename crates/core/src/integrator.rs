@@ -1,5 +1,7 @@
-//! The Whitted-style integrator: Phong shading, hard shadows, iterative mirror reflections and
-//! Halton anti-aliasing, traced as a wavefront per image row so backends get rays in batches.
+//! The Whitted-style integrator: Phong shading, hard shadows (soft for area lights), ambient
+//! occlusion, iterative mirror reflections and Halton anti-aliasing, traced as a wavefront per
+//! image row so backends get rays in batches. [`render`] runs the path tracer
+//! ([`crate::path`]) instead when the scene asks for it.
 //!
 //! Shading follows the source study ("Computer Graphics from Scratch", Gambetta): the local
 //! colour is `colour * (ambient + sum diffuse + sum specular)` with
@@ -8,17 +10,29 @@
 //! Lights have no distance falloff. Secondary rays start at the hit point moved
 //! `ray_offset * max(|p|, 1e-30)` along the normal (|p| = distance from the camera), and
 //! shadow rays towards a point light stop the same distance short of it.
+//!
+//! An area light is shaded as `render.area_light_samples` point lights of `1/N` of its
+//! intensity each, at stratified points of the light (Hammersley points with a per-pixel
+//! rotation), each with its own shadow ray: the penumbra is the fraction of the light a point
+//! sees. Ambient occlusion scales the ambient term by the fraction of cosine-distributed
+//! hemisphere rays that meet nothing within its distance.
 
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use marchmesh_scene::{Light, Material, Scene};
+use marchmesh_scene::{Integrator, Light, Material, Scene};
 use rayon::prelude::*;
 
 use crate::background::BackgroundSampler;
 use crate::camera::{PrimarySamples, primary_ray, sample_offset};
+use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
-use crate::geometry::{Geometry, OcclusionResult, Ray, RayWork, Termination, TraceResult};
+use crate::geometry::RenderSpace;
+use crate::geometry::{
+    Cone, Geometry, OcclusionResult, Ray, RayWork, SurfacePoint, Termination, TraceResult,
+    Visibility,
+};
+use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key, unit_from_key};
 use crate::stats::RenderStats;
 
 /// Default limit on the memory a render may allocate for its buffers: 4 GiB.
@@ -115,7 +129,12 @@ pub fn render(
             .into_par_iter()
             .with_max_len(1)
             .map(|row| {
-                let out = trace_row(scene, &shading, geometry, background, row);
+                let out = match scene.render.integrator {
+                    Integrator::Whitted => trace_row(scene, &shading, geometry, background, row),
+                    Integrator::Path => {
+                        crate::path::trace_row(scene, &shading, geometry, background, row)
+                    }
+                };
                 on_row();
                 out
             })
@@ -142,19 +161,28 @@ pub fn render(
     })
 }
 
-/// Scene data the shading loop reads, converted once to f32 render space.
-struct Shading {
-    ambient: f32,
-    lights: Vec<ShadingLight>,
-    materials: Vec<Material>,
-    max_depth: u32,
-    cutoff: f32,
-    ray_offset: f32,
-    max_distance: f32,
-    spp: u32,
+/// Scene data the shading loops read, converted once to f32 render space.
+pub(crate) struct Shading {
+    pub(crate) ambient: f32,
+    pub(crate) lights: Vec<ShadingLight>,
+    pub(crate) materials: Vec<Material>,
+    pub(crate) max_depth: u32,
+    pub(crate) cutoff: f32,
+    pub(crate) ray_offset: f32,
+    pub(crate) max_distance: f32,
+    pub(crate) spp: u32,
+    /// Shadow rays per area light per shading point.
+    pub(crate) area_samples: u32,
+    /// Ambient occlusion: (rays, distance).
+    pub(crate) ambient_occlusion: Option<(u32, f32)>,
+    /// Every area light, also listed in `lights`, for intersecting camera and mirror rays.
+    pub(crate) emitters: Vec<Emitter>,
+    pub(crate) seed: u64,
+    /// Path tracer: most bounces after the camera ray.
+    pub(crate) max_bounces: u32,
 }
 
-enum ShadingLight {
+pub(crate) enum ShadingLight {
     Point {
         position: Vec3,
         intensity: f32,
@@ -165,14 +193,22 @@ enum ShadingLight {
         intensity: f32,
         shadows: bool,
     },
+    Area(Emitter),
 }
 
 impl Shading {
     fn new(scene: &Scene) -> Self {
         let origin = scene.camera.position;
+        let space = RenderSpace::of(scene);
         let mut ambient = 0.0;
         let mut lights = Vec::new();
+        let mut emitters = Vec::new();
         for l in &scene.lights {
+            if let Some(e) = Emitter::of(l, &space) {
+                emitters.push(e);
+                lights.push(ShadingLight::Area(e));
+                continue;
+            }
             match *l {
                 Light::Ambient { intensity } => ambient += intensity as f32,
                 Light::Point {
@@ -193,6 +229,7 @@ impl Shading {
                     intensity: intensity as f32,
                     shadows: casts_shadows,
                 }),
+                Light::Sphere { .. } | Light::Rectangle { .. } => {}
             }
         }
         let r = &scene.render;
@@ -205,10 +242,29 @@ impl Shading {
             ray_offset: r.ray_offset as f32,
             max_distance: r.max_distance as f32,
             spp: r.samples_per_pixel,
+            area_samples: r.area_light_samples.max(1),
+            ambient_occlusion: r
+                .ambient_occlusion
+                .map(|ao| (ao.samples.max(1), ao.distance as f32)),
+            emitters,
+            seed: r.seed,
+            max_bounces: r.max_bounces,
         }
     }
 
-    fn material(&self, id: u32) -> Material {
+    /// The emission of the nearest area light the ray meets before `t_geometry`, if any.
+    pub(crate) fn emitter_before(&self, ray: &Ray, t_geometry: f32) -> Option<Vec3> {
+        let mut best: Option<(f32, Vec3)> = None;
+        for e in &self.emitters {
+            let limit = best.map_or(t_geometry, |b| b.0);
+            if let Some(t) = e.intersect(ray.origin, ray.dir, limit) {
+                best = Some((t, e.emission()));
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    pub(crate) fn material(&self, id: u32) -> Material {
         self.materials
             .get(id as usize)
             .copied()
@@ -216,20 +272,93 @@ impl Shading {
     }
 }
 
-struct RowOutput {
-    color: Vec<Vec3>,
-    depth: Vec<f32>,
-    normal: Vec<Vec3>,
-    material: Vec<u32>,
-    termination: Vec<Termination>,
-    work: Vec<RayWork>,
-    stats: RenderStats,
+/// One image row's pixels, AOVs and counters.
+pub(crate) struct RowOutput {
+    pub(crate) color: Vec<Vec3>,
+    pub(crate) depth: Vec<f32>,
+    pub(crate) normal: Vec<Vec3>,
+    pub(crate) material: Vec<u32>,
+    pub(crate) termination: Vec<Termination>,
+    pub(crate) work: Vec<RayWork>,
+    pub(crate) stats: RenderStats,
+}
+
+impl RowOutput {
+    /// A row of `width` pixels with nothing hit yet.
+    pub(crate) fn new(width: usize) -> Self {
+        Self {
+            color: vec![Vec3::ZERO; width],
+            depth: vec![NO_HIT_DEPTH; width],
+            normal: vec![Vec3::ZERO; width],
+            material: vec![u32::MAX; width],
+            termination: vec![Termination::Miss; width],
+            work: vec![RayWork::default(); width],
+            stats: RenderStats::default(),
+        }
+    }
+
+    /// Writes the per-pixel average of `sum` over `samples`, counting (and blackening)
+    /// non-finite pixels.
+    pub(crate) fn finish(&mut self, sum: &[Vec3], samples: u32) {
+        let inv = 1.0 / samples as f32;
+        for (c, s) in self.color.iter_mut().zip(sum) {
+            let v = *s * inv;
+            if v.is_finite() {
+                *c = v;
+            } else {
+                self.stats.non_finite_pixels += 1;
+                *c = Vec3::ZERO;
+            }
+        }
+    }
+}
+
+/// Traces `rays` with [`Geometry::closest_hits`] into `out`, returning the nanoseconds spent.
+pub(crate) fn timed_closest_hits(
+    geometry: &dyn Geometry,
+    rays: &[Ray],
+    out: &mut Vec<TraceResult>,
+) -> u64 {
+    out.clear();
+    out.resize(rays.len(), TraceResult::default());
+    let start = Instant::now();
+    geometry.closest_hits(rays, out);
+    start.elapsed().as_nanos() as u64
+}
+
+/// Traces the camera rays `rays` (whose exact samples are `samples`) with
+/// [`Geometry::closest_hits_primary`] into `out`, returning the nanoseconds spent.
+pub(crate) fn timed_closest_hits_primary(
+    geometry: &dyn Geometry,
+    rays: &[Ray],
+    samples: PrimarySamples<'_>,
+    out: &mut Vec<TraceResult>,
+) -> u64 {
+    out.clear();
+    out.resize(rays.len(), TraceResult::default());
+    let start = Instant::now();
+    geometry.closest_hits_primary(rays, samples, out);
+    start.elapsed().as_nanos() as u64
+}
+
+/// Traces `rays` with [`Geometry::occluded_many`] into `out`, returning the nanoseconds spent.
+pub(crate) fn timed_occluded_many(
+    geometry: &dyn Geometry,
+    rays: &[Ray],
+    out: &mut Vec<OcclusionResult>,
+) -> u64 {
+    out.clear();
+    out.resize(rays.len(), OcclusionResult::default());
+    let start = Instant::now();
+    geometry.occluded_many(rays, out);
+    start.elapsed().as_nanos() as u64
 }
 
 /// One path (one sample of one pixel) in the row's wavefront.
 #[derive(Clone, Copy)]
 struct Path {
     pixel: u32,
+    sample: u32,
     ray: Ray,
     throughput: f32,
 }
@@ -248,15 +377,7 @@ fn trace_row(
     row: u32,
 ) -> RowOutput {
     let w = scene.camera.width as usize;
-    let mut out = RowOutput {
-        color: vec![Vec3::ZERO; w],
-        depth: vec![NO_HIT_DEPTH; w],
-        normal: vec![Vec3::ZERO; w],
-        material: vec![u32::MAX; w],
-        termination: vec![Termination::Miss; w],
-        work: vec![RayWork::default(); w],
-        stats: RenderStats::default(),
-    };
+    let mut out = RowOutput::new(w);
     let mut sum = vec![Vec3::ZERO; w];
     let mut paths: Vec<Path> = Vec::with_capacity(w * sh.spp as usize);
     for s in 0..sh.spp {
@@ -264,6 +385,7 @@ fn trace_row(
         for col in 0..w as u32 {
             paths.push(Path {
                 pixel: col,
+                sample: s,
                 ray: primary_ray(&scene.camera, col, row, off, scene.render.max_distance),
                 throughput: 1.0,
             });
@@ -275,21 +397,36 @@ fn trace_row(
     let mut shadow_rays: Vec<Ray> = Vec::new();
     let mut pending: Vec<PendingLight> = Vec::new();
     let mut occlusion: Vec<OcclusionResult> = Vec::new();
+    let mut ao_rays: Vec<Ray> = Vec::new();
+    let mut ao_pending: Vec<PendingLight> = Vec::new();
+    // Geometry shortcuts: one cone per shading point and area light, one AO estimate per
+    // shading point; their pending amounts are scaled by the visible fraction.
+    let shortcuts = geometry.shortcuts();
+    let mut cones: Vec<Cone> = Vec::new();
+    let mut cone_pending: Vec<PendingLight> = Vec::new();
+    let mut ao_points: Vec<SurfacePoint> = Vec::new();
+    let mut ao_point_pending: Vec<PendingLight> = Vec::new();
+    let mut visibility: Vec<Visibility> = Vec::new();
     let mut next: Vec<Path> = Vec::new();
     let mut depth = 0;
     while !paths.is_empty() {
-        results.clear();
-        results.resize(paths.len(), TraceResult::default());
-        let rays = paths.iter().map(|p| p.ray).collect::<Vec<_>>();
+        let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
         if depth == 0 {
             // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
             let samples = PrimarySamples::row(&scene.camera, row);
-            geometry.closest_hits_primary(&rays, samples, &mut results);
+            out.stats.trace_time.camera_ns +=
+                timed_closest_hits_primary(geometry, &rays, samples, &mut results);
         } else {
-            geometry.closest_hits(&rays, &mut results);
+            out.stats.trace_time.bounce_ns += timed_closest_hits(geometry, &rays, &mut results);
         }
         shadow_rays.clear();
         pending.clear();
+        ao_rays.clear();
+        ao_pending.clear();
+        cones.clear();
+        cone_pending.clear();
+        ao_points.clear();
+        ao_point_pending.clear();
         next.clear();
         for (pi, (path, res)) in paths.iter().zip(&results).enumerate() {
             out.stats.add_work(&res.work);
@@ -306,6 +443,11 @@ fn trace_row(
             if depth == 0 && pi < w {
                 out.termination[px] = res.termination;
                 out.work[px] = res.work;
+            }
+            let t_geometry = hit.map_or(path.ray.t_max, |h| h.t);
+            if let Some(emission) = sh.emitter_before(&path.ray, t_geometry) {
+                sum[px] += path.throughput * emission;
+                continue;
             }
             let Some(hit) = hit else {
                 sum[px] += path.throughput * background.sample(path.ray.dir);
@@ -332,8 +474,39 @@ fn trace_row(
             };
             let offset = sh.ray_offset * hit.position.length().max(1e-30);
             let origin = hit.position + n * offset;
-            sum[px] += local_weight * sh.ambient * color;
-            for light in &sh.lights {
+            let pixel_key = sample_key(sh.seed, path.pixel, row, path.sample) ^ mix64(depth as u64);
+            let ambient = local_weight * sh.ambient * color;
+            match sh.ambient_occlusion {
+                Some(_) if sh.ambient > 0.0 && shortcuts.ambient_occlusion => {
+                    ao_points.push(SurfacePoint {
+                        position: origin,
+                        normal: n,
+                    });
+                    ao_point_pending.push(PendingLight {
+                        path: pi as u32,
+                        amount: ambient,
+                    });
+                }
+                Some((n_rays, distance)) if sh.ambient > 0.0 => {
+                    let rotation = rotation_of(pixel_key, u64::MAX);
+                    let share = ambient / n_rays as f32;
+                    for k in 0..n_rays {
+                        let (u, v) = hammersley(k, n_rays, rotation);
+                        ao_rays.push(Ray {
+                            origin,
+                            dir: cosine_hemisphere(n, u, v),
+                            t_min: 0.0,
+                            t_max: distance,
+                        });
+                        ao_pending.push(PendingLight {
+                            path: pi as u32,
+                            amount: share,
+                        });
+                    }
+                }
+                _ => sum[px] += ambient,
+            }
+            for (li, light) in sh.lights.iter().enumerate() {
                 let (to_light, intensity, shadows, dist) = match *light {
                     ShadingLight::Point {
                         position,
@@ -349,19 +522,77 @@ fn trace_row(
                         intensity,
                         shadows,
                     } => (to_light, intensity, shadows, sh.max_distance),
+                    ShadingLight::Area(emitter)
+                        if emitter.casts_shadows() && shortcuts.cone_shadows =>
+                    {
+                        // Shade the sampled points without rays, then scale the sum by one
+                        // cone-visibility estimate towards the light.
+                        let rotation = rotation_of(pixel_key, li as u64);
+                        let share = local_weight / sh.area_samples as f32;
+                        let mut total = Vec3::ZERO;
+                        for k in 0..sh.area_samples {
+                            let (u, v) = hammersley(k, sh.area_samples, rotation);
+                            if let Some(s) = emitter.sample(hit.position, u, v) {
+                                total += share
+                                    * phong(n, d, s.dir, 1.0, m.specular_exponent)
+                                    * color
+                                    * emitter.emission();
+                            }
+                        }
+                        if let (true, Some((dir, dist, tan_half_angle))) =
+                            (total != Vec3::ZERO, emitter.cone_from(hit.position))
+                        {
+                            cones.push(Cone {
+                                origin,
+                                dir,
+                                t_max: (dist - offset).max(0.0),
+                                tan_half_angle,
+                            });
+                            cone_pending.push(PendingLight {
+                                path: pi as u32,
+                                amount: total,
+                            });
+                        }
+                        continue;
+                    }
+                    ShadingLight::Area(emitter) => {
+                        let rotation = rotation_of(pixel_key, li as u64);
+                        let share = local_weight / sh.area_samples as f32;
+                        for k in 0..sh.area_samples {
+                            let (u, v) = hammersley(k, sh.area_samples, rotation);
+                            let Some(s) = emitter.sample(hit.position, u, v) else {
+                                continue;
+                            };
+                            let amount = phong(n, d, s.dir, 1.0, m.specular_exponent);
+                            if amount <= 0.0 {
+                                continue;
+                            }
+                            let contribution = share * amount * color * emitter.emission();
+                            let dist = s.dist - offset;
+                            if emitter.casts_shadows() && dist > 0.0 {
+                                shadow_rays.push(Ray {
+                                    origin,
+                                    dir: s.dir,
+                                    t_min: 0.0,
+                                    t_max: dist,
+                                });
+                                pending.push(PendingLight {
+                                    path: pi as u32,
+                                    amount: contribution,
+                                });
+                            } else {
+                                sum[px] += contribution;
+                            }
+                        }
+                        continue;
+                    }
                 };
-                let ndl = n.dot(to_light);
-                let facing = ndl > 0.0; // false for NaN too
-                if !facing || intensity <= 0.0 || !to_light.is_finite() {
+                if intensity <= 0.0 || !to_light.is_finite() {
                     continue;
                 }
-                let mut amount = intensity * ndl;
-                if let Some(s) = m.specular_exponent {
-                    let r = 2.0 * n * ndl - to_light;
-                    let rv = r.dot(-d);
-                    if rv > 0.0 {
-                        amount += intensity * rv.powf(s as f32);
-                    }
+                let amount = phong(n, d, to_light, intensity, m.specular_exponent);
+                if amount <= 0.0 {
+                    continue;
                 }
                 let contribution = local_weight * amount * color;
                 if shadows && dist > 0.0 {
@@ -382,6 +613,7 @@ fn trace_row(
             if reflect {
                 next.push(Path {
                     pixel: path.pixel,
+                    sample: path.sample,
                     ray: Ray {
                         origin,
                         dir: (d - 2.0 * d.dot(n) * n).normalize(),
@@ -393,11 +625,49 @@ fn trace_row(
             }
         }
         if !shadow_rays.is_empty() {
-            occlusion.clear();
-            occlusion.resize(shadow_rays.len(), OcclusionResult::default());
-            geometry.occluded_many(&shadow_rays, &mut occlusion);
+            out.stats.trace_time.shadow_ns +=
+                timed_occluded_many(geometry, &shadow_rays, &mut occlusion);
             out.stats.shadow_rays += shadow_rays.len() as u64;
             for (p, o) in pending.iter().zip(&occlusion) {
+                out.stats.add_work(&o.work);
+                out.stats.add_termination(o.termination, true);
+                if !o.occluded {
+                    sum[paths[p.path as usize].pixel as usize] += p.amount;
+                }
+            }
+        }
+        if !cones.is_empty() {
+            visibility.clear();
+            visibility.resize(cones.len(), Visibility::default());
+            let start = Instant::now();
+            geometry.cone_visibility(&cones, &mut visibility);
+            out.stats.trace_time.shadow_ns += start.elapsed().as_nanos() as u64;
+            out.stats.shadow_rays += cones.len() as u64;
+            for (p, v) in cone_pending.iter().zip(&visibility) {
+                out.stats.add_work(&v.work);
+                out.stats.add_termination(v.termination, true);
+                sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
+            }
+        }
+        if !ao_points.is_empty() {
+            visibility.clear();
+            visibility.resize(ao_points.len(), Visibility::default());
+            let distance = sh.ambient_occlusion.map_or(0.0, |a| a.1);
+            let start = Instant::now();
+            geometry.ambient_openness(&ao_points, distance, &mut visibility);
+            out.stats.trace_time.ambient_occlusion_ns += start.elapsed().as_nanos() as u64;
+            out.stats.ao_rays += ao_points.len() as u64;
+            for (p, v) in ao_point_pending.iter().zip(&visibility) {
+                out.stats.add_work(&v.work);
+                out.stats.add_termination(v.termination, true);
+                sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
+            }
+        }
+        if !ao_rays.is_empty() {
+            out.stats.trace_time.ambient_occlusion_ns +=
+                timed_occluded_many(geometry, &ao_rays, &mut occlusion);
+            out.stats.ao_rays += ao_rays.len() as u64;
+            for (p, o) in ao_pending.iter().zip(&occlusion) {
                 out.stats.add_work(&o.work);
                 out.stats.add_termination(o.termination, true);
                 if !o.occluded {
@@ -409,15 +679,30 @@ fn trace_row(
         std::mem::swap(&mut paths, &mut next);
         depth += 1;
     }
-    let inv = 1.0 / sh.spp as f32;
-    for (c, s) in out.color.iter_mut().zip(&sum) {
-        let v = *s * inv;
-        if v.is_finite() {
-            *c = v;
-        } else {
-            out.stats.non_finite_pixels += 1;
-            *c = Vec3::ZERO;
+    out.finish(&sum, sh.spp);
+    out
+}
+
+/// Phong's diffuse plus specular factor of a light of `intensity` in direction `to_light`
+/// (unit) at a point with facing normal `n` seen along `d`; 0 when the light is behind.
+fn phong(n: Vec3, d: Vec3, to_light: Vec3, intensity: f32, specular: Option<f64>) -> f32 {
+    let ndl = n.dot(to_light);
+    if ndl.is_nan() || ndl <= 0.0 {
+        return 0.0;
+    }
+    let mut amount = intensity * ndl;
+    if let Some(s) = specular {
+        let r = 2.0 * n * ndl - to_light;
+        let rv = r.dot(-d);
+        if rv > 0.0 {
+            amount += intensity * rv.powf(s as f32);
         }
     }
-    out
+    amount
+}
+
+/// The Cranley-Patterson rotation of one pixel sample's stratified set number `set`.
+fn rotation_of(pixel_key: u64, set: u64) -> (f32, f32) {
+    let k = pixel_key ^ mix64(set);
+    (unit_from_key(k), unit_from_key(k ^ 0x9e37_79b9))
 }

@@ -1,17 +1,21 @@
 //! The marchmesh ray-tracer core.
 //!
 //! The core owns everything but intersection: camera ray generation ([`camera`]), the Phong
-//! integrator with hard shadows, iterative reflections and Halton anti-aliasing
-//! ([`integrator`]), framebuffers with per-pixel AOVs ([`framebuffer`]), backgrounds and image
+//! integrator with hard and area-light shadows, ambient occlusion, iterative reflections and
+//! Halton anti-aliasing ([`integrator`]), the path tracer ([`path`]) with its area lights
+//! ([`emitter`]) and samplers ([`sampling`]), framebuffers with per-pixel AOVs ([`framebuffer`]), backgrounds and image
 //! output. It talks to geometry only through [`Geometry`]; backends never shade.
 
 pub mod background;
 pub mod camera;
 pub mod compare;
+pub mod emitter;
 pub mod framebuffer;
 pub mod geometry;
 pub mod image_io;
 pub mod integrator;
+pub mod path;
+pub mod sampling;
 pub mod stats;
 
 pub use background::{BackgroundError, BackgroundSampler};
@@ -20,4 +24,4 @@ pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{RenderError, RenderOptions, RenderOutput, render};
-pub use stats::RenderStats;
+pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};

@@ -9,8 +9,14 @@ pub struct RenderStats {
     pub primary_rays: u64,
     /// Occlusion rays traced.
     pub shadow_rays: u64,
-    /// Mirror reflection rays traced.
+    /// Mirror reflection rays traced (Whitted integrator).
     pub reflection_rays: u64,
+    /// Ambient-occlusion rays traced.
+    pub ao_rays: u64,
+    /// Path-tracer scattering rays after the camera ray (diffuse and mirror bounces).
+    pub bounce_rays: u64,
+    /// Time spent inside the geometry's batch queries per ray type, summed over threads.
+    pub trace_time: RayTypeTimes,
     /// Closest-hit queries that ended by step exhaustion.
     pub closest_max_steps: u64,
     /// Occlusion queries that ended by step exhaustion.
@@ -38,7 +44,24 @@ pub struct RenderStats {
 impl RenderStats {
     /// All rays traced.
     pub fn total_rays(&self) -> u64 {
-        self.primary_rays + self.shadow_rays + self.reflection_rays
+        self.primary_rays
+            + self.shadow_rays
+            + self.reflection_rays
+            + self.ao_rays
+            + self.bounce_rays
+    }
+
+    /// Million rays per second of one thread, per ray type: rays of the type divided by the
+    /// time the geometry spent tracing them (`None` for a type with no rays or no time).
+    pub fn mrays_per_thread_second(&self) -> RayTypeRates {
+        let rate = |rays: u64, ns: u64| (rays > 0 && ns > 0).then(|| rays as f64 * 1e3 / ns as f64);
+        let t = &self.trace_time;
+        RayTypeRates {
+            camera: rate(self.primary_rays, t.camera_ns),
+            shadow: rate(self.shadow_rays, t.shadow_ns),
+            ambient_occlusion: rate(self.ao_rays, t.ambient_occlusion_ns),
+            bounce: rate(self.reflection_rays + self.bounce_rays, t.bounce_ns),
+        }
     }
 
     /// Fraction of all queries that ran out of steps, in [0, 1].
@@ -95,5 +118,41 @@ impl RenderStats {
         self.primitive_tests += o.primitive_tests;
         self.non_finite_hits += o.non_finite_hits;
         self.non_finite_pixels += o.non_finite_pixels;
+        self.ao_rays += o.ao_rays;
+        self.bounce_rays += o.bounce_rays;
+        let (t, u) = (&mut self.trace_time, &o.trace_time);
+        t.camera_ns += u.camera_ns;
+        t.shadow_ns += u.shadow_ns;
+        t.ambient_occlusion_ns += u.ambient_occlusion_ns;
+        t.bounce_ns += u.bounce_ns;
     }
+}
+
+/// Nanoseconds spent in the geometry's batch queries, per ray type, summed over threads.
+///
+/// Camera rays are coherent; shadow rays towards area lights, ambient-occlusion rays and
+/// path-tracer bounces are not: the split shows what each representation pays for each kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RayTypeTimes {
+    /// Camera (primary) rays.
+    pub camera_ns: u64,
+    /// Occlusion rays towards lights.
+    pub shadow_ns: u64,
+    /// Ambient-occlusion rays.
+    pub ambient_occlusion_ns: u64,
+    /// Mirror reflections and path-tracer bounces.
+    pub bounce_ns: u64,
+}
+
+/// Million rays per thread-second per ray type (see [`RenderStats::mrays_per_thread_second`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RayTypeRates {
+    /// Camera rays.
+    pub camera: Option<f64>,
+    /// Shadow rays.
+    pub shadow: Option<f64>,
+    /// Ambient-occlusion rays.
+    pub ambient_occlusion: Option<f64>,
+    /// Reflection and bounce rays.
+    pub bounce: Option<f64>,
 }

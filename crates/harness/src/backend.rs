@@ -168,6 +168,16 @@ const SDF_OPTIONS: &[OptionDoc] = &[
         ty: "path|none",
         doc: "folder caching baked grids (none = no disk cache)",
     },
+    OptionDoc {
+        key: "cone_shadows",
+        ty: "bool",
+        doc: "area-light soft shadows from one cone march per light (approximate) instead of sampled rays",
+    },
+    OptionDoc {
+        key: "ao_taps",
+        ty: "int",
+        doc: "ambient occlusion from this many field taps along the normal (approximate); 0 = sampled rays",
+    },
 ];
 
 const MESH_OPTIONS: &[OptionDoc] = &[
@@ -262,6 +272,8 @@ pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
                 "cache_dir" => o
                     .cache_dir
                     .map_or("none".into(), |p| p.display().to_string()),
+                "cone_shadows" => o.cone_shadows.to_string(),
+                "ao_taps" => o.ao_taps.to_string(),
                 _ => return None,
             }
         }
@@ -389,6 +401,8 @@ pub fn sdf_options(options: &[(String, String)]) -> Result<SdfOptions, BackendEr
                         Some(PathBuf::from(v))
                     }
                 }
+                "cone_shadows" => o.cone_shadows = parse_bool(v)?,
+                "ao_taps" => o.ao_taps = parse_int(v)?,
                 _ => return Err(format!("unknown option; {}", valid_keys(kind))),
             }
             Ok(())

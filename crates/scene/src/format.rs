@@ -131,6 +131,60 @@ pub enum LightSpec {
     Point(PointLight),
     /// A light at infinity: `{"directional": {"direction": [1, 4, 4], "intensity": 0.2}}`.
     Directional(DirectionalLight),
+    /// A spherical area light (soft shadows):
+    /// `{"sphere_light": {"position": [0, 4, 0], "radius": 0.5, "intensity": 0.8}}`.
+    SphereLight(SphereLight),
+    /// A one-sided rectangular area light (soft shadows):
+    /// `{"rectangle_light": {"corner": [-1, 4, -1], "edge_u": [0, 0, 2], "edge_v": [2, 0, 0],
+    /// "intensity": 0.8}}`. It emits towards `cross(edge_u, edge_v)`.
+    RectangleLight(RectangleLight),
+}
+
+/// A spherical area light.
+///
+/// Whitted integrator: `intensity * color` is the light's total intensity, split evenly over
+/// `render.area_light_samples` points on the part of the sphere the shading point sees, each
+/// shaded like a point light (no falloff) with its own shadow ray. Path tracer: `intensity *
+/// color` is the radiance the sphere's surface emits. Lights are not geometry: rays pass
+/// through them and they cast no shadows; camera rays and mirror paths see their emission.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SphereLight {
+    /// Centre, world units.
+    pub position: [f64; 3],
+    /// Radius, world units, > 0.
+    pub radius: f64,
+    /// Intensity (Whitted) or radiance scale (path tracer), in [0, 1e6].
+    pub intensity: f64,
+    /// Linear RGB tint in [0, 1]. Default `[1, 1, 1]`.
+    #[serde(default = "white")]
+    pub color: [f64; 3],
+    /// Whether shadow rays are traced towards it. Default true.
+    #[serde(default = "yes")]
+    pub casts_shadows: bool,
+}
+
+/// A one-sided rectangular area light: the parallelogram `corner + s edge_u + t edge_v`,
+/// `s, t` in [0, 1], emitting on the side `cross(edge_u, edge_v)` points to.
+///
+/// `intensity` and `color` mean what they mean for [`SphereLight`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RectangleLight {
+    /// One corner, world units.
+    pub corner: [f64; 3],
+    /// First edge from the corner, world units (non-zero).
+    pub edge_u: [f64; 3],
+    /// Second edge from the corner, world units (non-zero, not parallel to `edge_u`).
+    pub edge_v: [f64; 3],
+    /// Intensity (Whitted) or radiance scale (path tracer), in [0, 1e6].
+    pub intensity: f64,
+    /// Linear RGB tint in [0, 1]. Default `[1, 1, 1]`.
+    #[serde(default = "white")]
+    pub color: [f64; 3],
+    /// Whether shadow rays are traced towards it. Default true.
+    #[serde(default = "yes")]
+    pub casts_shadows: bool,
 }
 
 /// Ambient light.
@@ -429,6 +483,25 @@ pub struct RenderSpec {
     /// a miss, and infinite planes and repetitions are bounded by it. Default 1000.
     #[serde(default = "default_max_distance")]
     pub max_distance: f64,
+    /// Which light transport runs. Default `"whitted"`.
+    #[serde(default)]
+    pub integrator: IntegratorSpec,
+    /// Shadow rays per shading point towards each area light, 1..=4096 (stratified over the
+    /// light). Default 16.
+    #[serde(default = "default_area_light_samples")]
+    pub area_light_samples: u32,
+    /// Ambient occlusion of the ambient term (Whitted integrator). Default none (the ambient
+    /// light reaches every point unoccluded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient_occlusion: Option<AmbientOcclusionSpec>,
+    /// Path tracer: most bounces after the camera ray, 0..=64 (0 = direct light only).
+    /// Default 8.
+    #[serde(default = "default_max_bounces")]
+    pub max_bounces: u32,
+    /// Seed of every random choice (area-light and AO sample rotations, path tracing); the same
+    /// seed gives the same image at any thread count. Default 0.
+    #[serde(default)]
+    pub seed: u64,
 }
 
 impl Default for RenderSpec {
@@ -439,8 +512,41 @@ impl Default for RenderSpec {
             reflection_cutoff: default_cutoff(),
             ray_offset: default_ray_offset(),
             max_distance: default_max_distance(),
+            integrator: IntegratorSpec::default(),
+            area_light_samples: default_area_light_samples(),
+            ambient_occlusion: None,
+            max_bounces: default_max_bounces(),
+            seed: 0,
         }
     }
+}
+
+/// The light transport of a render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum IntegratorSpec {
+    /// Phong shading with shadows (hard for point and directional lights, sampled for area
+    /// lights), optional ambient occlusion and mirror reflections: the source study's model.
+    #[default]
+    Whitted,
+    /// Unbiased path tracing: Lambertian diffuse from `color`, mirror reflection with
+    /// probability `reflectivity`, next-event estimation towards every light, Russian roulette
+    /// after three bounces, the background as an environment light. Ambient lights and
+    /// specular exponents are ignored.
+    Path,
+}
+
+/// Ambient occlusion: the ambient term at a point is scaled by the fraction of `samples`
+/// cosine-distributed hemisphere rays that meet nothing within `distance`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AmbientOcclusionSpec {
+    /// Rays per shading point, 1..=4096. Default 16.
+    #[serde(default = "default_area_light_samples")]
+    pub samples: u32,
+    /// Longest occlusion ray, world units, > 0. Default 1.
+    #[serde(default = "one")]
+    pub distance: f64,
 }
 
 fn zero3() -> [f64; 3] {
@@ -481,6 +587,15 @@ fn one_u32() -> u32 {
 }
 fn yes() -> bool {
     true
+}
+fn white() -> [f64; 3] {
+    [1.0; 3]
+}
+fn default_area_light_samples() -> u32 {
+    16
+}
+fn default_max_bounces() -> u32 {
+    8
 }
 fn default_depth() -> u32 {
     3

@@ -109,6 +109,31 @@ pub enum Light {
         /// Whether occlusion rays are traced.
         casts_shadows: bool,
     },
+    /// A spherical area light (see `format::SphereLight` for what intensity means).
+    Sphere {
+        /// Centre, world units.
+        center: DVec3,
+        /// Radius > 0, world units.
+        radius: f64,
+        /// `intensity * color`: per-channel intensity (Whitted) or radiance (path tracer).
+        emission: DVec3,
+        /// Whether occlusion rays are traced.
+        casts_shadows: bool,
+    },
+    /// A one-sided rectangular area light `corner + s edge_u + t edge_v`, emitting towards
+    /// `cross(edge_u, edge_v)`.
+    Rectangle {
+        /// Corner, world units.
+        corner: DVec3,
+        /// First edge, world units.
+        edge_u: DVec3,
+        /// Second edge, world units (not parallel to `edge_u`).
+        edge_v: DVec3,
+        /// `intensity * color`: per-channel intensity (Whitted) or radiance (path tracer).
+        emission: DVec3,
+        /// Whether occlusion rays are traced.
+        casts_shadows: bool,
+    },
 }
 
 /// What rays that hit nothing see.
@@ -138,6 +163,35 @@ pub struct RenderSettings {
     pub ray_offset: f64,
     /// Maximum ray distance, world units.
     pub max_distance: f64,
+    /// The light transport.
+    pub integrator: Integrator,
+    /// Shadow rays per shading point towards each area light (>= 1).
+    pub area_light_samples: u32,
+    /// Ambient occlusion of the ambient term, if enabled.
+    pub ambient_occlusion: Option<AmbientOcclusion>,
+    /// Path tracer: most bounces after the camera ray.
+    pub max_bounces: u32,
+    /// Seed of every random choice.
+    pub seed: u64,
+}
+
+/// The light transport of a render (see `format::IntegratorSpec`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Integrator {
+    /// Phong shading, shadows, ambient occlusion, mirror reflections.
+    #[default]
+    Whitted,
+    /// Unbiased path tracing with next-event estimation.
+    Path,
+}
+
+/// Validated ambient-occlusion settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AmbientOcclusion {
+    /// Rays per shading point (>= 1).
+    pub samples: u32,
+    /// Longest occlusion ray, world units (> 0).
+    pub distance: f64,
 }
 
 /// One node of the object tree, in its parent's frame.
@@ -307,6 +361,30 @@ impl Scene {
         self.camera.width = width;
         self.camera.height = height;
         Ok(self)
+    }
+
+    /// Replaces the samples per pixel (a CLI override); errors as in validation (the cap
+    /// depends on the integrator).
+    pub fn with_samples_per_pixel(mut self, samples: u32) -> Result<Self, String> {
+        let max = crate::validate::max_samples_per_pixel(self.render.integrator);
+        if !(1..=max).contains(&samples) {
+            return Err(format!(
+                "samples per pixel must be in 1..={max} for the {} integrator, got {samples}",
+                self.render.integrator.name()
+            ));
+        }
+        self.render.samples_per_pixel = samples;
+        Ok(self)
+    }
+}
+
+impl Integrator {
+    /// The name used in scene files.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Integrator::Whitted => "whitted",
+            Integrator::Path => "path",
+        }
     }
 }
 

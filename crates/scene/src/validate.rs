@@ -23,6 +23,23 @@ pub const MAX_NODES: usize = 100_000;
 pub const MAX_REPEAT_COUNT_PER_AXIS: u32 = 1_000_000;
 /// Largest accepted magnitude of any coordinate or length (world units).
 pub const MAX_COORDINATE: f64 = 1e12;
+/// Most samples per pixel for the Whitted integrator (all samples of a row are traced as one
+/// wavefront).
+pub const MAX_SAMPLES_PER_PIXEL: u32 = 1024;
+/// Most samples per pixel for the path tracer (traced in bounded chunks, for converged
+/// ground truth).
+pub const MAX_PATH_SAMPLES_PER_PIXEL: u32 = 65_536;
+/// The samples-per-pixel cap of `integrator`.
+pub fn max_samples_per_pixel(integrator: Integrator) -> u32 {
+    match integrator {
+        Integrator::Whitted => MAX_SAMPLES_PER_PIXEL,
+        Integrator::Path => MAX_PATH_SAMPLES_PER_PIXEL,
+    }
+}
+/// Most area-light shadow rays or ambient-occlusion rays per shading point.
+pub const MAX_LIGHT_SAMPLES: u32 = 4096;
+/// Most path-tracer bounces.
+pub const MAX_BOUNCES: u32 = 64;
 
 /// One thing wrong with a scene.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -101,6 +118,19 @@ impl Ctx<'_> {
             self.fail(path, format!("must be in [{lo}, {hi}], got {v}"));
         }
         v
+    }
+
+    /// A count in `1..=max`.
+    fn count_in(&mut self, path: &str, v: u32, max: u32) {
+        if !(1..=max).contains(&v) {
+            self.fail(path, format!("must be in 1..={max}, got {v}"));
+        }
+    }
+
+    /// An emitter's `intensity * color`, both checked (`path` is the light's JSON path).
+    fn emission(&mut self, path: &str, intensity: f64, color: [f64; 3]) -> DVec3 {
+        let i = self.in_range(&format!("{path}.intensity"), intensity, 0.0, 1e6);
+        i * self.color(&format!("{path}.color"), color)
     }
 
     fn vec3(&mut self, path: &str, v: [f64; 3]) -> DVec3 {
@@ -424,6 +454,34 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
                 ),
                 casts_shadows: d.casts_shadows,
             },
+            LightSpec::SphereLight(l) => {
+                let path = format!("lights[{i}].sphere_light");
+                Light::Sphere {
+                    center: cx.vec3(&format!("{path}.position"), l.position),
+                    radius: cx.positive(&format!("{path}.radius"), l.radius),
+                    emission: cx.emission(&path, l.intensity, l.color),
+                    casts_shadows: l.casts_shadows,
+                }
+            }
+            LightSpec::RectangleLight(l) => {
+                let path = format!("lights[{i}].rectangle_light");
+                let edge_u = cx.vec3(&format!("{path}.edge_u"), l.edge_u);
+                let edge_v = cx.vec3(&format!("{path}.edge_v"), l.edge_v);
+                let area = edge_u.cross(edge_v).length();
+                if area <= 1e-12 * edge_u.length() * edge_v.length() {
+                    cx.fail(
+                        &format!("{path}.edge_v"),
+                        "must be non-zero and not parallel to edge_u (the rectangle has no area)",
+                    );
+                }
+                Light::Rectangle {
+                    corner: cx.vec3(&format!("{path}.corner"), l.corner),
+                    edge_u,
+                    edge_v,
+                    emission: cx.emission(&path, l.intensity, l.color),
+                    casts_shadows: l.casts_shadows,
+                }
+            }
         });
     }
 
@@ -441,12 +499,43 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
     };
 
     let r = &file.render;
-    if !(1..=1024).contains(&r.samples_per_pixel) {
+    let integrator = match r.integrator {
+        IntegratorSpec::Whitted => Integrator::Whitted,
+        IntegratorSpec::Path => Integrator::Path,
+    };
+    let max_spp = max_samples_per_pixel(integrator);
+    if !(1..=max_spp).contains(&r.samples_per_pixel) {
         cx.fail(
             "render.samples_per_pixel",
-            format!("must be in 1..=1024, got {}", r.samples_per_pixel),
+            format!(
+                "must be in 1..={max_spp} for the {} integrator, got {}",
+                integrator.name(),
+                r.samples_per_pixel
+            ),
         );
     }
+    cx.count_in(
+        "render.area_light_samples",
+        r.area_light_samples,
+        MAX_LIGHT_SAMPLES,
+    );
+    if r.max_bounces > MAX_BOUNCES {
+        cx.fail(
+            "render.max_bounces",
+            format!("must be in 0..={MAX_BOUNCES}, got {}", r.max_bounces),
+        );
+    }
+    let ambient_occlusion = r.ambient_occlusion.as_ref().map(|ao| {
+        cx.count_in(
+            "render.ambient_occlusion.samples",
+            ao.samples,
+            MAX_LIGHT_SAMPLES,
+        );
+        AmbientOcclusion {
+            samples: ao.samples,
+            distance: cx.positive("render.ambient_occlusion.distance", ao.distance),
+        }
+    });
     if r.max_reflection_depth > 64 {
         cx.fail(
             "render.max_reflection_depth",
@@ -459,6 +548,11 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
         reflection_cutoff: cx.in_range("render.reflection_cutoff", r.reflection_cutoff, 0.0, 1.0),
         ray_offset: cx.in_range("render.ray_offset", r.ray_offset, 0.0, 0.1),
         max_distance: cx.positive("render.max_distance", r.max_distance),
+        integrator,
+        area_light_samples: r.area_light_samples,
+        ambient_occlusion,
+        max_bounces: r.max_bounces,
+        seed: r.seed,
     };
 
     let objects: Vec<Node> = file

@@ -22,6 +22,7 @@
 //! * [`Geometry::closest_hits`] / [`Geometry::occluded_many`] trace 8 rays in lockstep: one
 //!   8-lane field evaluation per step, a lane that finishes is refilled with the next ray.
 
+mod cone;
 mod march;
 mod options;
 
@@ -29,7 +30,8 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, Termination, TraceResult,
+    Cone, Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, Shortcuts, SurfacePoint,
+    Termination, TraceResult, Visibility,
 };
 use marchmesh_field::{Field, FieldError, FieldOptions};
 use marchmesh_scene::{MaterialId, Scene};
@@ -61,6 +63,10 @@ pub struct SdfGeometry {
     /// Normal step per unit path length (world units).
     normal_step: f32,
     lockstep: bool,
+    /// The one-query approximations enabled by the options.
+    shortcuts: Shortcuts,
+    /// Field taps per ambient-occlusion estimate.
+    ao_taps: u32,
     report: GeometryReport,
 }
 
@@ -164,6 +170,11 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         },
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
+        shortcuts: Shortcuts {
+            cone_shadows: opts.cone_shadows,
+            ambient_occlusion: opts.ao_taps > 0,
+        },
+        ao_taps: opts.ao_taps,
         field,
         report,
     })
@@ -394,5 +405,17 @@ impl Geometry for SdfGeometry {
 
     fn report(&self) -> GeometryReport {
         self.report.clone()
+    }
+
+    fn shortcuts(&self) -> Shortcuts {
+        self.shortcuts
+    }
+
+    fn cone_visibility(&self, cones: &[Cone], out: &mut [Visibility]) {
+        cone::cone_visibility(&self.field, cones, out, self.params.max_steps);
+    }
+
+    fn ambient_openness(&self, points: &[SurfacePoint], distance: f32, out: &mut [Visibility]) {
+        cone::ambient_openness(&self.field, self.ao_taps, points, distance, out);
     }
 }

@@ -68,6 +68,13 @@ pub struct SdfOptions {
     pub mesh_grid_resolution: u32,
     /// Cache folder for baked grids; `None` (default) = no disk cache.
     pub cache_dir: Option<PathBuf>,
+    /// Answer area-light soft shadows with one cone march per light (Quilez's penumbra
+    /// estimate, an approximation) instead of the integrator's sampled shadow rays (exact as
+    /// the sample count grows). Default false.
+    pub cone_shadows: bool,
+    /// Answer ambient occlusion with this many field taps along the normal (Evans 2006, an
+    /// approximation) instead of the integrator's sampled rays; 0 (default) = rays.
+    pub ao_taps: u32,
 }
 
 impl SdfOptions {
@@ -82,6 +89,8 @@ impl SdfOptions {
         lockstep: true,
         mesh_grid_resolution: 64,
         cache_dir: None,
+        cone_shadows: false,
+        ao_taps: 0,
     };
 }
 

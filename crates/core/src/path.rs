@@ -1,0 +1,336 @@
+//! The path tracer (`render.integrator: "path"`): unbiased light transport with next-event
+//! estimation, traced as wavefronts so backends get rays in batches.
+//!
+//! Model (Kajiya, "The Rendering Equation", 1986; estimator as in pbrt-v3's `PathIntegrator`
+//! without multiple importance sampling):
+//! - surfaces are Lambertian with albedo `color` (BRDF `color / pi`), or, with probability
+//!   `reflectivity`, perfect mirrors; specular exponents and ambient lights are ignored;
+//! - at each diffuse vertex one shadow ray goes to every light (next-event estimation):
+//!   area lights are sampled by solid angle (spheres) or area (rectangles) and emit radiance
+//!   `intensity * color`; point lights have radiant intensity `intensity` and fall off with
+//!   the squared distance; directional lights give irradiance `intensity` on a surface facing
+//!   them;
+//! - emission seen directly by the camera or after a mirror bounce is added (after a diffuse
+//!   bounce it was already counted by next-event estimation); an area light's emitting side
+//!   absorbs the path (a black emitter), its back side is invisible;
+//! - rays that leave the scene see the background as environment radiance;
+//! - bounce directions are cosine-distributed; after three bounces Russian roulette ends a
+//!   path with probability `1 - min(max throughput channel, 0.95)` and divides the survivors
+//!   by the survival probability;
+//! - random numbers are a randomized Halton sequence per pixel ([`halton_dim`]) keyed by the
+//!   scene's seed, the pixel and the sample: the image is the same at any thread count.
+//!
+//! `max_bounces = 0` gives direct lighting only. Samples of a row are traced in chunks of at
+//! most [`PATHS_PER_WAVEFRONT`] paths, so the memory does not grow with the sample count.
+
+use glam::Vec3;
+use marchmesh_scene::{Light, Scene};
+
+use crate::background::BackgroundSampler;
+use crate::camera::{PrimarySamples, primary_ray, sample_offset};
+use crate::geometry::{Geometry, OcclusionResult, Ray, RenderSpace, TraceResult};
+use crate::integrator::{
+    RowOutput, Shading, timed_closest_hits, timed_closest_hits_primary, timed_occluded_many,
+};
+use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
+
+/// Most paths traced together in one wavefront of a row.
+pub const PATHS_PER_WAVEFRONT: usize = 4096;
+
+/// Halton dimensions used per bounce: mirror choice, Russian roulette, bounce direction (2),
+/// then two per light.
+const DIMS_PER_BOUNCE_FIXED: u32 = 4;
+
+const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
+
+/// A light the path tracer samples: area lights come from [`Shading`]; point and directional
+/// lights carry the path tracer's physical meaning.
+enum PathLight {
+    Point {
+        position: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+    Directional {
+        to_light: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+    Area(crate::emitter::Emitter),
+}
+
+#[derive(Clone, Copy)]
+struct PathState {
+    pixel: u32,
+    sample: u32,
+    ray: Ray,
+    throughput: Vec3,
+    /// Emission met by this ray counts (camera rays and rays after a mirror bounce).
+    count_emission: bool,
+    bounce: u32,
+}
+
+/// A shadow ray's pending contribution to a pixel.
+struct Pending {
+    pixel: u32,
+    amount: Vec3,
+}
+
+/// Traces one image row with the path tracer; the caller's [`Shading`] holds the materials,
+/// lights and limits.
+pub(crate) fn trace_row(
+    scene: &Scene,
+    sh: &Shading,
+    geometry: &dyn Geometry,
+    background: &BackgroundSampler,
+    row: u32,
+) -> RowOutput {
+    let w = scene.camera.width as usize;
+    let mut out = RowOutput::new(w);
+    let mut sum = vec![Vec3::ZERO; w];
+    let lights = path_lights(scene, sh);
+    let chunk = (PATHS_PER_WAVEFRONT / w.max(1)).max(1) as u32;
+    let mut paths: Vec<PathState> = Vec::new();
+    let mut next: Vec<PathState> = Vec::new();
+    let mut results: Vec<TraceResult> = Vec::new();
+    let mut shadow_rays: Vec<Ray> = Vec::new();
+    let mut pending: Vec<Pending> = Vec::new();
+    let mut occlusion: Vec<OcclusionResult> = Vec::new();
+    let mut first = 0;
+    while first < sh.spp {
+        let last = (first + chunk).min(sh.spp);
+        paths.clear();
+        for s in first..last {
+            let off = sample_offset(s);
+            for col in 0..w as u32 {
+                paths.push(PathState {
+                    pixel: col,
+                    sample: s,
+                    ray: primary_ray(&scene.camera, col, row, off, scene.render.max_distance),
+                    throughput: Vec3::ONE,
+                    count_emission: true,
+                    bounce: 0,
+                });
+            }
+        }
+        out.stats.primary_rays += paths.len() as u64;
+        while !paths.is_empty() {
+            let camera = paths[0].bounce == 0;
+            let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
+            if camera {
+                // The chunk's camera rays are ordered sample-major from sample `first`.
+                let samples = PrimarySamples::row(&scene.camera, row).starting_at(first);
+                out.stats.trace_time.camera_ns +=
+                    timed_closest_hits_primary(geometry, &rays, samples, &mut results);
+            } else {
+                out.stats.trace_time.bounce_ns += timed_closest_hits(geometry, &rays, &mut results);
+            }
+            next.clear();
+            shadow_rays.clear();
+            pending.clear();
+            for (path, res) in paths.iter().zip(&results) {
+                out.stats.add_work(&res.work);
+                out.stats.add_termination(res.termination, false);
+                let px = path.pixel as usize;
+                let hit = res.hit.filter(|h| {
+                    let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
+                    if !ok {
+                        out.stats.non_finite_hits += 1;
+                    }
+                    ok
+                });
+                let aov = camera && path.sample == 0;
+                if aov {
+                    out.termination[px] = res.termination;
+                    out.work[px] = res.work;
+                }
+                let t_geometry = hit.map_or(path.ray.t_max, |h| h.t);
+                if let Some(emission) = sh.emitter_before(&path.ray, t_geometry) {
+                    if path.count_emission {
+                        sum[px] += path.throughput * emission;
+                    }
+                    continue;
+                }
+                let Some(hit) = hit else {
+                    sum[px] += path.throughput * background.sample(path.ray.dir);
+                    continue;
+                };
+                let d = path.ray.dir;
+                let mut n = hit.normal.normalize_or_zero();
+                if n.dot(d) > 0.0 {
+                    n = -n;
+                }
+                if aov {
+                    out.depth[px] = hit.t;
+                    out.normal[px] = n;
+                    out.material[px] = hit.material;
+                }
+                let m = sh.material(hit.material);
+                let albedo = m.color.as_vec3();
+                let key = sample_key(sh.seed, path.pixel, row, 0);
+                let dim0 = path.bounce * (DIMS_PER_BOUNCE_FIXED + 2 * lights.len() as u32);
+                let sample = |k: u32| halton_dim(path.sample, dim0 + k, key);
+                let offset = sh.ray_offset * hit.position.length().max(1e-30);
+                let origin = hit.position + n * offset;
+                let can_bounce = path.bounce < sh.max_bounces;
+                if (m.reflectivity as f32) > sample(0) {
+                    // Perfect mirror: the throughput is unchanged (weight r / probability r).
+                    if can_bounce {
+                        next.push(PathState {
+                            ray: Ray {
+                                origin,
+                                dir: (d - 2.0 * d.dot(n) * n).normalize(),
+                                t_min: 0.0,
+                                t_max: sh.max_distance,
+                            },
+                            count_emission: true,
+                            bounce: path.bounce + 1,
+                            ..*path
+                        });
+                    }
+                    continue;
+                }
+                // Diffuse vertex: next-event estimation towards every light.
+                let brdf = path.throughput * albedo * INV_PI;
+                for (li, light) in lights.iter().enumerate() {
+                    let u = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32);
+                    let v = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32 + 1);
+                    let (dir, dist, radiance_over_pdf, shadows) = match *light {
+                        PathLight::Point {
+                            position,
+                            intensity,
+                            shadows,
+                        } => {
+                            let to = position - hit.position;
+                            let dist = to.length();
+                            (
+                                to / dist,
+                                dist,
+                                Vec3::splat(intensity / (dist * dist)),
+                                shadows,
+                            )
+                        }
+                        PathLight::Directional {
+                            to_light,
+                            intensity,
+                            shadows,
+                        } => (to_light, f32::INFINITY, Vec3::splat(intensity), shadows),
+                        PathLight::Area(e) => match e.sample(hit.position, u, v) {
+                            Some(s) => (
+                                s.dir,
+                                s.dist,
+                                e.emission() / s.pdf_solid_angle,
+                                e.casts_shadows(),
+                            ),
+                            None => continue,
+                        },
+                    };
+                    let cos = n.dot(dir);
+                    if cos.is_nan() || cos <= 0.0 || !dir.is_finite() {
+                        continue;
+                    }
+                    let amount = brdf * radiance_over_pdf * cos;
+                    if !amount.is_finite() || amount == Vec3::ZERO {
+                        continue;
+                    }
+                    let t_max = if dist.is_finite() {
+                        dist - offset
+                    } else {
+                        sh.max_distance
+                    };
+                    if shadows && t_max > 0.0 {
+                        shadow_rays.push(Ray {
+                            origin,
+                            dir,
+                            t_min: 0.0,
+                            t_max,
+                        });
+                        pending.push(Pending {
+                            pixel: path.pixel,
+                            amount,
+                        });
+                    } else {
+                        sum[px] += amount;
+                    }
+                }
+                if !can_bounce {
+                    continue;
+                }
+                // Cosine-distributed bounce: BRDF * cos / pdf = albedo.
+                let mut throughput = path.throughput * albedo;
+                if path.bounce >= 3 {
+                    let survive = throughput.max_element().min(0.95);
+                    if survive <= sample(1) {
+                        continue;
+                    }
+                    throughput /= survive;
+                }
+                next.push(PathState {
+                    ray: Ray {
+                        origin,
+                        dir: cosine_hemisphere(n, sample(2), sample(3)),
+                        t_min: 0.0,
+                        t_max: sh.max_distance,
+                    },
+                    throughput,
+                    count_emission: false,
+                    bounce: path.bounce + 1,
+                    ..*path
+                });
+            }
+            if !shadow_rays.is_empty() {
+                out.stats.trace_time.shadow_ns +=
+                    timed_occluded_many(geometry, &shadow_rays, &mut occlusion);
+                out.stats.shadow_rays += shadow_rays.len() as u64;
+                for (p, o) in pending.iter().zip(&occlusion) {
+                    out.stats.add_work(&o.work);
+                    out.stats.add_termination(o.termination, true);
+                    if !o.occluded {
+                        sum[p.pixel as usize] += p.amount;
+                    }
+                }
+            }
+            out.stats.bounce_rays += next.len() as u64;
+            std::mem::swap(&mut paths, &mut next);
+        }
+        first = last;
+    }
+    out.finish(&sum, sh.spp);
+    out
+}
+
+/// The lights as the path tracer samples them, in render space.
+fn path_lights(scene: &Scene, sh: &Shading) -> Vec<PathLight> {
+    let space = RenderSpace::of(scene);
+    let mut area = sh.emitters.iter();
+    let mut lights = Vec::new();
+    for l in &scene.lights {
+        match *l {
+            Light::Ambient { .. } => {}
+            Light::Point {
+                position,
+                intensity,
+                casts_shadows,
+            } => lights.push(PathLight::Point {
+                position: space.point(position).as_vec3(),
+                intensity: intensity as f32,
+                shadows: casts_shadows,
+            }),
+            Light::Directional {
+                direction,
+                intensity,
+                casts_shadows,
+            } => lights.push(PathLight::Directional {
+                to_light: direction.as_vec3().normalize(),
+                intensity: intensity as f32,
+                shadows: casts_shadows,
+            }),
+            Light::Sphere { .. } | Light::Rectangle { .. } => {
+                if let Some(e) = area.next() {
+                    lights.push(PathLight::Area(*e));
+                }
+            }
+        }
+    }
+    lights
+}
