@@ -15,7 +15,7 @@ Usage (Mitsuba 3 from PyPI, scalar variant, no GPU):
 
     pip install mitsuba numpy
     cargo build --release -p marchmesh-cli
-    python3 scripts/crosscheck_mitsuba_pt.py scenes/cornell-box.json --size 64 --spp 1024
+    python3 scripts/crosscheck_mitsuba_pt.py scenes/lighting/cornell-box.json --size 64 --spp 1024
 
 Exit status: 0 when both checks pass, 1 when one fails, 2 on bad input or a missing tool.
 """
