@@ -29,7 +29,7 @@ use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::RenderSpace;
 use crate::geometry::{
-    Cone, Geometry, OcclusionResult, Ray, RayWork, SurfacePoint, Termination, TraceResult,
+    Cone, Geometry, Hit, OcclusionResult, Ray, RayWork, SurfacePoint, Termination, TraceResult,
     Visibility,
 };
 use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key, unit_from_key};
@@ -313,45 +313,78 @@ impl RowOutput {
     }
 }
 
-/// Traces `rays` with [`Geometry::closest_hits`] into `out`, returning the nanoseconds spent.
-pub(crate) fn timed_closest_hits(
-    geometry: &dyn Geometry,
-    rays: &[Ray],
-    out: &mut Vec<TraceResult>,
+/// Resizes `out` to `len` default results, runs `trace` on it and returns the nanoseconds the
+/// trace took: every batched geometry query of the integrators is timed through this, so the
+/// per-ray-type times in [`RenderStats::trace_time`] measure the geometry alone.
+pub(crate) fn timed<T: Clone + Default>(
+    out: &mut Vec<T>,
+    len: usize,
+    trace: impl FnOnce(&mut [T]),
 ) -> u64 {
     out.clear();
-    out.resize(rays.len(), TraceResult::default());
+    out.resize(len, T::default());
     let start = Instant::now();
-    geometry.closest_hits(rays, out);
+    trace(out);
     start.elapsed().as_nanos() as u64
 }
 
-/// Traces the camera rays `rays` (whose exact samples are `samples`) with
-/// [`Geometry::closest_hits_primary`] into `out`, returning the nanoseconds spent.
-pub(crate) fn timed_closest_hits_primary(
-    geometry: &dyn Geometry,
-    rays: &[Ray],
-    samples: PrimarySamples<'_>,
-    out: &mut Vec<TraceResult>,
-) -> u64 {
-    out.clear();
-    out.resize(rays.len(), TraceResult::default());
-    let start = Instant::now();
-    geometry.closest_hits_primary(rays, samples, out);
-    start.elapsed().as_nanos() as u64
+/// What a traced path vertex met.
+pub(crate) enum Vertex {
+    /// An area light's emitting side, before any surface: its emission.
+    Emitter(Vec3),
+    /// Nothing: the background's radiance in the ray's direction.
+    Background(Vec3),
+    /// A surface, with its unit normal turned to face the ray.
+    Surface {
+        /// The hit.
+        hit: Hit,
+        /// Normal facing the incoming ray.
+        normal: Vec3,
+    },
 }
 
-/// Traces `rays` with [`Geometry::occluded_many`] into `out`, returning the nanoseconds spent.
-pub(crate) fn timed_occluded_many(
-    geometry: &dyn Geometry,
-    rays: &[Ray],
-    out: &mut Vec<OcclusionResult>,
-) -> u64 {
-    out.clear();
-    out.resize(rays.len(), OcclusionResult::default());
-    let start = Instant::now();
-    geometry.occluded_many(rays, out);
-    start.elapsed().as_nanos() as u64
+/// Classifies one closest-hit result of a wavefront: counts its work and termination, drops a
+/// non-finite hit (counted), records pixel `px`'s AOVs when `aov` (sample 0 of a camera ray),
+/// and decides whether the ray met an area light, the background or a surface.
+pub(crate) fn resolve_vertex(
+    out: &mut RowOutput,
+    sh: &Shading,
+    background: &BackgroundSampler,
+    ray: &Ray,
+    res: &TraceResult,
+    px: usize,
+    aov: bool,
+) -> Vertex {
+    out.stats.add_work(&res.work);
+    out.stats.add_termination(res.termination, false);
+    let hit = res.hit.filter(|h| {
+        let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
+        if !ok {
+            out.stats.non_finite_hits += 1;
+        }
+        ok
+    });
+    if aov {
+        out.termination[px] = res.termination;
+        out.work[px] = res.work;
+    }
+    let t_geometry = hit.map_or(ray.t_max, |h| h.t);
+    if let Some(emission) = sh.emitter_before(ray, t_geometry) {
+        return Vertex::Emitter(emission);
+    }
+    let Some(hit) = hit else {
+        return Vertex::Background(background.sample(ray.dir));
+    };
+    let mut normal = hit.normal.normalize_or_zero();
+    if normal.dot(ray.dir) > 0.0 {
+        normal = -normal;
+    }
+    if aov {
+        out.depth[px] = hit.t;
+        out.normal[px] = normal;
+        out.material[px] = hit.material;
+    }
+    Vertex::Surface { hit, normal }
 }
 
 /// One path (one sample of one pixel) in the row's wavefront.
@@ -414,10 +447,13 @@ fn trace_row(
         if depth == 0 {
             // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
             let samples = PrimarySamples::row(&scene.camera, row);
-            out.stats.trace_time.camera_ns +=
-                timed_closest_hits_primary(geometry, &rays, samples, &mut results);
+            out.stats.trace_time.camera_ns += timed(&mut results, rays.len(), |r| {
+                geometry.closest_hits_primary(&rays, samples, r)
+            });
         } else {
-            out.stats.trace_time.bounce_ns += timed_closest_hits(geometry, &rays, &mut results);
+            out.stats.trace_time.bounce_ns += timed(&mut results, rays.len(), |r| {
+                geometry.closest_hits(&rays, r)
+            });
         }
         shadow_rays.clear();
         pending.clear();
@@ -429,40 +465,16 @@ fn trace_row(
         ao_point_pending.clear();
         next.clear();
         for (pi, (path, res)) in paths.iter().zip(&results).enumerate() {
-            out.stats.add_work(&res.work);
-            out.stats.add_termination(res.termination, false);
             let px = path.pixel as usize;
-            let hit = res.hit.filter(|h| {
-                let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
-                if !ok {
-                    out.stats.non_finite_hits += 1;
+            let aov = depth == 0 && pi < w;
+            let (hit, n) = match resolve_vertex(&mut out, sh, background, &path.ray, res, px, aov) {
+                Vertex::Emitter(radiance) | Vertex::Background(radiance) => {
+                    sum[px] += path.throughput * radiance;
+                    continue;
                 }
-                ok
-            });
-            // AOVs: primary ray of sample 0 (the first `w` paths of depth 0).
-            if depth == 0 && pi < w {
-                out.termination[px] = res.termination;
-                out.work[px] = res.work;
-            }
-            let t_geometry = hit.map_or(path.ray.t_max, |h| h.t);
-            if let Some(emission) = sh.emitter_before(&path.ray, t_geometry) {
-                sum[px] += path.throughput * emission;
-                continue;
-            }
-            let Some(hit) = hit else {
-                sum[px] += path.throughput * background.sample(path.ray.dir);
-                continue;
+                Vertex::Surface { hit, normal } => (hit, normal),
             };
             let d = path.ray.dir;
-            let mut n = hit.normal.normalize_or_zero();
-            if n.dot(d) > 0.0 {
-                n = -n;
-            }
-            if depth == 0 && pi < w {
-                out.depth[px] = hit.t;
-                out.normal[px] = n;
-                out.material[px] = hit.material;
-            }
             let m = sh.material(hit.material);
             let color = m.color.as_vec3();
             let refl = m.reflectivity as f32;
@@ -625,8 +637,9 @@ fn trace_row(
             }
         }
         if !shadow_rays.is_empty() {
-            out.stats.trace_time.shadow_ns +=
-                timed_occluded_many(geometry, &shadow_rays, &mut occlusion);
+            out.stats.trace_time.shadow_ns += timed(&mut occlusion, shadow_rays.len(), |o| {
+                geometry.occluded_many(&shadow_rays, o)
+            });
             out.stats.shadow_rays += shadow_rays.len() as u64;
             for (p, o) in pending.iter().zip(&occlusion) {
                 out.stats.add_work(&o.work);
@@ -637,11 +650,9 @@ fn trace_row(
             }
         }
         if !cones.is_empty() {
-            visibility.clear();
-            visibility.resize(cones.len(), Visibility::default());
-            let start = Instant::now();
-            geometry.cone_visibility(&cones, &mut visibility);
-            out.stats.trace_time.shadow_ns += start.elapsed().as_nanos() as u64;
+            out.stats.trace_time.shadow_ns += timed(&mut visibility, cones.len(), |v| {
+                geometry.cone_visibility(&cones, v)
+            });
             out.stats.shadow_rays += cones.len() as u64;
             for (p, v) in cone_pending.iter().zip(&visibility) {
                 out.stats.add_work(&v.work);
@@ -650,12 +661,11 @@ fn trace_row(
             }
         }
         if !ao_points.is_empty() {
-            visibility.clear();
-            visibility.resize(ao_points.len(), Visibility::default());
             let distance = sh.ambient_occlusion.map_or(0.0, |a| a.1);
-            let start = Instant::now();
-            geometry.ambient_openness(&ao_points, distance, &mut visibility);
-            out.stats.trace_time.ambient_occlusion_ns += start.elapsed().as_nanos() as u64;
+            out.stats.trace_time.ambient_occlusion_ns +=
+                timed(&mut visibility, ao_points.len(), |v| {
+                    geometry.ambient_openness(&ao_points, distance, v)
+                });
             out.stats.ao_rays += ao_points.len() as u64;
             for (p, v) in ao_point_pending.iter().zip(&visibility) {
                 out.stats.add_work(&v.work);
@@ -665,7 +675,9 @@ fn trace_row(
         }
         if !ao_rays.is_empty() {
             out.stats.trace_time.ambient_occlusion_ns +=
-                timed_occluded_many(geometry, &ao_rays, &mut occlusion);
+                timed(&mut occlusion, ao_rays.len(), |o| {
+                    geometry.occluded_many(&ao_rays, o)
+                });
             out.stats.ao_rays += ao_rays.len() as u64;
             for (p, o) in ao_pending.iter().zip(&occlusion) {
                 out.stats.add_work(&o.work);

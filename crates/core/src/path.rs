@@ -29,9 +29,7 @@ use marchmesh_scene::{Light, Scene};
 use crate::background::BackgroundSampler;
 use crate::camera::{PrimarySamples, primary_ray, sample_offset};
 use crate::geometry::{Geometry, OcclusionResult, Ray, RenderSpace, TraceResult};
-use crate::integrator::{
-    RowOutput, Shading, timed_closest_hits, timed_closest_hits_primary, timed_occluded_many,
-};
+use crate::integrator::{RowOutput, Shading, Vertex, resolve_vertex, timed};
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
 
 /// Most paths traced together in one wavefront of a row.
@@ -120,51 +118,35 @@ pub(crate) fn trace_row(
             if camera {
                 // The chunk's camera rays are ordered sample-major from sample `first`.
                 let samples = PrimarySamples::row(&scene.camera, row).starting_at(first);
-                out.stats.trace_time.camera_ns +=
-                    timed_closest_hits_primary(geometry, &rays, samples, &mut results);
+                out.stats.trace_time.camera_ns += timed(&mut results, rays.len(), |r| {
+                    geometry.closest_hits_primary(&rays, samples, r)
+                });
             } else {
-                out.stats.trace_time.bounce_ns += timed_closest_hits(geometry, &rays, &mut results);
+                out.stats.trace_time.bounce_ns += timed(&mut results, rays.len(), |r| {
+                    geometry.closest_hits(&rays, r)
+                });
             }
             next.clear();
             shadow_rays.clear();
             pending.clear();
             for (path, res) in paths.iter().zip(&results) {
-                out.stats.add_work(&res.work);
-                out.stats.add_termination(res.termination, false);
                 let px = path.pixel as usize;
-                let hit = res.hit.filter(|h| {
-                    let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
-                    if !ok {
-                        out.stats.non_finite_hits += 1;
-                    }
-                    ok
-                });
                 let aov = camera && path.sample == 0;
-                if aov {
-                    out.termination[px] = res.termination;
-                    out.work[px] = res.work;
-                }
-                let t_geometry = hit.map_or(path.ray.t_max, |h| h.t);
-                if let Some(emission) = sh.emitter_before(&path.ray, t_geometry) {
-                    if path.count_emission {
-                        sum[px] += path.throughput * emission;
-                    }
-                    continue;
-                }
-                let Some(hit) = hit else {
-                    sum[px] += path.throughput * background.sample(path.ray.dir);
-                    continue;
-                };
+                let (hit, n) =
+                    match resolve_vertex(&mut out, sh, background, &path.ray, res, px, aov) {
+                        Vertex::Emitter(emission) => {
+                            if path.count_emission {
+                                sum[px] += path.throughput * emission;
+                            }
+                            continue;
+                        }
+                        Vertex::Background(radiance) => {
+                            sum[px] += path.throughput * radiance;
+                            continue;
+                        }
+                        Vertex::Surface { hit, normal } => (hit, normal),
+                    };
                 let d = path.ray.dir;
-                let mut n = hit.normal.normalize_or_zero();
-                if n.dot(d) > 0.0 {
-                    n = -n;
-                }
-                if aov {
-                    out.depth[px] = hit.t;
-                    out.normal[px] = n;
-                    out.material[px] = hit.material;
-                }
                 let m = sh.material(hit.material);
                 let albedo = m.color.as_vec3();
                 let key = sample_key(sh.seed, path.pixel, row, 0);
@@ -279,8 +261,9 @@ pub(crate) fn trace_row(
                 });
             }
             if !shadow_rays.is_empty() {
-                out.stats.trace_time.shadow_ns +=
-                    timed_occluded_many(geometry, &shadow_rays, &mut occlusion);
+                out.stats.trace_time.shadow_ns += timed(&mut occlusion, shadow_rays.len(), |o| {
+                    geometry.occluded_many(&shadow_rays, o)
+                });
                 out.stats.shadow_rays += shadow_rays.len() as u64;
                 for (p, o) in pending.iter().zip(&occlusion) {
                     out.stats.add_work(&o.work);

@@ -100,7 +100,8 @@ fn path_tracer_direct_light_matches_the_rectangle_form_factor() {
 #[test]
 fn path_tracer_gives_the_same_image_at_any_thread_count() {
     let json = std::fs::read_to_string(
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/lighting/cornell-box.json"),
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../scenes/lighting/cornell-box.json"),
     )
     .unwrap();
     let s = scene(&json).with_image_size(24, 24).unwrap();
