@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use marchmesh_core::{BackgroundSampler, Framebuffer, RenderOptions, compare, image_io, render};
-use marchmesh_scene::Scene;
+use marchmesh_scene::{RenderOverrides, Scene};
 
 use crate::alloc::HeapPhase;
 use crate::backend::{self, BackendKind, BackendSpec};
@@ -15,6 +15,7 @@ use crate::images;
 use crate::results::{Failure, ReferenceInfo, Row};
 use crate::rss::RssPhase;
 use crate::stats::{RepeatPolicy, Summary};
+use crate::suite::BackendConfig;
 use crate::suite::{Resolution, Suite, glob_match};
 
 /// One configuration to measure.
@@ -34,8 +35,10 @@ pub struct Config {
     pub spec: BackendSpec,
     /// Requested resolution.
     pub resolution: Resolution,
-    /// Samples per pixel override.
-    pub spp: Option<u32>,
+    /// Render settings replacing the scene's (the group's `spp` folded in).
+    pub render: RenderOverrides,
+    /// Render settings of the reference render this configuration is measured against.
+    pub truth_render: RenderOverrides,
     /// Render threads (resolved: never 0).
     pub threads: usize,
     /// Compare with the reference.
@@ -140,7 +143,12 @@ pub fn configurations(suite: &Suite, options: &BenchOptions) -> Vec<Config> {
         };
         for (scene, path) in &g.scenes {
             for &resolution in &g.resolutions {
-                for (label, spec) in &g.backends {
+                for BackendConfig {
+                    label,
+                    spec,
+                    render,
+                } in &g.backends
+                {
                     for &t in &threads {
                         let kind = spec.kind.map_or("?", BackendKind::name);
                         let id = format!(
@@ -163,7 +171,14 @@ pub fn configurations(suite: &Suite, options: &BenchOptions) -> Vec<Config> {
                             label: label.clone(),
                             spec: spec.clone(),
                             resolution,
-                            spp: g.spp,
+                            render: RenderOverrides {
+                                samples_per_pixel: render.samples_per_pixel.or(g.spp),
+                                ..render.clone()
+                            },
+                            truth_render: RenderOverrides {
+                                samples_per_pixel: g.truth.samples_per_pixel.or(g.spp),
+                                ..g.truth.clone()
+                            },
                             threads: t,
                             reference: g.reference,
                             repeats,
@@ -199,6 +214,17 @@ struct Truth {
     size: Option<f64>,
 }
 
+/// A configuration's render overrides as `render.key=value` pairs for the options column.
+fn render_override_pairs(o: &RenderOverrides) -> Vec<String> {
+    match serde_json::to_value(o) {
+        Ok(serde_json::Value::Object(map)) => map
+            .into_iter()
+            .map(|(k, v)| format!("render.{k}={v}"))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
 /// File-name-safe version of a configuration id.
 pub fn slug(id: &str) -> String {
     id.chars()
@@ -212,15 +238,14 @@ pub fn slug(id: &str) -> String {
         .collect()
 }
 
-fn load_scene(path: &Path, res: Resolution, spp: Option<u32>) -> Result<Loaded, String> {
+fn load_scene(path: &Path, res: Resolution, render: &RenderOverrides) -> Result<Loaded, String> {
     let scene = marchmesh_scene::load(path).map_err(|e| e.to_string())?;
     let (w, h) = res.apply(scene.camera.width, scene.camera.height);
-    let mut scene = scene
+    let scene = scene
         .with_image_size(w, h)
-        .map_err(|e| format!("{}: image size {w}x{h}: {e}", path.display()))?;
-    if let Some(spp) = spp {
-        scene.render.samples_per_pixel = spp;
-    }
+        .map_err(|e| format!("{}: image size {w}x{h}: {e}", path.display()))?
+        .with_render_overrides(render)
+        .map_err(|e| format!("{}: render settings: {e}", path.display()))?;
     let background = BackgroundSampler::load(&scene.background)
         .map_err(|e| format!("{}: background: {e}", path.display()))?;
     Ok(Loaded { scene, background })
@@ -245,15 +270,35 @@ pub fn run(
             break;
         }
         progress.config(index, &c.id);
-        let loaded_key: SceneKey = format!(
-            "{}|{}|{:?}",
-            c.scene_path.display(),
-            resolution_tag(c.resolution),
-            c.spp
-        );
+        let key = |render: &RenderOverrides| -> SceneKey {
+            format!(
+                "{}|{}|{render:?}",
+                c.scene_path.display(),
+                resolution_tag(c.resolution)
+            )
+        };
+        let (loaded_key, truth_key) = (key(&c.render), key(&c.truth_render));
+        if c.reference && !truths.contains_key(&truth_key) {
+            let truth_scene = scenes
+                .entry(truth_key.clone())
+                .or_insert_with(|| load_scene(&c.scene_path, c.resolution, &c.truth_render));
+            let truth = match truth_scene {
+                Ok(truth_scene) => {
+                    progress.phase("reference");
+                    let (truth, info) = reference_render(c, truth_scene, options);
+                    out.references.push(info);
+                    truth
+                }
+                Err(e) => Err(format!("reference scene: {e}")),
+            };
+            if let Err(e) = &truth {
+                progress.note(&format!("{} reference: {e}", c.scene));
+            }
+            truths.insert(truth_key.clone(), truth);
+        }
         let loaded = scenes
             .entry(loaded_key.clone())
-            .or_insert_with(|| load_scene(&c.scene_path, c.resolution, c.spp));
+            .or_insert_with(|| load_scene(&c.scene_path, c.resolution, &c.render));
         let loaded = match loaded {
             Ok(l) => l,
             Err(e) => {
@@ -266,17 +311,8 @@ pub fn run(
                 continue;
             }
         };
-        if c.reference && !truths.contains_key(&loaded_key) {
-            progress.phase("reference");
-            let (truth, info) = reference_render(c, loaded, options);
-            if let Err(e) = &truth {
-                progress.note(&format!("{} reference: {e}", c.scene));
-            }
-            out.references.push(info);
-            truths.insert(loaded_key.clone(), truth);
-        }
         let truth = if c.reference {
-            truths.get(&loaded_key)
+            truths.get(&truth_key)
         } else {
             None
         };
@@ -436,6 +472,7 @@ fn measure(
     let triangles = (kind == "mesh")
         .then(|| counter("flat_triangles").unwrap_or(0) + counter("blas_triangles").unwrap_or(0));
     let total_rays = s.total_rays();
+    let rates = s.mrays_per_thread_second();
     let row = Row {
         config_id: c.id.clone(),
         group: c.group.clone(),
@@ -448,6 +485,7 @@ fn measure(
             .options
             .iter()
             .map(|(k, v)| format!("{k}={v}"))
+            .chain(render_override_pairs(&c.render))
             .collect::<Vec<_>>()
             .join(";"),
         width: scene.camera.width,
@@ -470,8 +508,12 @@ fn measure(
         render_ms_ci_high: t.ci_high,
         render_ci_coverage: t.ci_coverage,
         rays_primary: s.primary_rays,
-        rays_secondary: s.shadow_rays + s.reflection_rays,
+        rays_secondary: total_rays - s.primary_rays,
         mrays_per_s: total_rays as f64 / (t.median * 1e-3).max(1e-12) / 1e6,
+        mrays_camera_per_thread_s: rates.camera,
+        mrays_shadow_per_thread_s: rates.shadow,
+        mrays_ao_per_thread_s: rates.ambient_occlusion,
+        mrays_bounce_per_thread_s: rates.bounce,
         memory_bytes: report.memory_bytes,
         triangles,
         peak_heap_bytes_build,

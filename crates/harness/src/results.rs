@@ -54,10 +54,22 @@ pub struct Row {
     pub render_ci_coverage: f64,
     /// Camera rays per render.
     pub rays_primary: u64,
-    /// Shadow + reflection rays per render.
+    /// Shadow, ambient-occlusion, reflection and bounce rays per render.
     pub rays_secondary: u64,
     /// (primary + secondary) rays / median render time, millions per second.
     pub mrays_per_s: f64,
+    /// Camera rays per thread-second spent in the geometry, millions (timed per batch).
+    #[serde(default)]
+    pub mrays_camera_per_thread_s: Option<f64>,
+    /// Shadow rays (or cone queries) per thread-second spent in the geometry, millions.
+    #[serde(default)]
+    pub mrays_shadow_per_thread_s: Option<f64>,
+    /// Ambient-occlusion rays (or tap queries) per thread-second in the geometry, millions.
+    #[serde(default)]
+    pub mrays_ao_per_thread_s: Option<f64>,
+    /// Reflection and path-tracer bounce rays per thread-second in the geometry, millions.
+    #[serde(default)]
+    pub mrays_bounce_per_thread_s: Option<f64>,
     /// Representation bytes reported by the backend.
     pub memory_bytes: u64,
     /// Triangles stored (mesh backend; flat + instanced BLAS triangles).
@@ -361,6 +373,10 @@ fn example_row() -> Row {
         rays_primary: 0,
         rays_secondary: 0,
         mrays_per_s: 0.0,
+        mrays_camera_per_thread_s: None,
+        mrays_shadow_per_thread_s: None,
+        mrays_ao_per_thread_s: None,
+        mrays_bounce_per_thread_s: None,
         memory_bytes: 0,
         triangles: None,
         peak_heap_bytes_build: None,
@@ -514,7 +530,7 @@ mod tests {
     #[test]
     fn header_has_units_and_every_field() {
         let h = csv_header();
-        assert_eq!(h.len(), 52);
+        assert_eq!(h.len(), 56);
         for c in [
             "render_ms_median",
             "peak_heap_bytes_render",

@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use marchmesh_scene::RenderOverrides;
+
 use crate::backend::{self, BackendKind, BackendSpec};
 use crate::stats::RepeatPolicy;
 
@@ -49,6 +51,11 @@ pub struct Group {
     /// Samples per pixel override (default: the scene's own).
     #[serde(default)]
     pub spp: Option<u32>,
+    /// Render settings of the reference render every configuration is measured against
+    /// (default: the scene's own), e.g. `{"area_light_samples": 1024}` so noisy lighting is
+    /// compared with a converged truth.
+    #[serde(default)]
+    pub truth: RenderOverrides,
     /// Render thread counts (0 = one per logical core). Default `[0]`.
     #[serde(default = "default_threads")]
     pub threads: Vec<usize>,
@@ -142,6 +149,21 @@ pub struct BackendEntry {
     /// `key=value` options, applied in order (see `marchmesh render --opt help`).
     #[serde(default)]
     pub options: Vec<String>,
+    /// Render settings of this configuration (default: the scene's own), e.g.
+    /// `{"area_light_samples": 16}`: a quality level of the light transport.
+    #[serde(default)]
+    pub render: RenderOverrides,
+}
+
+/// One resolved backend configuration of a group.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BackendConfig {
+    /// Quality label.
+    pub label: String,
+    /// Backend and options.
+    pub spec: BackendSpec,
+    /// Render settings replacing the scene's.
+    pub render: RenderOverrides,
 }
 
 /// A validated suite: scene paths resolved, backends parsed.
@@ -176,10 +198,12 @@ pub struct ResolvedGroup {
     pub resolutions: Vec<Resolution>,
     /// Samples per pixel override.
     pub spp: Option<u32>,
+    /// Render settings of the reference render.
+    pub truth: RenderOverrides,
     /// Thread counts.
     pub threads: Vec<usize>,
-    /// (label, spec) of each backend configuration.
-    pub backends: Vec<(String, BackendSpec)>,
+    /// The backend configurations.
+    pub backends: Vec<BackendConfig>,
     /// Accuracy against the reference.
     pub reference: bool,
     /// Repeat override.
@@ -393,10 +417,9 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                 ));
             }
         }
-        if let Some(spp) = g.spp
-            && !(1..=1024).contains(&spp)
-        {
-            return Err(fmt_err(format!("{gp}.spp"), "must be in 1..=1024".into()));
+        // The upper bound depends on the scene's integrator: checked when each scene loads.
+        if g.spp == Some(0) {
+            return Err(fmt_err(format!("{gp}.spp"), "must be >= 1".into()));
         }
         let mut backends = Vec::new();
         for (bi, b) in g.backends.iter().enumerate() {
@@ -424,13 +447,18 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                     "labels must not contain `/`".into(),
                 ));
             }
-            backends.push((label, spec));
+            backends.push(BackendConfig {
+                label,
+                spec,
+                render: b.render.clone(),
+            });
         }
         groups.push(ResolvedGroup {
             name: g.name.clone(),
             scenes,
             resolutions: g.resolutions.clone(),
             spp: g.spp,
+            truth: g.truth.clone(),
             threads: g.threads.clone(),
             backends,
             reference: g.reference,
@@ -566,9 +594,32 @@ mod tests {
         assert_eq!(s.groups[0].scenes.len(), 1);
         assert_eq!(s.skipped.len(), 1);
         assert!(s.skipped[0].contains("absent.json"));
-        assert_eq!(s.groups[0].backends[0].0, "bvh=bvh2");
-        assert_eq!(s.groups[0].backends[1].0, "q");
+        assert_eq!(s.groups[0].backends[0].label, "bvh=bvh2");
+        assert_eq!(s.groups[0].backends[1].label, "q");
         assert_eq!(s.groups[0].resolutions[0].apply(500, 400), (32, 26));
         assert_eq!(s.groups[0].resolutions[1].apply(500, 400), (8, 4));
+    }
+
+    #[test]
+    fn render_overrides_and_truth_are_read_and_unknown_keys_named() {
+        let p = write_tmp(
+            "light.json",
+            r#"{"groups": [{"name": "g", "scenes": ["scene.json"],
+                 "truth": {"area_light_samples": 1024},
+                 "backends": [{"backend": "mesh", "label": "r4", "render": {"area_light_samples": 4}}]}]}"#,
+        );
+        let s = load(&p).unwrap();
+        assert_eq!(s.groups[0].truth.area_light_samples, Some(1024));
+        assert_eq!(s.groups[0].backends[0].render.area_light_samples, Some(4));
+        let p = write_tmp(
+            "badlight.json",
+            r#"{"groups": [{"name": "g", "scenes": ["scene.json"],
+                 "backends": [{"backend": "mesh", "render": {"shadow_rays": 4}}]}]}"#,
+        );
+        let e = load(&p).unwrap_err().to_string();
+        assert!(
+            e.contains("groups[0].backends[0].render") && e.contains("shadow_rays"),
+            "{e}"
+        );
     }
 }

@@ -378,6 +378,70 @@ impl Scene {
     }
 }
 
+/// Render settings that replace a loaded scene's own (a benchmark's quality level or its
+/// ground truth); each value is checked as in a scene file. Empty by default.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RenderOverrides {
+    /// Samples per pixel (cap depends on the integrator).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub samples_per_pixel: Option<u32>,
+    /// Shadow rays per shading point and area light.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub area_light_samples: Option<u32>,
+    /// Ambient-occlusion rays per shading point (the scene must enable ambient occlusion).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient_occlusion_samples: Option<u32>,
+    /// Path-tracer bounces.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_bounces: Option<u32>,
+    /// Seed of every random choice.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+}
+
+impl RenderOverrides {
+    /// Whether nothing is overridden.
+    pub fn is_empty(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+impl Scene {
+    /// The scene with `overrides` applied; errors name the setting and its valid range, as
+    /// validation does.
+    pub fn with_render_overrides(mut self, overrides: &RenderOverrides) -> Result<Self, String> {
+        use crate::validate::{MAX_BOUNCES, MAX_LIGHT_SAMPLES};
+        let in_range = |name: &str, v: u32, lo: u32, hi: u32| {
+            if (lo..=hi).contains(&v) {
+                Ok(v)
+            } else {
+                Err(format!("{name} must be in {lo}..={hi}, got {v}"))
+            }
+        };
+        if let Some(spp) = overrides.samples_per_pixel {
+            self = self.with_samples_per_pixel(spp)?;
+        }
+        if let Some(n) = overrides.area_light_samples {
+            self.render.area_light_samples =
+                in_range("area_light_samples", n, 1, MAX_LIGHT_SAMPLES)?;
+        }
+        if let Some(n) = overrides.ambient_occlusion_samples {
+            let ao = self.render.ambient_occlusion.as_mut().ok_or_else(|| {
+                "ambient_occlusion_samples: the scene has no render.ambient_occlusion".to_string()
+            })?;
+            ao.samples = in_range("ambient_occlusion_samples", n, 1, MAX_LIGHT_SAMPLES)?;
+        }
+        if let Some(n) = overrides.max_bounces {
+            self.render.max_bounces = in_range("max_bounces", n, 0, MAX_BOUNCES)?;
+        }
+        if let Some(seed) = overrides.seed {
+            self.render.seed = seed;
+        }
+        Ok(self)
+    }
+}
+
 impl Integrator {
     /// The name used in scene files.
     pub const fn name(self) -> &'static str {

@@ -123,3 +123,50 @@ fn unknown_integrators_and_light_fields_are_parse_errors() {
     );
     assert!(p[0].1.contains("power"), "{p:?}");
 }
+
+#[test]
+fn render_overrides_are_checked_like_scene_values() {
+    use marchmesh_scene::RenderOverrides;
+    let base = || {
+        parse_scene(
+            r#"{ "render": { "ambient_occlusion": { "samples": 8 } } }"#,
+            "t.json",
+            Path::new("."),
+        )
+        .unwrap()
+    };
+    let s = base()
+        .with_render_overrides(&RenderOverrides {
+            area_light_samples: Some(64),
+            ambient_occlusion_samples: Some(32),
+            seed: Some(9),
+            ..RenderOverrides::default()
+        })
+        .unwrap();
+    assert_eq!(s.render.area_light_samples, 64);
+    assert_eq!(s.render.ambient_occlusion.unwrap().samples, 32);
+    assert_eq!(s.render.seed, 9);
+    let err = |o: RenderOverrides| base().with_render_overrides(&o).unwrap_err();
+    assert!(
+        err(RenderOverrides {
+            area_light_samples: Some(0),
+            ..RenderOverrides::default()
+        })
+        .contains("area_light_samples must be in 1..=4096")
+    );
+    assert!(
+        err(RenderOverrides {
+            samples_per_pixel: Some(5000),
+            ..RenderOverrides::default()
+        })
+        .contains("1..=1024 for the whitted")
+    );
+    let no_ao = parse_scene("{}", "t.json", Path::new(".")).unwrap();
+    let e = no_ao
+        .with_render_overrides(&RenderOverrides {
+            ambient_occlusion_samples: Some(4),
+            ..RenderOverrides::default()
+        })
+        .unwrap_err();
+    assert!(e.contains("no render.ambient_occlusion"), "{e}");
+}
