@@ -16,6 +16,13 @@
 //!   over in the shell: the same merging the hit epsilon stands for. A visit to the shell
 //!   that cannot decide within 24 evaluations (a long passage nearly parallel to a surface,
 //!   e.g. the horizon of a huge sphere) ends as a hit, as a plain epsilon test would.
+//!   A prediction is only trusted where the unbounding spheres of the sample before it and of
+//!   the predicted sample cover the jump (Keinert's overlap test): otherwise the gap between
+//!   them may hide a surface without an inside (a triangle, an open mesh: the field does not
+//!   change sign there), which `Sweep` looks for before the prediction is used.
+//! * `Sweep`: plain sphere tracing through such a gap, from the earlier sample's sphere to the
+//!   prediction's; a distance below the fine threshold there is a hit, reaching the
+//!   prediction's sphere clears the gap.
 //! * `Bracket`: regula falsi (Illinois) on a sign change, to the fine threshold.
 //! * `Escape`: a ray starting on a surface (secondary rays) first leaves that surface's shell
 //!   stepping by the (safe) distance; a hit there is a distance below half the starting
@@ -46,6 +53,9 @@ pub(crate) struct Params {
 /// Field evaluations one visit to the shell may spend deciding hit or near miss.
 const FINE_BUDGET: u32 = 24;
 
+/// Field evaluations one sweep of a gap before a prediction may spend.
+const SWEEP_BUDGET: u32 = 32;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
     /// The first evaluation, at the start.
@@ -61,6 +71,16 @@ enum Phase {
         sa: f32,
         trial: bool,
         left: u32,
+    },
+    /// Plain steps at `self.t` through the gap before a prediction: the prediction was the
+    /// sample `s_land` at `t_land`, made from `(ta, sa)`; `left` as in `Fine`.
+    Sweep {
+        ta: f32,
+        sa: f32,
+        t_land: f32,
+        s_land: f32,
+        left: u32,
+        evals: u32,
     },
     /// A crossing between `lo` (outside) and `hi` (inside); `side` for Illinois.
     Bracket {
@@ -286,6 +306,43 @@ impl March {
                 trial,
                 left,
             } => self.fine(s, ta, sa, trial, left, p),
+            Phase::Sweep {
+                ta,
+                sa,
+                t_land,
+                s_land,
+                left,
+                evals,
+            } => {
+                if s < 0.0 {
+                    // A solid after all: bracket from the last outside sample.
+                    return self.crossing(self.t_prev, self.r_prev, self.t, s, p);
+                }
+                if s <= self.thr(p) {
+                    return Next::Done(Termination::Hit);
+                }
+                let next = self.t + s;
+                // Clear only with an overlap of more than the fine threshold: a sheet exactly
+                // where the two spheres touch is reached by the next step instead.
+                if next > t_land - s_land + self.thr(p) || evals >= SWEEP_BUDGET {
+                    // The gap is clear (or too long to sweep: keep the prediction, as
+                    // before the sweep existed): take up the predicted sample.
+                    self.t = t_land;
+                    return self.predicted(s_land, ta, sa, left, p);
+                }
+                self.t_prev = self.t;
+                self.r_prev = s;
+                self.phase = Phase::Sweep {
+                    ta,
+                    sa,
+                    t_land,
+                    s_land,
+                    left,
+                    evals: evals + 1,
+                };
+                self.t = next;
+                self.budget(p)
+            }
             Phase::Bracket {
                 lo,
                 slo,
@@ -335,6 +392,36 @@ impl March {
         if s <= self.thr(p) {
             return Next::Done(Termination::Hit);
         }
+        if trial && sa + s < t - ta + self.thr(p) {
+            // The spheres at `ta` and at the prediction leave a gap, or merely touch (as two
+            // exact spheres on either side of a sheet do, touching on the sheet): sweep it.
+            self.phase = Phase::Sweep {
+                ta,
+                sa,
+                t_land: t,
+                s_land: s,
+                left,
+                evals: 0,
+            };
+            self.t_prev = ta;
+            self.r_prev = sa;
+            self.t = ta + sa;
+            return self.budget(p);
+        }
+        self.fine_clear(s, ta, sa, trial, left, p)
+    }
+
+    /// A shell sample `s > thr` at `self.t` that is a prediction from `(ta, sa)` whose gap
+    /// (if any) was swept clear.
+    #[inline]
+    fn predicted(&mut self, s: f32, ta: f32, sa: f32, left: u32, p: &Params) -> Next {
+        self.fine_clear(s, ta, sa, true, left, p)
+    }
+
+    /// The rest of [`March::fine`] for a sample `s > thr` with no gap left before it.
+    #[inline]
+    fn fine_clear(&mut self, s: f32, ta: f32, sa: f32, trial: bool, left: u32, p: &Params) -> Next {
+        let t = self.t;
         let eps = self.eps(p);
         if s >= eps {
             // Left the shell (a near miss): back to marching.

@@ -28,6 +28,4 @@ conformance_suite!(
         .map(|g| Box::new(g) as _),
     tolerance = tolerance,
     ignore_inside_overlapping = "needs branch sdf: camera-inside semantics",
-    ignore_flat_ellipsoid =
-        "needs branch sdf: holes behind a flattened ellipsoid (issue 10 item 3)",
 );
