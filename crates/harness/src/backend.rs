@@ -178,8 +178,8 @@ const MESH_OPTIONS: &[OptionDoc] = &[
     },
     OptionDoc {
         key: "bvh",
-        ty: "bvh2|cwbvh",
-        doc: "BVH layout: binary or compressed 8-wide",
+        ty: "bvh2|cwbvh|wide",
+        doc: "BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2",
     },
     OptionDoc {
         key: "build",
@@ -272,6 +272,7 @@ pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
                 "bvh" => match o.bvh {
                     BvhKind::Bvh2 => "bvh2",
                     BvhKind::CwBvh => "cwbvh",
+                    BvhKind::Wide => "wide",
                 }
                 .into(),
                 "build" => match o.build_quality {
@@ -417,7 +418,8 @@ pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, Backend
                     o.bvh = match v.to_ascii_lowercase().as_str() {
                         "bvh2" => BvhKind::Bvh2,
                         "cwbvh" => BvhKind::CwBvh,
-                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh")),
+                        "wide" => BvhKind::Wide,
+                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh, wide")),
                     }
                 }
                 "build" => {

@@ -24,6 +24,7 @@ mod build;
 pub mod extract;
 mod options;
 pub mod tessellate;
+mod wide;
 
 use std::collections::HashMap;
 use std::path::PathBuf;

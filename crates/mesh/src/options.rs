@@ -11,6 +11,10 @@ pub enum BvhKind {
     /// Compressed 8-wide BVH (`obvhs::cwbvh::CwBvh`, Ylitie et al. 2017), 80-byte nodes,
     /// SIMD node tests, up to 3 triangles per leaf.
     CwBvh,
+    /// 8-wide BVH converted from the Bvh2 build (`crate::wide`): 224-byte nodes with SoA
+    /// child boxes tested 8 at a time (AVX, runtime-detected, portable fallback), triangles
+    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`].
+    Wide,
 }
 
 /// obvhs build presets (`BvhBuildParams::*_build()`), from fastest build to best traversal.
