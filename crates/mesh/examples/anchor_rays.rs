@@ -99,6 +99,12 @@ fn main() -> Res<()> {
                     ..MeshOptions::DEFAULT
                 },
             )?;
+            let report = g.report();
+            eprintln!(
+                "{bvh}: {} bytes, {:.1} bytes per triangle (nodes, indices, triangles, normals)",
+                report.memory_bytes,
+                report.memory_bytes as f64 / tris.len() as f64
+            );
             let raw = raw_build(kind, &tris);
             let mut out = vec![TraceResult::default(); rays.len()];
             let side = scene.camera.width as usize;
