@@ -207,6 +207,11 @@ const MESH_OPTIONS: &[OptionDoc] = &[
         doc: "surface-nets cells on the longest side of CSG / smooth-union objects (8..=512)",
     },
     OptionDoc {
+        key: "packets",
+        ty: "bool",
+        doc: "trace 8 rays of a batch as one packet (bvh=wide, no instances)",
+    },
+    OptionDoc {
         key: "instancing",
         ty: "bool",
         doc: "instance repeated shapes under a TLAS (false = flatten into one BVH)",
@@ -291,6 +296,7 @@ pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
                     _ => "none".into(),
                 },
                 "surface_res" => o.surface_resolution.to_string(),
+                "packets" => o.packets.to_string(),
                 "instancing" => o.instancing.to_string(),
                 "max_instances" => o.max_instances.to_string(),
                 "max_segments" => o.max_segments_per_turn.to_string(),
@@ -449,6 +455,7 @@ pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, Backend
                 }
                 "tess_level" => o.tessellation = Tessellation::FixedLevel(parse_int(v)?),
                 "surface_res" => o.surface_resolution = parse_int(v)?,
+                "packets" => o.packets = parse_bool(v)?,
                 "instancing" => o.instancing = parse_bool(v)?,
                 "max_instances" => o.max_instances = parse_int(v)?,
                 "max_segments" => o.max_segments_per_turn = parse_int(v)?,

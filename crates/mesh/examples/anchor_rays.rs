@@ -4,7 +4,8 @@
 //!
 //! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
 //! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
-//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|raw) and prints
+//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|raw; `wide1` traces single rays, `wide`
+//! row batches with packets) and prints
 //! one Mrays/s figure per timed repeat after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
 
@@ -89,13 +90,14 @@ fn main() -> Res<()> {
             let kind = match bvh {
                 "bvh2" | "raw" => BvhKind::Bvh2,
                 "cwbvh" => BvhKind::CwBvh,
-                "wide" => BvhKind::Wide,
+                "wide" | "wide1" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
             let g = build(
                 &scene,
                 &MeshOptions {
                     bvh: kind,
+                    packets: bvh == "wide",
                     ..MeshOptions::DEFAULT
                 },
             )?;
@@ -111,7 +113,13 @@ fn main() -> Res<()> {
             let mut trace = || {
                 let t = Instant::now();
                 let mut hits = 0usize;
-                if bvh == "raw" {
+                if bvh == "wide1" {
+                    // Single rays only (no packets).
+                    hits = rays
+                        .iter()
+                        .filter(|r| g.closest_hit(r).hit.is_some())
+                        .count();
+                } else if bvh == "raw" {
                     hits = rays
                         .iter()
                         .filter(|r| raw_closest(&raw, r).is_finite())

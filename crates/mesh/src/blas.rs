@@ -431,6 +431,14 @@ impl Blas {
         geometric
     }
 
+    /// The wide layout, when this BLAS was built as one (for packet traversal).
+    pub(crate) fn wide(&self) -> Option<&WideBvh> {
+        match &self.tree {
+            Tree::Wide(w) => Some(&w.wide),
+            Tree::Bvh2(_) | Tree::CwBvh(_) => None,
+        }
+    }
+
     /// Material of the triangle behind `slot`, if this BLAS carries materials.
     pub(crate) fn material(&self, slot: u32) -> Option<MaterialId> {
         self.materials.get(slot as usize).copied()

@@ -28,14 +28,14 @@ pub(crate) const WIDTH: usize = 8;
 /// Triangles per block.
 pub(crate) const BLOCK: usize = 4;
 /// An empty child lane (also marks padding lanes of a triangle block).
-const EMPTY: u32 = u32::MAX;
+pub(crate) const EMPTY: u32 = u32::MAX;
 /// Child reference flag: the low 24 bits are the first block, bits 24..31 the block count.
-const LEAF: u32 = 1 << 31;
-const LEAF_FIRST_BITS: u32 = 24;
+pub(crate) const LEAF: u32 = 1 << 31;
+pub(crate) const LEAF_FIRST_BITS: u32 = 24;
 const LEAF_MAX_BLOCKS: u32 = 127;
 /// Traversal stack entries held on the call stack. Each node pushes at most `WIDTH - 1`
 /// entries, so trees deeper than `(STACK - 1) / (WIDTH - 1)` nodes are not converted.
-const STACK: usize = 512;
+pub(crate) const STACK: usize = 512;
 const MAX_DEPTH: u32 = ((STACK - 1) / (WIDTH - 1)) as u32;
 
 /// One node: 8 child boxes (structure of arrays) and child references (an inner node
@@ -44,9 +44,9 @@ const MAX_DEPTH: u32 = ((STACK - 1) / (WIDTH - 1)) as u32;
 #[derive(Clone, Copy)]
 #[repr(C, align(32))]
 pub(crate) struct WideNode {
-    lo: [[f32; WIDTH]; 3],
-    hi: [[f32; WIDTH]; 3],
-    child: [u32; WIDTH],
+    pub(crate) lo: [[f32; WIDTH]; 3],
+    pub(crate) hi: [[f32; WIDTH]; 3],
+    pub(crate) child: [u32; WIDTH],
 }
 
 const EMPTY_NODE: WideNode = WideNode {
@@ -65,7 +65,7 @@ pub(crate) struct TriBlock {
     e1: [[f32; BLOCK]; 3],
     e2: [[f32; BLOCK]; 3],
     ng: [[f32; BLOCK]; 3],
-    slot: [u32; BLOCK],
+    pub(crate) slot: [u32; BLOCK],
 }
 
 const EMPTY_BLOCK: TriBlock = TriBlock {
@@ -79,12 +79,12 @@ const EMPTY_BLOCK: TriBlock = TriBlock {
 /// The 8-wide BVH with its triangle blocks.
 #[derive(Clone)]
 pub(crate) struct WideBvh {
-    nodes: Vec<WideNode>,
-    blocks: Vec<TriBlock>,
+    pub(crate) nodes: Vec<WideNode>,
+    pub(crate) blocks: Vec<TriBlock>,
     /// Reference of the root (node 0, or a leaf when the whole tree is one leaf).
-    root: u32,
+    pub(crate) root: u32,
     /// Whether this CPU runs the 256-bit AVX node test (detected at build).
-    avx: bool,
+    pub(crate) avx: bool,
 }
 
 impl WideBvh {
@@ -459,7 +459,7 @@ impl NodeTest for Avx {
 /// `RtTriangle::intersect`: each lane's `t` if it hits within `[ray.tmin, ray.tmax]`, else
 /// `+inf` (padding lanes never hit).
 #[inline(always)]
-fn block_hits(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
+pub(crate) fn block_hits(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     #[cfg(target_arch = "x86_64")]
     {
         block_hits_sse(b, ray)

@@ -146,3 +146,50 @@ fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
     }
     assert_eq!(missed, 0, "{missed} rays slipped through the closed sphere");
 }
+
+#[test]
+fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
+    let mut scenes: Vec<Scene> = marchmesh_conformance::CASES
+        .iter()
+        .map(|c| marchmesh_conformance::case_scene(c.name))
+        .collect();
+    scenes.push(scene(
+        r#"{"camera": {"position": [0.02, 0.12, 0.35], "look_at": [-0.02, 0.1, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}}]}"#,
+    ));
+    let mut hits = 0;
+    for (i, s) in scenes.iter().enumerate() {
+        let options = MeshOptions {
+            bvh: BvhKind::Wide,
+            ..MeshOptions::fast()
+        };
+        let single = build(s, &options).expect("build");
+        let packets = build(
+            s,
+            &MeshOptions {
+                packets: true,
+                ..options
+            },
+        )
+        .expect("build");
+        // Row batches of 61 rays: 7 packets and a remainder of 5 traced one by one.
+        let rays = camera_rays(s, 61);
+        let mut out = vec![marchmesh_core::TraceResult::default(); rays.len()];
+        for (r, o) in rays.chunks(61).zip(out.chunks_mut(61)) {
+            packets.closest_hits(r, o);
+        }
+        for (k, (ray, p)) in rays.iter().zip(&out).enumerate() {
+            let one = single.closest_hit(ray).hit;
+            match (one, p.hit) {
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert_eq!(a.t.to_bits(), b.t.to_bits(), "scene {i} ray {k}");
+                    assert_eq!(a.material, b.material, "scene {i} ray {k}");
+                }
+                (None, None) => {}
+                (a, b) => panic!("scene {i} ray {k}: single {a:?} vs packet {b:?}"),
+            }
+        }
+    }
+    assert!(hits > 1000, "the scenes should hit something: {hits} hits");
+}
