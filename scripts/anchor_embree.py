@@ -8,7 +8,7 @@ the render-space triangles (world minus camera position in f64, then f32) come f
 
 Setup:  python3 -m venv /tmp/embree-venv && /tmp/embree-venv/bin/pip install embreex numpy
 Run:    /tmp/embree-venv/bin/python scripts/anchor_embree.py MESH.obj [--rounds 3]
-            [--repeats 15] [--bvh bvh2,wide,raw]
+            [--repeats 15] [--bvh bvh2,wide1,wide,raw]
 Each round times Embree (1 warm-up, REPEATS timed, median) then each marchmesh BVH in a
 fresh process (build, 1 warm-up, REPEATS timed, median); the ratios use per-round medians
 (median over rounds), so load from other processes hits both sides alike. State the load
@@ -58,7 +58,11 @@ def main():
     ap.add_argument("mesh")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=15)
-    ap.add_argument("--bvh", default="bvh2,wide,raw", help="marchmesh layouts (raw = obvhs Bvh2)")
+    ap.add_argument(
+        "--bvh",
+        default="bvh2,wide1,wide,raw",
+        help="marchmesh tracers: bvh2, cwbvh, wide1 (single rays), wide (packets), raw (obvhs Bvh2)",
+    )
     a = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     with tempfile.TemporaryDirectory() as d:
