@@ -188,8 +188,8 @@ const MESH_OPTIONS: &[OptionDoc] = &[
     },
     OptionDoc {
         key: "bvh",
-        ty: "bvh2|cwbvh",
-        doc: "BVH layout: binary or compressed 8-wide",
+        ty: "bvh2|cwbvh|wide",
+        doc: "BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2",
     },
     OptionDoc {
         key: "build",
@@ -215,6 +215,11 @@ const MESH_OPTIONS: &[OptionDoc] = &[
         key: "surface_res",
         ty: "int",
         doc: "surface-nets cells on the longest side of CSG / smooth-union objects (8..=512)",
+    },
+    OptionDoc {
+        key: "packets",
+        ty: "bool",
+        doc: "trace 8 rays of a batch as one packet (bvh=wide, no instances)",
     },
     OptionDoc {
         key: "instancing",
@@ -284,6 +289,7 @@ pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
                 "bvh" => match o.bvh {
                     BvhKind::Bvh2 => "bvh2",
                     BvhKind::CwBvh => "cwbvh",
+                    BvhKind::Wide => "wide",
                 }
                 .into(),
                 "build" => match o.build_quality {
@@ -302,6 +308,7 @@ pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
                     _ => "none".into(),
                 },
                 "surface_res" => o.surface_resolution.to_string(),
+                "packets" => o.packets.to_string(),
                 "instancing" => o.instancing.to_string(),
                 "max_instances" => o.max_instances.to_string(),
                 "max_segments" => o.max_segments_per_turn.to_string(),
@@ -431,7 +438,8 @@ pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, Backend
                     o.bvh = match v.to_ascii_lowercase().as_str() {
                         "bvh2" => BvhKind::Bvh2,
                         "cwbvh" => BvhKind::CwBvh,
-                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh")),
+                        "wide" => BvhKind::Wide,
+                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh, wide")),
                     }
                 }
                 "build" => {
@@ -461,6 +469,7 @@ pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, Backend
                 }
                 "tess_level" => o.tessellation = Tessellation::FixedLevel(parse_int(v)?),
                 "surface_res" => o.surface_resolution = parse_int(v)?,
+                "packets" => o.packets = parse_bool(v)?,
                 "instancing" => o.instancing = parse_bool(v)?,
                 "max_instances" => o.max_instances = parse_int(v)?,
                 "max_segments" => o.max_segments_per_turn = parse_int(v)?,

@@ -29,7 +29,7 @@ fn bench(c: &mut Criterion) {
         let mut group = c.benchmark_group(format!("build/{}", case.name));
         group.sample_size(10);
         group.throughput(Throughput::Elements(case.tris.len() as u64));
-        for kind in [BvhKind::Bvh2, BvhKind::CwBvh] {
+        for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let options = MeshOptions {
                 bvh: kind,
                 ..case.options
@@ -44,7 +44,7 @@ fn bench(c: &mut Criterion) {
         group.finish();
 
         let primary = primary_rays(&case.scene);
-        for kind in [BvhKind::Bvh2, BvhKind::CwBvh] {
+        for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let options = MeshOptions {
                 bvh: kind,
                 ..case.options

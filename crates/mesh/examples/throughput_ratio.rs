@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("case           bvh    threads  backend Mrays/s  obvhs Mrays/s  ratio");
     for case in &cases {
         let primary = primary_rays(&case.scene);
-        for kind in [BvhKind::Bvh2, BvhKind::CwBvh] {
+        for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let g = build(
                 &case.scene,
                 &MeshOptions {

@@ -17,12 +17,21 @@ use obvhs::{
 };
 
 use crate::options::BvhKind;
+use crate::wide::WideBvh;
 
 /// The BVH of one BLAS or of the TLAS.
 #[derive(Clone)]
 pub(crate) enum Tree {
     Bvh2(Bvh2),
     CwBvh(CwBvh),
+    Wide(WideTree),
+}
+
+/// An 8-wide BVH converted from a Bvh2 build, with the Bvh2's slot-to-primitive map.
+#[derive(Clone)]
+pub(crate) struct WideTree {
+    pub wide: WideBvh,
+    pub primitive_indices: Vec<u32>,
 }
 
 /// Smallest extent (world units, largest side of the triangles' bounding box) for which a
@@ -67,6 +76,26 @@ impl Tree {
                 b.primitive_indices.shrink_to_fit();
                 Tree::CwBvh(b)
             }
+            BvhKind::Wide => {
+                let b = build_bvh2_from_tris(tris, params, &mut t);
+                let slot_tris: Vec<RtTriangle> = b
+                    .primitive_indices
+                    .iter()
+                    .map(|&i| RtTriangle::from(&tris[i as usize]))
+                    .collect();
+                // A tree too deep or too large for the wide layout stays a Bvh2.
+                match WideBvh::from_bvh2(&b, &slot_tris) {
+                    Some(wide) => {
+                        let mut primitive_indices = b.primitive_indices;
+                        primitive_indices.shrink_to_fit();
+                        Tree::Wide(WideTree {
+                            wide,
+                            primitive_indices,
+                        })
+                    }
+                    None => Self::build(BvhKind::Bvh2, tris, params),
+                }
+            }
         }
     }
 
@@ -75,6 +104,7 @@ impl Tree {
         match self {
             Tree::Bvh2(b) => &b.primitive_indices,
             Tree::CwBvh(b) => &b.primitive_indices,
+            Tree::Wide(w) => &w.primitive_indices,
         }
     }
 
@@ -83,6 +113,7 @@ impl Tree {
         match self {
             Tree::Bvh2(_) => BvhKind::Bvh2,
             Tree::CwBvh(_) => BvhKind::CwBvh,
+            Tree::Wide(_) => BvhKind::Wide,
         }
     }
 
@@ -91,6 +122,7 @@ impl Tree {
         match self {
             Tree::Bvh2(b) => b.nodes.len(),
             Tree::CwBvh(b) => b.nodes.len(),
+            Tree::Wide(w) => w.wide.node_count(),
         }
     }
 
@@ -111,6 +143,7 @@ impl Tree {
                     + b.exact_node_aabbs.as_ref().map_or(0, |a| a.len() * 24))
                     as u64
             }
+            Tree::Wide(w) => w.wide.memory_bytes() + w.primitive_indices.len() as u64 * 4,
         }
     }
 
@@ -130,6 +163,7 @@ impl Tree {
                 })
             }
             Tree::CwBvh(b) => traverse_cwbvh(b, ray, work, &mut leaf),
+            Tree::Wide(w) => w.wide.traverse_slots(ray, work, leaf),
         }
     }
 }
@@ -330,6 +364,12 @@ impl Blas {
     /// Closest hit along `ray` (in this BLAS's frame) before `ray.tmax`; shrinks `ray.tmax`.
     #[inline(always)]
     pub(crate) fn closest(&self, ray: &mut Ray, work: &mut RayWork) -> Option<BlasHit> {
+        if let Tree::Wide(w) = &self.tree {
+            return w
+                .wide
+                .closest(ray, work)
+                .map(|(slot, t)| BlasHit { slot, t });
+        }
         let mut best: Option<BlasHit> = None;
         let tris = &self.tris;
         let mut tests = 0u32;
@@ -351,6 +391,9 @@ impl Blas {
     /// Whether anything lies along `ray` before `ray.tmax`.
     #[inline(always)]
     pub(crate) fn any(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
+        if let Tree::Wide(w) = &self.tree {
+            return w.wide.any(ray, work);
+        }
         let tris = &self.tris;
         let mut hit = false;
         let mut tests = 0u32;
@@ -386,6 +429,14 @@ impl Blas {
             }
         }
         geometric
+    }
+
+    /// The wide layout, when this BLAS was built as one (for packet traversal).
+    pub(crate) fn wide(&self) -> Option<&WideBvh> {
+        match &self.tree {
+            Tree::Wide(w) => Some(&w.wide),
+            Tree::Bvh2(_) | Tree::CwBvh(_) => None,
+        }
     }
 
     /// Material of the triangle behind `slot`, if this BLAS carries materials.

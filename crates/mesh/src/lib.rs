@@ -23,7 +23,13 @@ mod blas;
 mod build;
 pub mod extract;
 mod options;
+// SIMD traversal: std::arch intrinsics behind runtime feature detection (each unsafe call
+// states why the CPU feature is present); the only unsafe code besides the counting allocator.
+#[allow(unsafe_code)]
+mod packet;
 pub mod tessellate;
+#[allow(unsafe_code)]
+mod wide;
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -101,6 +107,7 @@ enum HitSource {
 pub struct MeshGeometry {
     flat: Option<Blas>,
     flat_materials_default: MaterialId,
+    packets: bool,
     blases: Vec<Blas>,
     instances: Vec<Instance>,
     tlas: Option<Tree>,
@@ -387,6 +394,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
     Ok(MeshGeometry {
         flat: flat_blas,
         flat_materials_default: 0,
+        packets: options.packets,
         blases,
         instances,
         tlas,
@@ -704,7 +712,79 @@ impl MeshGeometry {
     }
 }
 
+impl MeshGeometry {
+    /// Closest hits of 8 rays of a batch as one packet through the flat wide BVH; `false`
+    /// (nothing written) when packets are off, the scene has instances, the flat BVH is not
+    /// wide, or the rays do not share an origin.
+    fn closest_packet(&self, rays: &[Ray], out: &mut [TraceResult]) -> bool {
+        let (true, Some(flat), None) = (self.packets, &self.flat, &self.tlas) else {
+            return false;
+        };
+        let (Some(wide), Ok(rays8), true) = (
+            flat.wide(),
+            <&[Ray; packet::PACKET]>::try_from(rays),
+            out.len() == packet::PACKET,
+        ) else {
+            return false;
+        };
+        let mut r: [ObRay; packet::PACKET] = rays8.map(|ray| self.ob_ray(&ray));
+        if r.iter().any(|r| r.tmax.is_nan() || r.tmax < r.tmin) {
+            return false;
+        }
+        let mut visits = 0;
+        let mut tests = [0; packet::PACKET];
+        let Some(best) = packet::closest8(wide, &mut r, &mut visits, &mut tests) else {
+            return false;
+        };
+        for k in 0..packet::PACKET {
+            let work = RayWork {
+                node_visits: visits.div_ceil(packet::PACKET as u32),
+                primitive_tests: tests[k],
+                ..RayWork::default()
+            };
+            out[k] = match best[k] {
+                Some((slot, t)) => TraceResult {
+                    hit: Some(Hit {
+                        t,
+                        position: rays8[k].origin + rays8[k].dir * t,
+                        normal: flat.normal(&r[k], slot),
+                        material: flat.material(slot).unwrap_or(self.flat_materials_default),
+                    }),
+                    termination: Termination::Hit,
+                    work,
+                },
+                None => TraceResult {
+                    hit: None,
+                    termination: Termination::Miss,
+                    work,
+                },
+            };
+        }
+        true
+    }
+}
+
 impl Geometry for MeshGeometry {
+    /// Traces 8 consecutive rays at a time as a packet where the scene allows it (flat
+    /// wide BVH, shared origin), others one by one; same hits either way.
+    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "closest_hits: rays and out differ in length"
+        );
+        for (rs, os) in rays
+            .chunks(packet::PACKET)
+            .zip(out.chunks_mut(packet::PACKET))
+        {
+            if !self.closest_packet(rs, os) {
+                for (r, o) in rs.iter().zip(os.iter_mut()) {
+                    *o = self.closest_hit(r);
+                }
+            }
+        }
+    }
+
     fn closest_hit(&self, ray: &Ray) -> TraceResult {
         let mut work = RayWork::default();
         let mut r = self.ob_ray(ray);

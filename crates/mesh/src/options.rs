@@ -11,6 +11,10 @@ pub enum BvhKind {
     /// Compressed 8-wide BVH (`obvhs::cwbvh::CwBvh`, Ylitie et al. 2017), 80-byte nodes,
     /// SIMD node tests, up to 3 triangles per leaf.
     CwBvh,
+    /// 8-wide BVH converted from the Bvh2 build (`crate::wide`): 224-byte nodes with SoA
+    /// child boxes tested 8 at a time (AVX, runtime-detected, portable fallback), triangles
+    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`].
+    Wide,
 }
 
 /// obvhs build presets (`BvhBuildParams::*_build()`), from fastest build to best traversal.
@@ -70,9 +74,12 @@ pub enum Tessellation {
 /// change fields.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeshOptions {
-    /// BVH layout. Default [`BvhKind::Bvh2`]: measured in one default-suite run on this
-    /// project's 2-core x86 machine, Bvh2 rendered seed-spheres 1.84x and the bunny 1.24x
-    /// faster than CwBvh, csg the same, primitives 0.86x (bench-results/20261122T222119Z-default).
+    /// BVH layout. Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1
+    /// thread, 500x500 primary rays, interleaved rounds, load 2.3-2.8) it traced 1.9x (bunny),
+    /// 1.6x (dragon_res3) and 1.35x (871k-triangle dragon) as many rays per second as Bvh2,
+    /// for about 1.65x its memory (156 vs 94 bytes per triangle). Earlier, Bvh2 rendered
+    /// seed-spheres 1.84x and the bunny 1.24x faster than CwBvh
+    /// (bench-results/20261122T222119Z-default).
     pub bvh: BvhKind,
     /// Build preset. Default [`BuildQuality::Medium`].
     pub build_quality: BuildQuality,
@@ -81,6 +88,12 @@ pub struct MeshOptions {
     /// Surface-nets grid cells along the longest side of a CSG / smooth-union object's
     /// bounds (8..=512). Default 128.
     pub surface_resolution: u32,
+    /// Trace the rays of a `closest_hits` batch 8 at a time as packets (interval culling,
+    /// `crate::packet`) when the BVH is [`BvhKind::Wide`] and nothing is instanced; same
+    /// hits as single rays. Default `false`: measured (1 thread, 500x500 primary rays, load
+    /// ~2.8) about 1.0-1.2x single-ray speed on the bunny and dragon_res3 but 0.7x on the
+    /// 871k-triangle dragon, whose sub-pixel triangles make an 8-pixel interval loose.
+    pub packets: bool,
     /// Instance shapes used more than once (repetition, a mesh placed twice) from one BLAS
     /// under a TLAS. `false` flattens everything into one BVH (same image, more memory).
     /// Default `true`.
@@ -96,10 +109,11 @@ pub struct MeshOptions {
 impl MeshOptions {
     /// The documented defaults.
     pub const DEFAULT: Self = Self {
-        bvh: BvhKind::Bvh2,
+        bvh: BvhKind::Wide,
         build_quality: BuildQuality::Medium,
         tessellation: Tessellation::ScreenError { pixels: 0.25 },
         surface_resolution: 128,
+        packets: false,
         instancing: true,
         max_instances: 1 << 22,
         max_segments_per_turn: 4096,

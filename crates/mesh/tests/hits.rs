@@ -84,7 +84,7 @@ fn bunny_hits_match_a_brute_force_f64_ray_caster() {
         .iter()
         .map(|p| to_render.transform_point3(p.as_dvec3()))
         .collect();
-    for kind in [BvhKind::Bvh2, BvhKind::CwBvh] {
+    for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
         let g = build(
             &s,
             &MeshOptions {
@@ -218,7 +218,7 @@ fn bvh2_and_cwbvh_and_every_preset_agree() {
         marchmesh_mesh::BuildQuality::Fastest,
         marchmesh_mesh::BuildQuality::Slow,
     ] {
-        for bvh in [BvhKind::Bvh2, BvhKind::CwBvh] {
+        for bvh in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let g = build(
                 &s,
                 &MeshOptions {

@@ -157,7 +157,8 @@ pub fn raw_build(kind: BvhKind, tris: &[Triangle]) -> Raw {
     let params = BvhBuildParams::medium_build();
     let mut t = Duration::default();
     match kind {
-        BvhKind::Bvh2 => {
+        // The wide layout is converted from a Bvh2: raw obvhs Bvh2 is its baseline.
+        BvhKind::Bvh2 | BvhKind::Wide => {
             let b = build_bvh2_from_tris(tris, params, &mut t);
             let rt = b
                 .primitive_indices

@@ -1,0 +1,147 @@
+//! Companion of `scripts/anchor_embree.py`: frames a mesh file as `benches/bvh.rs` does
+//! (500x500, 40 deg), then either exports the exact camera rays and render-space triangles
+//! for Embree, or times the mesh backend on the same rays (1 thread, primary rays only).
+//!
+//! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
+//! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
+//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|raw; `wide1` traces single rays, `wide`
+//! row batches with packets) and prints
+//! one Mrays/s figure per timed repeat after one warm-up (`raw` is obvhs' own Bvh2
+//! traversal with no marchmesh code in the loop).
+
+#[path = "../benches/support/mod.rs"]
+mod support;
+
+use std::io::Write;
+use std::time::Instant;
+
+use glam::Vec3A;
+use marchmesh_core::{Geometry, TraceResult};
+use marchmesh_mesh::{BvhKind, MeshOptions, build};
+use obvhs::triangle::Triangle;
+use support::*;
+
+type Res<T> = Result<T, Box<dyn std::error::Error>>;
+
+/// The scene and render-space triangles of a mesh file framed like the benchmark.
+fn framed(path: &str) -> Res<(marchmesh_scene::Scene, Vec<Triangle>)> {
+    let abs = std::fs::canonicalize(path)?;
+    let mesh = marchmesh_meshio::load_mesh(&abs)?;
+    let (lo, hi) = mesh.bounds();
+    let json = format!(
+        r#"{{{}, "objects": [{{"shape": {{"mesh": {{"path": {:?}}}}}}}]}}"#,
+        camera_json(lo.as_dvec3(), hi.as_dvec3()),
+        abs.display().to_string()
+    );
+    let scene = marchmesh_scene::parse_scene(&json, "anchor", &scenes_dir())?;
+    let cam = scene.camera.position;
+    let p = |i: u32| Vec3A::from((mesh.positions[i as usize].as_dvec3() - cam).as_vec3());
+    let tris = mesh
+        .triangles
+        .iter()
+        .map(|t| Triangle {
+            v0: p(t[0]),
+            v1: p(t[1]),
+            v2: p(t[2]),
+        })
+        .collect();
+    Ok((scene, tris))
+}
+
+fn write_f32(path: std::path::PathBuf, values: impl Iterator<Item = f32>) -> Res<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(&path)?);
+    for v in values {
+        out.write_all(&v.to_le_bytes())?;
+    }
+    out.flush()?;
+    Ok(())
+}
+
+fn main() -> Res<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let usage = "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS";
+    let (Some(mode), Some(mesh)) = (args.get(1), args.get(2)) else {
+        return Err(usage.into());
+    };
+    let (scene, tris) = framed(mesh)?;
+    let rays = primary_rays(&scene);
+    match mode.as_str() {
+        "export" => {
+            let dir = std::path::PathBuf::from(args.get(3).ok_or(usage)?);
+            std::fs::create_dir_all(&dir)?;
+            write_f32(
+                dir.join("tris.f32"),
+                tris.iter()
+                    .flat_map(|t| [t.v0, t.v1, t.v2])
+                    .flat_map(|v| [v.x, v.y, v.z]),
+            )?;
+            write_f32(
+                dir.join("rays.f32"),
+                rays.iter()
+                    .flat_map(|r| [r.origin.to_array(), r.dir.to_array()])
+                    .flatten(),
+            )?;
+            println!("{} triangles, {} rays", tris.len(), rays.len());
+        }
+        "time" => {
+            let bvh = args.get(3).ok_or(usage)?.as_str();
+            let repeats: usize = args.get(4).ok_or(usage)?.parse()?;
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+            let kind = match bvh {
+                "bvh2" | "raw" => BvhKind::Bvh2,
+                "cwbvh" => BvhKind::CwBvh,
+                "wide" | "wide1" => BvhKind::Wide,
+                other => return Err(format!("unknown bvh `{other}`").into()),
+            };
+            let g = build(
+                &scene,
+                &MeshOptions {
+                    bvh: kind,
+                    packets: bvh == "wide",
+                    ..MeshOptions::DEFAULT
+                },
+            )?;
+            let report = g.report();
+            eprintln!(
+                "{bvh}: {} bytes, {:.1} bytes per triangle (nodes, indices, triangles, normals)",
+                report.memory_bytes,
+                report.memory_bytes as f64 / tris.len() as f64
+            );
+            let raw = raw_build(kind, &tris);
+            let mut out = vec![TraceResult::default(); rays.len()];
+            let side = scene.camera.width as usize;
+            let mut trace = || {
+                let t = Instant::now();
+                let mut hits = 0usize;
+                if bvh == "wide1" {
+                    // Single rays only (no packets).
+                    hits = rays
+                        .iter()
+                        .filter(|r| g.closest_hit(r).hit.is_some())
+                        .count();
+                } else if bvh == "raw" {
+                    hits = rays
+                        .iter()
+                        .filter(|r| raw_closest(&raw, r).is_finite())
+                        .count();
+                } else {
+                    pool.install(|| {
+                        // Row batches, as the integrator hands them over.
+                        for (r, o) in rays.chunks(side).zip(out.chunks_mut(side)) {
+                            g.closest_hits(r, o);
+                        }
+                    });
+                    hits += out.iter().filter(|o| o.hit.is_some()).count();
+                }
+                (rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6, hits)
+            };
+            trace();
+            for _ in 0..repeats {
+                let (mrays, hits) = trace();
+                println!("{mrays:.4} {hits}");
+            }
+        }
+        _ => return Err(usage.into()),
+    }
+    Ok(())
+}

@@ -1,0 +1,195 @@
+//! The 8-wide SIMD layout (`bvh=wide`) against the Bvh2 path it is converted from: the same
+//! closest-hit distance bit for bit and the same occlusion on every conformance case and the
+//! bunny, and no ray slipping between the triangles of closed meshes.
+
+mod common;
+
+use common::*;
+use glam::{DVec3, Vec3};
+use marchmesh_core::{Geometry, Ray};
+use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation, build};
+use marchmesh_scene::Scene;
+
+fn both(scene: &Scene, options: MeshOptions) -> (impl Geometry, impl Geometry) {
+    let bvh2 = build(
+        scene,
+        &MeshOptions {
+            bvh: BvhKind::Bvh2,
+            ..options
+        },
+    )
+    .expect("bvh2 build");
+    let wide = build(
+        scene,
+        &MeshOptions {
+            bvh: BvhKind::Wide,
+            ..options
+        },
+    )
+    .expect("wide build");
+    (bvh2, wide)
+}
+
+/// Asserts identical hit distances (bits), materials and occlusion; returns the hit count.
+fn assert_identical(a: &dyn Geometry, b: &dyn Geometry, rays: &[Ray], label: &str) -> usize {
+    let mut hits = 0;
+    for (k, ray) in rays.iter().enumerate() {
+        let (x, y) = (a.closest_hit(ray).hit, b.closest_hit(ray).hit);
+        match (x, y) {
+            (Some(x), Some(y)) => {
+                hits += 1;
+                assert_eq!(
+                    x.t.to_bits(),
+                    y.t.to_bits(),
+                    "{label} ray {k}: t {} vs {}",
+                    x.t,
+                    y.t
+                );
+                // Ties between triangles at the same t (shared edges) may pick another
+                // triangle of the same surface: same material, close normal.
+                assert_eq!(x.material, y.material, "{label} ray {k}: material");
+                assert!(
+                    x.normal.dot(y.normal) > 0.9,
+                    "{label} ray {k}: normals {:?} vs {:?}",
+                    x.normal,
+                    y.normal
+                );
+            }
+            (None, None) => {}
+            (x, y) => panic!("{label} ray {k}: bvh2 {x:?} vs wide {y:?}"),
+        }
+        for t_max in [0.5, 3.0, 8.0] {
+            let shadow = Ray { t_max, ..*ray };
+            assert_eq!(
+                a.occluded(&shadow).occluded,
+                b.occluded(&shadow).occluded,
+                "{label} ray {k}: occlusion before {t_max}"
+            );
+        }
+    }
+    hits
+}
+
+#[test]
+fn wide_matches_bvh2_on_every_conformance_case() {
+    let mut total = 0;
+    for case in marchmesh_conformance::CASES {
+        let scene = marchmesh_conformance::case_scene(case.name);
+        let (bvh2, wide) = both(&scene, MeshOptions::fast());
+        total += assert_identical(&bvh2, &wide, &camera_rays(&scene, 48), case.name);
+    }
+    assert!(total > 1000, "the suite should hit something: {total} hits");
+}
+
+#[test]
+fn wide_matches_bvh2_on_the_bunny_at_every_build_preset() {
+    let s = scene(
+        r#"{"camera": {"position": [0.02, 0.12, 0.35], "look_at": [-0.02, 0.1, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}}]}"#,
+    );
+    for quality in [
+        marchmesh_mesh::BuildQuality::Fastest,
+        marchmesh_mesh::BuildQuality::Medium,
+        marchmesh_mesh::BuildQuality::Slow,
+    ] {
+        let (bvh2, wide) = both(
+            &s,
+            MeshOptions {
+                build_quality: quality,
+                ..MeshOptions::DEFAULT
+            },
+        );
+        let hits = assert_identical(&bvh2, &wide, &camera_rays(&s, 80), &format!("{quality:?}"));
+        assert!(
+            hits > 1000,
+            "{quality:?}: bunny should fill the view: {hits} hits"
+        );
+    }
+}
+
+#[test]
+fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
+    // Rays from all around aimed at points inside a finely tessellated closed sphere must all
+    // hit it, including those through vertices and along edges.
+    let s = scene(
+        r#"{"camera": {"position": [0, 0, -4], "look_at": [0, 0, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"sphere": {"radius": 1}}}]}"#,
+    );
+    let g = build(
+        &s,
+        &MeshOptions {
+            bvh: BvhKind::Wide,
+            tessellation: Tessellation::FixedLevel(3),
+            ..MeshOptions::DEFAULT
+        },
+    )
+    .expect("build");
+    let eye = DVec3::new(0.0, 0.0, -4.0); // render space origin is the camera
+    let mut missed = 0;
+    let n = 60;
+    for i in 0..n {
+        for j in 0..n {
+            // Targets on a grid inside the sphere's silhouette (radius 0.95 around centre).
+            let x = (f64::from(i) / f64::from(n - 1) - 0.5) * 1.3;
+            let y = (f64::from(j) / f64::from(n - 1) - 0.5) * 1.3;
+            let target = DVec3::new(x, y, 0.0) - eye;
+            let ray = Ray {
+                origin: Vec3::ZERO,
+                dir: target.normalize().as_vec3(),
+                t_min: 0.0,
+                t_max: f32::INFINITY,
+            };
+            if g.closest_hit(&ray).hit.is_none() {
+                missed += 1;
+            }
+        }
+    }
+    assert_eq!(missed, 0, "{missed} rays slipped through the closed sphere");
+}
+
+#[test]
+fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
+    let mut scenes: Vec<Scene> = marchmesh_conformance::CASES
+        .iter()
+        .map(|c| marchmesh_conformance::case_scene(c.name))
+        .collect();
+    scenes.push(scene(
+        r#"{"camera": {"position": [0.02, 0.12, 0.35], "look_at": [-0.02, 0.1, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}}]}"#,
+    ));
+    let mut hits = 0;
+    for (i, s) in scenes.iter().enumerate() {
+        let options = MeshOptions {
+            bvh: BvhKind::Wide,
+            ..MeshOptions::fast()
+        };
+        let single = build(s, &options).expect("build");
+        let packets = build(
+            s,
+            &MeshOptions {
+                packets: true,
+                ..options
+            },
+        )
+        .expect("build");
+        // Row batches of 61 rays: 7 packets and a remainder of 5 traced one by one.
+        let rays = camera_rays(s, 61);
+        let mut out = vec![marchmesh_core::TraceResult::default(); rays.len()];
+        for (r, o) in rays.chunks(61).zip(out.chunks_mut(61)) {
+            packets.closest_hits(r, o);
+        }
+        for (k, (ray, p)) in rays.iter().zip(&out).enumerate() {
+            let one = single.closest_hit(ray).hit;
+            match (one, p.hit) {
+                (Some(a), Some(b)) => {
+                    hits += 1;
+                    assert_eq!(a.t.to_bits(), b.t.to_bits(), "scene {i} ray {k}");
+                    assert_eq!(a.material, b.material, "scene {i} ray {k}");
+                }
+                (None, None) => {}
+                (a, b) => panic!("scene {i} ray {k}: single {a:?} vs packet {b:?}"),
+            }
+        }
+    }
+    assert!(hits > 1000, "the scenes should hit something: {hits} hits");
+}
