@@ -23,6 +23,7 @@
 //!   8-lane field evaluation per step, a lane that finishes is refilled with the next ray.
 
 mod cone;
+mod inside;
 mod march;
 mod options;
 
@@ -36,6 +37,7 @@ use marchmesh_core::{
 use marchmesh_field::{Field, FieldError, FieldOptions};
 use marchmesh_scene::{MaterialId, Scene};
 
+use inside::Inside;
 use march::{March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
 
@@ -67,6 +69,8 @@ pub struct SdfGeometry {
     shortcuts: Shortcuts,
     /// Field taps per ambient-occlusion estimate.
     ao_taps: u32,
+    /// Per-object fields for rays starting inside a solid (only when the camera is inside).
+    inside: Option<Inside>,
     report: GeometryReport,
 }
 
@@ -120,13 +124,12 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         "must be >= 2",
     )?;
     let t0 = Instant::now();
-    let field = Field::compile_scene(
-        scene,
-        &FieldOptions {
-            mesh_grid_resolution: opts.mesh_grid_resolution,
-            cache_dir: opts.cache_dir.clone(),
-        },
-    )?;
+    let field_opts = FieldOptions {
+        mesh_grid_resolution: opts.mesh_grid_resolution,
+        cache_dir: opts.cache_dir.clone(),
+    };
+    let field = Field::compile_scene(scene, &field_opts)?;
+    let inside = Inside::build(scene, &field, &field_opts)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bounds = field.bounds().map(|(lo, hi)| {
         // Pad by a relative margin so f32 rounding never clips a surface.
@@ -146,6 +149,17 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         "memory counts the f32 program the tracer reads, the f64 program (shared field API) and mesh grids"
             .into(),
     );
+    if let Some(inside) = &inside {
+        notes.push(format!(
+            "camera inside a solid: rays starting inside one trace the nearest of the {} top-level surfaces (min |d_k|), one field per object",
+            inside.len()
+        ));
+    } else if field.distance_f64(DVec3::ZERO) < 0.0 {
+        notes.push(format!(
+            "camera inside a solid of more than {} top-level objects: rays starting inside see the union's boundary, not surfaces inside other solids",
+            inside::MAX_INSIDE_OBJECTS
+        ));
+    }
     let mut counters = fr.counters.clone();
     counters.push(("field_bytes_f32".into(), field.memory_bytes_f32() as f64));
     let mut phases = fr.phases_ms.clone();
@@ -153,7 +167,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     phases.push(("other".into(), (total_ms - accounted).max(0.0)));
     let report = GeometryReport {
         backend: "sdf".into(),
-        memory_bytes: field.memory_bytes(),
+        memory_bytes: field.memory_bytes() + inside.as_ref().map_or(0, Inside::memory_bytes),
         build_phases_ms: phases,
         counters,
         notes,
@@ -175,6 +189,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
             ambient_occlusion: opts.ao_taps > 0,
         },
         ao_taps: opts.ao_taps,
+        inside,
         field,
         report,
     })
@@ -277,11 +292,63 @@ impl SdfGeometry {
     }
 
     fn run(&self, m: &mut March) -> Termination {
+        Self::run_with(m, &self.params, |p| self.field.distance(p))
+    }
+
+    /// Marches `m` to its end with the distance function `distance`.
+    fn run_with(m: &mut March, params: &Params, distance: impl Fn(Vec3) -> f32) -> Termination {
         loop {
-            let d = self.field.distance(m.point());
-            if let Next::Done(t) = m.feed(d, &self.params) {
+            if let Next::Done(t) = m.feed(distance(m.point()), params) {
                 return t;
             }
+        }
+    }
+
+    /// The per-object fields when `ray` starts inside a solid (camera-inside scenes only).
+    fn inside_of(&self, ray: &Ray) -> Option<&Inside> {
+        self.inside
+            .as_ref()
+            .filter(|_| self.field.distance(ray.origin) < 0.0)
+    }
+
+    /// A ray starting inside a solid: the first top-level surface it crosses.
+    fn closest_from_inside(&self, inside: &Inside, ray: &Ray) -> TraceResult {
+        let mut m = match March::new(ray, &self.params, true) {
+            Ok(m) => m,
+            Err(t) => {
+                return TraceResult {
+                    hit: None,
+                    termination: t,
+                    work: RayWork::default(),
+                };
+            }
+        };
+        let term = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
+        let work = RayWork {
+            steps: m.evals,
+            ..RayWork::default()
+        };
+        if term != Termination::Hit {
+            return TraceResult {
+                hit: None,
+                termination: term,
+                work,
+            };
+        }
+        let p = m.point();
+        let h = (self.normal_step * m.path_length())
+            .max(p.length() * 1e-6)
+            .max(1e-30);
+        let (normal, material) = inside.normal_material(inside.nearest(p).1, p, m.dir(), h);
+        TraceResult {
+            hit: Some(Hit {
+                t: m.t,
+                position: p,
+                normal,
+                material,
+            }),
+            termination: Termination::Hit,
+            work,
         }
     }
 
@@ -328,6 +395,9 @@ impl SdfGeometry {
 
 impl Geometry for SdfGeometry {
     fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        if let Some(inside) = self.inside_of(ray) {
+            return self.closest_from_inside(inside, ray);
+        }
         match March::new(ray, &self.params, true) {
             Err(t) => TraceResult {
                 hit: None,
@@ -342,6 +412,19 @@ impl Geometry for SdfGeometry {
     }
 
     fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        if let Some(inside) = self.inside_of(ray) {
+            return match March::new(ray, &self.params, false) {
+                Err(t) => OcclusionResult {
+                    occluded: false,
+                    termination: t,
+                    work: RayWork::default(),
+                },
+                Ok(mut m) => {
+                    let t = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
+                    Self::occ(&m, t)
+                }
+            };
+        }
         match March::new(ray, &self.params, false) {
             Err(t) => OcclusionResult {
                 occluded: false,
@@ -361,7 +444,7 @@ impl Geometry for SdfGeometry {
             out.len(),
             "closest_hits: rays and out differ in length"
         );
-        if !self.lockstep {
+        if !self.lockstep || self.inside.is_some() {
             for (r, o) in rays.iter().zip(out.iter_mut()) {
                 *o = self.closest_hit(r);
             }
@@ -385,7 +468,7 @@ impl Geometry for SdfGeometry {
             out.len(),
             "occluded_many: rays and out differ in length"
         );
-        if !self.lockstep {
+        if !self.lockstep || self.inside.is_some() {
             for (r, o) in rays.iter().zip(out.iter_mut()) {
                 *o = self.occluded(r);
             }

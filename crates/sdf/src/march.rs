@@ -288,9 +288,12 @@ impl March {
             Phase::March => {
                 let r = s.abs();
                 let step = self.t - self.t_prev;
-                if self.omega > 1.0 && r + self.r_prev < step {
+                if self.omega > 1.0 && r + self.r_prev < step + self.thr(p) {
                     // The relaxed step left the previous unbounding sphere uncovered: undo it,
-                    // take the plain step, and stop relaxing (Keinert et al. 2014).
+                    // take the plain step, and stop relaxing (Keinert et al. 2014). Spheres
+                    // that merely touch count as uncovered: exact spheres on either side of a
+                    // sheet (a triangle, or any surface of the unsigned field traced from
+                    // inside a solid) touch exactly on it.
                     self.omega = 1.0;
                     self.t = self.t_prev + self.r_prev;
                     return self.budget(p);
@@ -446,7 +449,9 @@ impl March {
                 trial: true,
                 left: left - 1,
             };
-            self.t = t + s / slope;
+            // Never past the end of the range: a surface between here and the prediction
+            // must still be looked at (the sweep does) rather than the ray ending there.
+            self.t = (t + s / slope).min(self.t_end);
             return self.budget(p);
         }
         // A failed prediction (the ray passes the surface by) or not approaching.

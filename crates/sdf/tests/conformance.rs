@@ -27,5 +27,4 @@ conformance_suite!(
     reference = |scene: &Scene| marchmesh_reference::build(scene, &Default::default())
         .map(|g| Box::new(g) as _),
     tolerance = tolerance,
-    ignore_inside_overlapping = "needs branch sdf: camera-inside semantics",
 );
