@@ -132,10 +132,7 @@ fn unique_temporary(target: &Path) -> PathBuf {
     let name = target
         .file_name()
         .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
-    target.with_file_name(format!(
-        ".{name}.tmp-{}-{n}-{nanos}",
-        std::process::id()
-    ))
+    target.with_file_name(format!(".{name}.tmp-{}-{n}-{nanos}", std::process::id()))
 }
 
 /// Writes `bytes` to a new file at `target` atomically and without overwriting anything:
@@ -183,8 +180,10 @@ pub fn publish_new(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
 /// Errors: [`SafeIoError::NotRegularFile`] for a non-regular target, or an I/O error; a
 /// failed write leaves `target` as it was and no temporary file.
 pub fn replace_regular(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
-    if let Ok(meta) = std::fs::symlink_metadata(target) {
-        if !meta.file_type().is_file() {
+    if let Ok(meta) = std::fs::symlink_metadata(target)
+        && !meta.file_type().is_file()
+    {
+        {
             return Err(SafeIoError::NotRegularFile {
                 path: target.to_path_buf(),
                 kind: if meta.is_dir() {
@@ -268,7 +267,10 @@ mod tests {
                     s.spawn(move || publish_new(target, &vec![k; 4096]).is_ok())
                 })
                 .collect();
-            handles.into_iter().map(|h| usize::from(h.join().unwrap())).sum()
+            handles
+                .into_iter()
+                .map(|h| usize::from(h.join().unwrap()))
+                .sum()
         });
         assert_eq!(winners, 1);
         let bytes = std::fs::read(&target).unwrap();
