@@ -183,18 +183,16 @@ pub fn replace_regular(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
     if let Ok(meta) = std::fs::symlink_metadata(target)
         && !meta.file_type().is_file()
     {
-        {
-            return Err(SafeIoError::NotRegularFile {
-                path: target.to_path_buf(),
-                kind: if meta.is_dir() {
-                    "folder"
-                } else if meta.file_type().is_symlink() {
-                    "symbolic link"
-                } else {
-                    "device, FIFO or socket"
-                },
-            });
-        }
+        return Err(SafeIoError::NotRegularFile {
+            path: target.to_path_buf(),
+            kind: if meta.is_dir() {
+                "folder"
+            } else if meta.file_type().is_symlink() {
+                "symbolic link"
+            } else {
+                "device, FIFO or socket"
+            },
+        });
     }
     let temporary = unique_temporary(target);
     let io = |action| {
