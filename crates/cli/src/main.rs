@@ -144,7 +144,7 @@ fn main() {
         Command::Render(args) => render(args),
         Command::Validate { scenes } => validate(&scenes),
         Command::Schema => {
-            println!("{}", marchmesh_scene::json_schema());
+            say(format_args!("{}", marchmesh_scene::json_schema()));
             Ok(())
         }
         Command::Bench(args) => bench::bench(args),
@@ -158,6 +158,20 @@ fn main() {
     }
 }
 
+/// Prints one line to stdout. A closed stdout (`marchmesh schema | head -c1`) ends the process
+/// quietly with status 141 (128 + SIGPIPE, what a shell reports for a killed writer) instead
+/// of panicking like `println!`; other write errors end it with status 1 and a message.
+fn say(line: std::fmt::Arguments) {
+    use std::io::Write;
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(141);
+        }
+        eprintln!("error: cannot write to stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
 fn validate(paths: &[PathBuf]) -> Result<()> {
     let mut failed = 0;
     for p in paths {
@@ -165,7 +179,7 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
             Ok(s) => {
                 let mut nodes = 0;
                 s.visit_nodes(|_| nodes += 1);
-                println!(
+                say(format_args!(
                     "{}: ok: {}x{} camera, {} lights, {} objects ({} nodes), {} meshes",
                     p.display(),
                     s.camera.width,
@@ -174,10 +188,22 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
                     s.objects.len(),
                     nodes,
                     s.mesh_paths().len()
-                );
-                for m in s.mesh_paths() {
-                    if !m.exists() {
-                        println!("  warning: mesh file {} does not exist", m.display());
+                ));
+                let mut missing: Vec<String> = s
+                    .mesh_paths()
+                    .iter()
+                    .filter(|m| !m.exists())
+                    .map(|m| format!("mesh file {}", m.display()))
+                    .collect();
+                if let marchmesh_scene::Background::Environment { path, .. } = &s.background
+                    && !path.exists()
+                {
+                    missing.push(format!("environment map {}", path.display()));
+                }
+                if !missing.is_empty() {
+                    failed += 1;
+                    for m in missing {
+                        eprintln!("{}: {m} does not exist", p.display());
                     }
                 }
             }

@@ -159,3 +159,47 @@ fn item16_out_jpg_writes_jpeg_and_unknown_extensions_are_refused() {
         stderr(&o)
     );
 }
+
+#[test]
+fn item14_schema_and_validate_on_a_closed_stdout_do_not_panic() {
+    let dir = tmp("pipe");
+    let s = scene(&dir);
+    for args in [
+        vec!["schema".to_string()],
+        vec!["validate".into(), s.display().to_string()],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+            .args(&args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take()); // the reader goes away before anything is written
+        let o = child.wait_with_output().unwrap();
+        assert!(!stderr(&o).contains("panicked"), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn item16_validate_fails_on_missing_environment_maps_and_meshes() {
+    let dir = tmp("validate");
+    let p = dir.join("env.json");
+    std::fs::write(
+        &p,
+        r#"{"background": {"environment": {"path": "nope.hdr"}},
+            "objects": [{"shape": {"mesh": {"path": "nope.obj"}}}]}"#,
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["validate"])
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("environment map") && stderr(&o).contains("nope.hdr"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(stderr(&o).contains("nope.obj"), "{}", stderr(&o));
+}
