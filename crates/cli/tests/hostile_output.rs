@@ -203,3 +203,47 @@ fn item16_validate_fails_on_missing_environment_maps_and_meshes() {
     );
     assert!(stderr(&o).contains("nope.obj"), "{}", stderr(&o));
 }
+
+#[test]
+fn item7_stability_never_writes_into_a_non_empty_folder() {
+    let dir = tmp("stability");
+    let run = dir.join("run");
+    std::fs::create_dir_all(&run).unwrap();
+    std::fs::write(run.join("summary.md"), b"mine").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["stability", "--out"])
+        .arg(&run)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not empty"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(run.join("summary.md")).unwrap(), b"mine");
+    let scenes = dir.join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    std::fs::write(scenes.join("x.json"), b"mine").unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["stability", "--out"])
+        .arg(dir.join("run2"))
+        .arg("--write-scenes")
+        .arg(&scenes)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--write-scenes"), "{}", stderr(&o));
+}
+
+#[test]
+fn item11_stability_fails_when_the_filter_matches_nothing() {
+    let dir = tmp("stability-filter");
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["stability", "--filter", "no-such-case-xyz", "--out"])
+        .arg(dir.join("run"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("no stability case matches"),
+        "{}",
+        stderr(&o)
+    );
+}
