@@ -24,10 +24,10 @@ fn stop_flag() -> Arc<AtomicBool> {
     let s = stop.clone();
     let _ = ctrlc::set_handler(move || {
         if s.swap(true, Ordering::SeqCst) {
-            eprintln!("\\nsecond Ctrl-C: exiting without writing");
+            eprintln!("\nsecond Ctrl-C: exiting without writing");
             std::process::exit(130);
         }
-        eprintln!("\\nCtrl-C: stopping after the current configuration (Ctrl-C again to abort)");
+        eprintln!("\nCtrl-C: stopping after the current configuration (Ctrl-C again to abort)");
     });
     stop
 }
