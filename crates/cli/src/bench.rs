@@ -24,10 +24,10 @@ fn stop_flag() -> Arc<AtomicBool> {
     let s = stop.clone();
     let _ = ctrlc::set_handler(move || {
         if s.swap(true, Ordering::SeqCst) {
-            eprintln!("\\nsecond Ctrl-C: exiting without writing");
+            eprintln!("\nsecond Ctrl-C: exiting without writing");
             std::process::exit(130);
         }
-        eprintln!("\\nCtrl-C: stopping after the current configuration (Ctrl-C again to abort)");
+        eprintln!("\nCtrl-C: stopping after the current configuration (Ctrl-C again to abort)");
     });
     stop
 }
@@ -303,8 +303,10 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
             utc_strings(marchmesh_harness::results::now_secs()).1
         )),
     };
-    if out.join("stability.json").exists() {
-        bail!("{} already holds a stability run", out.display());
+    // --out is the run folder itself: it must be new or empty, so no file is ever replaced.
+    refuse_non_empty(&out, "--out")?;
+    if let Some(dir) = &args.write_scenes {
+        refuse_non_empty(dir, "--write-scenes")?;
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let ctx = marchmesh_stability::CaseContext {
@@ -357,5 +359,34 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     for e in &errors {
         eprintln!("case error: {e}");
     }
+    if rows.is_empty() && errors.is_empty() {
+        bail!(
+            "no stability case matches the filter {:?}",
+            args.filter.as_deref().unwrap_or("")
+        );
+    }
+    if rows.is_empty() {
+        bail!(
+            "every one of the {} selected cases failed to run",
+            errors.len()
+        );
+    }
     Ok(())
+}
+
+/// Refuses `dir` (named by `flag` in the message) if it exists and is not an empty folder.
+fn refuse_non_empty(dir: &std::path::Path, flag: &str) -> Result<()> {
+    match std::fs::read_dir(dir) {
+        Ok(mut entries) => {
+            if entries.next().is_some() {
+                bail!(
+                    "{flag} {}: folder is not empty; choose a new or empty folder (nothing was overwritten)",
+                    dir.display()
+                );
+            }
+            Ok(())
+        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(e).with_context(|| format!("{flag} {}", dir.display())),
+    }
 }

@@ -144,7 +144,7 @@ fn main() {
         Command::Render(args) => render(args),
         Command::Validate { scenes } => validate(&scenes),
         Command::Schema => {
-            println!("{}", marchmesh_scene::json_schema());
+            say(format_args!("{}", marchmesh_scene::json_schema()));
             Ok(())
         }
         Command::Bench(args) => bench::bench(args),
@@ -158,6 +158,20 @@ fn main() {
     }
 }
 
+/// Prints one line to stdout. A closed stdout (`marchmesh schema | head -c1`) ends the process
+/// quietly with status 141 (128 + SIGPIPE, what a shell reports for a killed writer) instead
+/// of panicking like `println!`; other write errors end it with status 1 and a message.
+fn say(line: std::fmt::Arguments) {
+    use std::io::Write;
+    if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(141);
+        }
+        eprintln!("error: cannot write to stdout: {e}");
+        std::process::exit(1);
+    }
+}
+
 fn validate(paths: &[PathBuf]) -> Result<()> {
     let mut failed = 0;
     for p in paths {
@@ -165,7 +179,7 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
             Ok(s) => {
                 let mut nodes = 0;
                 s.visit_nodes(|_| nodes += 1);
-                println!(
+                say(format_args!(
                     "{}: ok: {}x{} camera, {} lights, {} objects ({} nodes), {} meshes",
                     p.display(),
                     s.camera.width,
@@ -174,10 +188,22 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
                     s.objects.len(),
                     nodes,
                     s.mesh_paths().len()
-                );
-                for m in s.mesh_paths() {
-                    if !m.exists() {
-                        println!("  warning: mesh file {} does not exist", m.display());
+                ));
+                let mut missing: Vec<String> = s
+                    .mesh_paths()
+                    .iter()
+                    .filter(|m| !m.exists())
+                    .map(|m| format!("mesh file {}", m.display()))
+                    .collect();
+                if let marchmesh_scene::Background::Environment { path, .. } = &s.background
+                    && !path.exists()
+                {
+                    missing.push(format!("environment map {}", path.display()));
+                }
+                if !missing.is_empty() {
+                    failed += 1;
+                    for m in missing {
+                        eprintln!("{}: {m} does not exist", p.display());
                     }
                 }
             }
@@ -195,6 +221,21 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
 
 /// Refuses to replace an existing file unless `force`.
 fn check_writable(path: &Path, force: bool) -> Result<()> {
+    // symlink_metadata: a dangling symlink exists too and is never replaced.
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        if !force {
+            bail!(
+                "{} already exists (use --force to overwrite)",
+                path.display()
+            );
+        }
+        if !meta.file_type().is_file() {
+            bail!(
+                "{} is not a regular file (a folder, device or symbolic link): not replaced, even with --force",
+                path.display()
+            );
+        }
+    }
     if path.exists() && !force {
         bail!(
             "{} already exists (use --force to overwrite)",
@@ -224,15 +265,20 @@ fn render(args: RenderArgs) -> Result<()> {
         .iter()
         .map(|s| backend::parse_option(s).map_err(anyhow::Error::msg))
         .collect::<Result<Vec<_>>>()?;
-    check_writable(&args.out, args.force)?;
-    if let Some(dir) = &args.aov
-        && dir.join("depth.pfm").exists()
-        && !args.force
-    {
+    if args.threads > MAX_THREADS {
         bail!(
-            "{} already holds AOVs (use --force to overwrite)",
-            dir.display()
+            "--threads {} is over the limit of {MAX_THREADS}",
+            args.threads
         );
+    }
+    let jpeg = output_is_jpeg(&args.out)?;
+    if let Some(dir) = &args.aov {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating AOV folder {}", dir.display()))?;
+    }
+    let targets = render_targets(&args.out, args.aov.as_deref());
+    for t in &targets {
+        check_writable(t, args.force)?;
     }
     let mut scene = marchmesh_scene::load(&args.scene)?;
     let (w, h) = (
@@ -282,13 +328,17 @@ fn render(args: RenderArgs) -> Result<()> {
     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
     bar.finish_and_clear();
 
-    write_atomically(&args.out, |tmp| {
-        image_io::write_png(&out.framebuffer, tmp).map_err(anyhow::Error::from)
-    })?;
+    // Encode everything first, then publish all-or-nothing.
+    let mut files = vec![(
+        args.out.clone(),
+        image_io::encode_color(&out.framebuffer, jpeg, &args.out)?,
+    )];
     if let Some(dir) = &args.aov {
-        image_io::write_aovs(&out.framebuffer, dir)
-            .with_context(|| format!("writing AOVs to {}", dir.display()))?;
+        for (name, bytes) in image_io::aov_files(&out.framebuffer) {
+            files.push((dir.join(name), bytes));
+        }
     }
+    publish_all(&files, args.force)?;
     let report = geometry.report();
     let s = &out.stats;
     let secs = out.elapsed.as_secs_f64();
@@ -352,22 +402,63 @@ fn render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes via a temporary file in the same folder, renamed into place on success, so a failed
-/// write never leaves a half-written file where the user's file was.
-fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let file_name = path
-        .file_name()
-        .with_context(|| format!("{} is not a file path", path.display()))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(".tmp.png");
-    let tmp = path.with_file_name(tmp_name);
-    let result = write(&tmp).and_then(|()| {
-        std::fs::rename(&tmp, path)
-            .with_context(|| format!("moving {} to {}", tmp.display(), path.display()))
-    });
-    if result.is_err() {
-        std::fs::remove_file(&tmp).ok();
+/// Most worker threads `render` accepts (`--threads`): far more than any machine's cores,
+/// few enough that a typo cannot start a million threads.
+const MAX_THREADS: usize = 1024;
+
+/// Whether `--out` asks for JPEG (`.jpg`/`.jpeg`) rather than PNG (`.png`); other extensions
+/// are refused rather than written as PNG bytes under a misleading name.
+fn output_is_jpeg(out: &Path) -> Result<bool> {
+    let ext = out
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    match ext.as_str() {
+        "png" => Ok(false),
+        "jpg" | "jpeg" => Ok(true),
+        _ => bail!(
+            "--out {}: unsupported image extension {ext:?} (use .png, .jpg or .jpeg)",
+            out.display()
+        ),
     }
-    result.with_context(|| format!("writing {}", path.display()))
+}
+
+/// Every file a render writes: the image, then each AOV file.
+fn render_targets(out: &Path, aov: Option<&Path>) -> Vec<PathBuf> {
+    let mut v = vec![out.to_path_buf()];
+    if let Some(dir) = aov {
+        v.extend(image_io::AOV_FILE_NAMES.iter().map(|n| dir.join(n)));
+    }
+    v
+}
+
+/// Publishes every `(path, bytes)` atomically. Without `force` each file is created new
+/// (a file created meanwhile by anyone makes this fail, never overwritten) and on any failure
+/// the files this call already published are removed again, so a render leaves all its files
+/// or none. With `force` existing regular files are replaced (never a folder, device or
+/// symlink); files replaced before a failure stay replaced.
+fn publish_all(files: &[(PathBuf, Vec<u8>)], force: bool) -> Result<()> {
+    let mut published: Vec<&Path> = Vec::new();
+    for (path, bytes) in files {
+        let result = if force {
+            marchmesh_safeio::replace_regular(path, bytes)
+        } else {
+            marchmesh_safeio::publish_new(path, bytes)
+        };
+        if let Err(e) = result {
+            if !force {
+                for p in &published {
+                    std::fs::remove_file(p).ok();
+                }
+            }
+            let hint = if matches!(e, marchmesh_safeio::SafeIoError::Exists { .. }) {
+                " (use --force to overwrite)"
+            } else {
+                ""
+            };
+            bail!("{e}{hint}");
+        }
+        published.push(path);
+    }
+    Ok(())
 }

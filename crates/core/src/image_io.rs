@@ -59,6 +59,82 @@ pub fn write_png(fb: &Framebuffer, path: &Path) -> Result<(), ImageIoError> {
         })
 }
 
+/// The colour buffer encoded as 8-bit PNG (`jpeg == false`) or JPEG (quality 95) bytes, for
+/// callers that publish files atomically. Errors: the encoder fails (named with `path`).
+pub fn encode_color(fb: &Framebuffer, jpeg: bool, path: &Path) -> Result<Vec<u8>, ImageIoError> {
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    let rgb = fb.to_rgb8();
+    let result = if jpeg {
+        rgb.write_with_encoder(image::codecs::jpeg::JpegEncoder::new_with_quality(
+            &mut bytes, 95,
+        ))
+    } else {
+        rgb.write_to(&mut bytes, image::ImageFormat::Png)
+    };
+    result.map_err(|e| ImageIoError::Encode {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    Ok(bytes.into_inner())
+}
+
+/// File names [`aov_files`] produces, in order.
+pub const AOV_FILE_NAMES: [&str; 5] = [
+    "depth.pfm",
+    "normal.pfm",
+    "mask.pfm",
+    "work.pfm",
+    "termination.pfm",
+];
+
+/// The AOVs [`write_aovs`] writes, as `(file name, PFM bytes)` in [`AOV_FILE_NAMES`] order,
+/// so a caller can publish them all-or-nothing.
+pub fn aov_files(fb: &Framebuffer) -> Vec<(&'static str, Vec<u8>)> {
+    let (w, h) = (fb.width, fb.height);
+    let normals: Vec<f32> = fb.normal.iter().flat_map(|n: &Vec3| n.to_array()).collect();
+    let mask: Vec<f32> = fb
+        .depth
+        .iter()
+        .map(|d| if d.is_finite() { 1.0 } else { 0.0 })
+        .collect();
+    let work: Vec<f32> = fb
+        .work
+        .iter()
+        .flat_map(|w| {
+            [
+                w.steps as f32,
+                w.node_visits as f32,
+                w.primitive_tests as f32,
+            ]
+        })
+        .collect();
+    let term: Vec<f32> = fb
+        .termination
+        .iter()
+        .map(|t: &Termination| *t as u8 as f32)
+        .collect();
+    vec![
+        (AOV_FILE_NAMES[0], encode_pfm(w, h, 1, &fb.depth)),
+        (AOV_FILE_NAMES[1], encode_pfm(w, h, 3, &normals)),
+        (AOV_FILE_NAMES[2], encode_pfm(w, h, 1, &mask)),
+        (AOV_FILE_NAMES[3], encode_pfm(w, h, 3, &work)),
+        (AOV_FILE_NAMES[4], encode_pfm(w, h, 1, &term)),
+    ]
+}
+
+/// `channels` (1 or 3) floats per pixel, `data` row-major from the top, as PFM bytes.
+pub fn encode_pfm(width: u32, height: u32, channels: usize, data: &[f32]) -> Vec<u8> {
+    let tag = if channels == 1 { "Pf" } else { "PF" };
+    let mut out = format!("{tag}\n{width} {height}\n-1.0\n").into_bytes();
+    let row = width as usize * channels;
+    for r in (0..height as usize).rev() {
+        for v in &data[r * row..(r + 1) * row] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+    }
+    out
+}
+
 /// Writes `channels` (1 or 3) floats per pixel, `data` row-major from the top, as PFM.
 pub fn write_pfm(
     path: &Path,

@@ -423,7 +423,12 @@ pub fn sdf_options(options: &[(String, String)]) -> Result<SdfOptions, BackendEr
 pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, BackendError> {
     let kind = BackendKind::Mesh;
     let mut o = MeshOptions::DEFAULT;
-    for (k, v) in options {
+    // A preset sets every field: apply it first so `--opt x=1 --opt preset=fast` keeps x.
+    let presets_first = options
+        .iter()
+        .filter(|(k, _)| k == "preset")
+        .chain(options.iter().filter(|(k, _)| k != "preset"));
+    for (k, v) in presets_first {
         let r: Result<(), String> = (|| {
             match k.as_str() {
                 "preset" => {
@@ -605,6 +610,9 @@ mod tests {
         assert_eq!(s.mesh_grid_resolution, 32);
         assert_eq!(s.max_distance, Some(100.0));
         assert!(!s.lockstep);
+        // Issue 11 item 16: a preset given after an option no longer drops that option.
+        let late = mesh_options(&opts(&[("bvh", "cwbvh"), ("preset", "fast")])).unwrap();
+        assert_eq!(late.bvh, BvhKind::CwBvh);
         let m = mesh_options(&opts(&[
             ("preset", "fast"),
             ("bvh", "cwbvh"),

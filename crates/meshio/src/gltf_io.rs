@@ -22,22 +22,19 @@ fn malformed(path: &Path, reason: impl Into<String>) -> MeshLoadError {
 /// Reads every triangle primitive instanced by the default scene (or the first scene; or every
 /// mesh untransformed if the file has no scene), node transforms applied.
 pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
-    let bytes = std::fs::read(path).map_err(|source| MeshLoadError::Io {
-        path: path.to_path_buf(),
-        action: "cannot read",
-        source,
-    })?;
+    let bytes = crate::read_file(path)?;
     if bytes.starts_with(b"glTF") {
         check_glb_header(path, &bytes)?;
     }
     // The gltf crate is not hardened against every corrupt input: turn a panic into an error.
     let parsed = catch_unwind(AssertUnwindSafe(|| -> Result<_, gltf::Error> {
         let gltf::Gltf { document, blob } = gltf::Gltf::from_slice(&bytes)?;
-        let buffers = gltf::import_buffers(&document, path.parent(), blob)?;
-        Ok((document, buffers))
+        Ok((document, blob))
     }))
     .map_err(|_| malformed(path, "the glTF parser failed on this file"))?;
-    let (document, buffers) = parsed.map_err(|e| malformed(path, e.to_string()))?;
+    let (document, blob) = parsed.map_err(|e| malformed(path, e.to_string()))?;
+    let buffers = load_buffers(path, &document, blob)?;
+    check_accessors(path, &document, &buffers)?;
 
     let mut out = RawMesh {
         report: LoadReport {
@@ -97,6 +94,196 @@ pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
     Ok(out)
 }
 
+/// Loads every buffer of `document`: the GLB blob, a `data:` URI (base64), or a file named by
+/// a relative URI that, percent-decoded and canonicalised (symlinks resolved), lies inside the
+/// glTF's own folder. Absolute paths, other schemes (`file:`, `http:`) and paths escaping the
+/// folder are refused naming the glTF and the URI; files are read with the [`crate::read_file`]
+/// cap and must hold at least the buffer's declared `byteLength`, which is checked before reading.
+fn load_buffers(
+    path: &Path,
+    document: &gltf::Document,
+    mut blob: Option<Vec<u8>>,
+) -> Result<Vec<Vec<u8>>, MeshLoadError> {
+    let cap = marchmesh_safeio::read_cap_bytes();
+    let folder = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    for buffer in document.buffers() {
+        let declared = buffer.length() as u64;
+        if declared > cap {
+            return Err(malformed(
+                path,
+                format!(
+                    "buffer {} declares {declared} bytes, over the read limit of {cap} bytes (set {} in MiB to raise it)",
+                    buffer.index(),
+                    marchmesh_safeio::READ_CAP_ENV
+                ),
+            ));
+        }
+        let mut data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob
+                .take()
+                .ok_or_else(|| malformed(path, "a buffer refers to a missing GLB binary chunk"))?,
+            gltf::buffer::Source::Uri(uri) => load_uri(path, folder, uri, cap)?,
+        };
+        if (data.len() as u64) < declared {
+            return Err(malformed(
+                path,
+                format!(
+                    "buffer {} declares {declared} bytes but holds only {}",
+                    buffer.index(),
+                    data.len()
+                ),
+            ));
+        }
+        data.truncate(declared as usize);
+        out.push(data);
+    }
+    Ok(out)
+}
+
+/// The bytes of one buffer URI, confined as [`load_buffers`] describes.
+fn load_uri(path: &Path, folder: &Path, uri: &str, cap: u64) -> Result<Vec<u8>, MeshLoadError> {
+    let refuse = |why: &str| malformed(path, format!("buffer URI {uri:?} refused: {why}"));
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (_, payload) = rest
+            .split_once(";base64,")
+            .ok_or_else(|| refuse("only base64 data: URIs are supported"))?;
+        if payload.len() as u64 / 4 * 3 > cap {
+            return Err(refuse("larger than the read limit"));
+        }
+        return base64::decode(payload).map_err(|e| refuse(&format!("bad base64: {e}")));
+    }
+    let decoded = percent_decode(uri).ok_or_else(|| refuse("bad percent-encoding"))?;
+    if decoded.contains(':') || decoded.starts_with('/') || decoded.starts_with('\\') {
+        return Err(refuse(
+            "only data: URIs and relative paths inside the glTF's folder are allowed",
+        ));
+    }
+    let folder = folder.canonicalize().map_err(|source| MeshLoadError::Io {
+        path: folder.to_path_buf(),
+        action: "cannot resolve the glTF's folder",
+        source,
+    })?;
+    let target = folder
+        .join(&decoded)
+        .canonicalize()
+        .map_err(|e| refuse(&format!("cannot resolve: {e}")))?;
+    if !target.starts_with(&folder) {
+        return Err(refuse("it resolves outside the glTF's folder"));
+    }
+    marchmesh_safeio::read_capped(&target, cap).map_err(|e| refuse(&e.to_string()))
+}
+
+/// Decodes `%XX` escapes; `None` for a malformed escape or non-UTF-8 result.
+fn percent_decode(uri: &str) -> Option<String> {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' {
+            let hex = std::str::from_utf8(bytes.get(i + 1..i + 3)?).ok()?;
+            out.push(u8::from_str_radix(hex, 16).ok()?);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).ok()
+}
+
+/// Checks, before any accessor is read, that every buffer view lies inside its buffer, every
+/// accessor inside its view (or buffer), index accessors are unsigned-integer `SCALAR`s and
+/// `POSITION` accessors are `VEC3` of `FLOAT`: the `gltf` reader would panic or silently
+/// misread otherwise.
+fn check_accessors(
+    path: &Path,
+    document: &gltf::Document,
+    buffers: &[Vec<u8>],
+) -> Result<(), MeshLoadError> {
+    use gltf::accessor::{DataType, Dimensions};
+    for view in document.views() {
+        let have = buffers.get(view.buffer().index()).map_or(0, Vec::len);
+        let end = view.offset().checked_add(view.length());
+        if end.is_none_or(|end| end > have) {
+            return Err(malformed(
+                path,
+                format!(
+                    "buffer view {} ends at byte {} but buffer {} has {have} bytes",
+                    view.index(),
+                    view.offset().saturating_add(view.length()),
+                    view.buffer().index()
+                ),
+            ));
+        }
+    }
+    for accessor in document.accessors() {
+        let Some(view) = accessor.view() else {
+            continue;
+        };
+        let element = accessor.size();
+        let stride = view.stride().unwrap_or(element);
+        let span = accessor
+            .count()
+            .checked_sub(1)
+            .map_or(Some(0), |n| n.checked_mul(stride)?.checked_add(element));
+        let end = span.and_then(|s| s.checked_add(accessor.offset()));
+        if end.is_none_or(|end| end > view.length()) {
+            return Err(malformed(
+                path,
+                format!(
+                    "accessor {} ({} elements) does not fit in buffer view {} of {} bytes",
+                    accessor.index(),
+                    accessor.count(),
+                    view.index(),
+                    view.length()
+                ),
+            ));
+        }
+    }
+    for mesh in document.meshes() {
+        for primitive in mesh.primitives() {
+            if let Some(indices) = primitive.indices() {
+                let ok_type = matches!(
+                    indices.data_type(),
+                    DataType::U8 | DataType::U16 | DataType::U32
+                );
+                if !ok_type || indices.dimensions() != Dimensions::Scalar {
+                    return Err(malformed(
+                        path,
+                        format!(
+                            "index accessor {} is {:?} {:?}; indices must be SCALAR unsigned integers",
+                            indices.index(),
+                            indices.dimensions(),
+                            indices.data_type()
+                        ),
+                    ));
+                }
+            }
+            for (semantic, accessor) in primitive.attributes() {
+                if semantic == gltf::Semantic::Positions
+                    && (accessor.dimensions() != Dimensions::Vec3
+                        || accessor.data_type() != DataType::F32)
+                {
+                    return Err(malformed(
+                        path,
+                        format!(
+                            "POSITION accessor {} is {:?} {:?}; it must be VEC3 FLOAT",
+                            accessor.index(),
+                            accessor.dimensions(),
+                            accessor.data_type()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Checks the 12-byte GLB header before handing the bytes to the parser.
 fn check_glb_header(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
     if bytes.len() < 20 {
@@ -136,7 +323,7 @@ fn check_glb_header(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
 fn append_primitive(
     path: &Path,
     primitive: &gltf::Primitive,
-    buffers: &[gltf::buffer::Data],
+    buffers: &[Vec<u8>],
     world: DMat4,
     out: &mut RawMesh,
 ) -> Result<(), MeshLoadError> {
@@ -148,7 +335,7 @@ fn append_primitive(
         out.report.non_triangle_primitives_skipped += 1;
         return Ok(());
     }
-    let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d.0[..]));
+    let reader = primitive.reader(|b| buffers.get(b.index()).map(|d| &d[..]));
     let positions: Vec<Vec3> = reader
         .read_positions()
         .ok_or_else(|| malformed(path, "a primitive has no POSITION attribute"))?

@@ -79,6 +79,15 @@ pub enum MeshLoadError {
         /// The underlying error.
         source: std::io::Error,
     },
+    /// The file is missing, unreadable, not a regular file (a folder, device or FIFO) or
+    /// larger than the read cap.
+    #[error("{path}: cannot read mesh file: {reason}")]
+    Unreadable {
+        /// The file.
+        path: PathBuf,
+        /// Why (the OS error, "not a regular file (folder)", or the cap and how to raise it).
+        reason: String,
+    },
     /// The extension is not `.obj`, `.gltf` or `.glb`.
     #[error("{path}: unsupported mesh file extension {extension:?} (expected .obj, .gltf or .glb)")]
     UnsupportedExtension {
@@ -161,6 +170,24 @@ pub fn load_mesh(path: &Path) -> Result<TriangleMesh, MeshLoadError> {
         }
     };
     assemble(raw)
+}
+
+/// Reads a mesh file with the [`marchmesh_safeio`] cap (1 GiB unless `MARCHMESH_MAX_READ_MIB`
+/// says otherwise), refusing folders, devices and FIFOs.
+pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, MeshLoadError> {
+    marchmesh_safeio::read_regular(path).map_err(|e| MeshLoadError::Unreadable {
+        path: path.to_path_buf(),
+        reason: match e {
+            marchmesh_safeio::SafeIoError::Io { source, .. } => source.to_string(),
+            other => strip_path(&other.to_string(), path),
+        },
+    })
+}
+
+/// `message` without a leading `"{path}: "`, so the path is not printed twice.
+fn strip_path(message: &str, path: &Path) -> String {
+    let prefix = format!("{}: ", path.display());
+    message.strip_prefix(&prefix).unwrap_or(message).to_string()
 }
 
 /// A mesh as read from a file, before validation.

@@ -1,6 +1,5 @@
 //! Wavefront OBJ loading through `tobj`.
 
-use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
@@ -10,12 +9,8 @@ use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh};
 
 /// Reads every model of an OBJ file (materials ignored) into one raw mesh.
 pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
-    let file = File::open(path).map_err(|source| MeshLoadError::Io {
-        path: path.to_path_buf(),
-        action: "cannot read",
-        source,
-    })?;
-    let mut reader = BufReader::new(file);
+    let bytes = crate::read_file(path)?;
+    let mut reader = BufReader::new(&bytes[..]);
     let options = tobj::LoadOptions {
         single_index: true,
         triangulate: true,

@@ -27,6 +27,23 @@ pub enum SceneError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// The file is missing, not a regular file (a folder, device or FIFO) or larger than the
+    /// read cap (`MARCHMESH_MAX_READ_MIB`).
+    #[error("{}: cannot read scene file: {reason}", path.display())]
+    Unreadable {
+        /// The scene file.
+        path: PathBuf,
+        /// Why.
+        reason: String,
+    },
+    /// The file is not UTF-8 text (UTF-16, NUL bytes, invalid sequences).
+    #[error("{source_name}: {reason}")]
+    Encoding {
+        /// The scene file.
+        source_name: String,
+        /// What encoding problem was found.
+        reason: String,
+    },
     /// The JSON is malformed or a value has the wrong type or an unknown field.
     #[error("{source_name}:{line}:{column}: at `{json_path}`: {message}")]
     Parse {
@@ -95,12 +112,43 @@ pub fn parse_scene(text: &str, source_name: &str, base_dir: &Path) -> Result<Sce
 
 /// Reads, parses and validates a scene file.
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+    let bytes = marchmesh_safeio::read_regular(path).map_err(|e| SceneError::Unreadable {
         path: path.to_path_buf(),
-        source,
+        reason: match e {
+            marchmesh_safeio::SafeIoError::Io { source, .. } => source.to_string(),
+            other => {
+                let text = other.to_string();
+                let prefix = format!("{}: ", path.display());
+                text.strip_prefix(&prefix).unwrap_or(&text).to_string()
+            }
+        },
     })?;
+    let source_name = path.display().to_string();
+    let text = decode_text(&bytes, &source_name)?;
     let base = path.parent().unwrap_or(Path::new("."));
-    parse_scene(&text, &path.display().to_string(), base)
+    parse_scene(text, &source_name, base)
+}
+
+/// The scene text of `bytes`: UTF-8, with a leading UTF-8 byte-order mark skipped. UTF-16
+/// (either byte order, detected by its BOM or by NUL bytes) and other non-UTF-8 text is an
+/// error saying so, instead of a JSON syntax error.
+pub fn decode_text<'a>(bytes: &'a [u8], source_name: &str) -> Result<&'a str, SceneError> {
+    let encoding = |what: &str| SceneError::Encoding {
+        source_name: source_name.to_string(),
+        reason: what.to_string(),
+    };
+    if bytes.starts_with(&[0xFF, 0xFE]) || bytes.starts_with(&[0xFE, 0xFF]) || bytes.contains(&0) {
+        return Err(encoding(
+            "the file is UTF-16 (or contains NUL bytes); save it as UTF-8",
+        ));
+    }
+    let bytes = bytes.strip_prefix(&[0xEF, 0xBB, 0xBF]).unwrap_or(bytes);
+    std::str::from_utf8(bytes).map_err(|e| {
+        encoding(&format!(
+            "not valid UTF-8 (byte offset {}); save it as UTF-8",
+            e.valid_up_to()
+        ))
+    })
 }
 
 /// The JSON Schema of the scene format, pretty-printed.

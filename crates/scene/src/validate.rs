@@ -21,6 +21,13 @@ pub const MAX_NESTING_DEPTH: usize = 24;
 pub const MAX_NODES: usize = 100_000;
 /// Largest accepted finite repetition count on one axis.
 pub const MAX_REPEAT_COUNT_PER_AXIS: u32 = 1_000_000;
+/// Largest accepted product, over a chain of nested repeat nodes, of each node's work factor:
+/// 2 per repeated axis (a count of 1 counts 1). Evaluating a repetition visits at least two
+/// neighbouring copies per repeated axis and nested repetitions multiply, so 23 nested
+/// count-2 repeats cost 2^23 evaluations per query on every backend; 1024 keeps the worst
+/// accepted scene to about a thousand child evaluations per query (e.g. three nested 3-axis
+/// repeats plus one single-axis repeat).
+pub const MAX_NESTED_REPEAT_FACTOR: u64 = 1024;
 /// Largest accepted magnitude of any coordinate or length (world units).
 pub const MAX_COORDINATE: f64 = 1e12;
 /// Most samples per pixel for the Whitted integrator (all samples of a row are traced as one
@@ -79,6 +86,8 @@ struct Ctx<'a> {
     problems: Vec<Problem>,
     materials: Vec<Material>,
     nodes: usize,
+    /// Product of the work factors of the repeat nodes enclosing the node being checked.
+    repeat_factor: u64,
 }
 
 impl Ctx<'_> {
@@ -308,12 +317,16 @@ impl Ctx<'_> {
                 }
             }
             ShapeSpec::Mesh(m) => {
+                let full = self.base_dir.join(&m.path);
                 if m.path.trim().is_empty() {
                     self.fail(&format!("{path}.mesh.path"), "must not be empty");
+                } else if let Some(reason) = not_a_readable_file(&full) {
+                    self.fail(
+                        &format!("{path}.mesh.path"),
+                        format!("{}: {reason}", full.display()),
+                    );
                 }
-                NodeKind::Mesh {
-                    path: self.base_dir.join(&m.path),
-                }
+                NodeKind::Mesh { path: full }
             }
             ShapeSpec::Union(c) => NodeKind::Union(self.children(
                 &format!("{path}.union.children"),
@@ -370,7 +383,26 @@ impl Ctx<'_> {
                         "at least one axis needs a period > 0",
                     );
                 }
-                let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1)?;
+                let factor: u64 = (0..3)
+                    .filter(|&axis| period[axis] > 0.0 && r.count[axis] != Some(1))
+                    .map(|_| 2u64)
+                    .product();
+                let enclosing = self.repeat_factor;
+                self.repeat_factor = enclosing.saturating_mul(factor);
+                if self.repeat_factor > MAX_NESTED_REPEAT_FACTOR
+                    && enclosing <= MAX_NESTED_REPEAT_FACTOR
+                {
+                    self.fail(
+                        &p,
+                        format!(
+                            "nested repetitions multiply the work per query to {} (2 per repeated axis at every nesting level), over the limit of {MAX_NESTED_REPEAT_FACTOR}: nest fewer repeats or repeat fewer axes",
+                            self.repeat_factor
+                        ),
+                    );
+                }
+                let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1);
+                self.repeat_factor = enclosing;
+                let child = child?;
                 NodeKind::Repeat {
                     child: Box::new(child),
                     period,
@@ -378,6 +410,19 @@ impl Ctx<'_> {
                 }
             }
         })
+    }
+}
+
+/// Why an existing `path` cannot be a mesh or image file (a folder, a device or FIFO), or
+/// `None` if it is a regular file (symlinks followed) or does not exist.
+fn not_a_readable_file(path: &Path) -> Option<&'static str> {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => None,
+        Ok(m) if m.is_dir() => Some("is a folder, not a file"),
+        Ok(_) => Some("is a device, FIFO or socket, not a regular file"),
+        // A missing file is reported when the mesh or image is loaded (scenes are validated
+        // before their assets exist, e.g. in tests and by generators).
+        Err(_) => None,
     }
 }
 
@@ -393,6 +438,7 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
             reflectivity: 0.0,
         }],
         nodes: 0,
+        repeat_factor: 1,
     };
 
     let c = &file.camera;
@@ -490,6 +536,11 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
         BackgroundSpec::Environment(e) => {
             if e.path.trim().is_empty() {
                 cx.fail("background.environment.path", "must not be empty");
+            } else if let Some(reason) = not_a_readable_file(&base_dir.join(&e.path)) {
+                cx.fail(
+                    "background.environment.path",
+                    format!("{}: {reason}", base_dir.join(&e.path).display()),
+                );
             }
             Background::Environment {
                 path: base_dir.join(&e.path),

@@ -1,0 +1,305 @@
+//! Hostile-input-safe file I/O, in one place for every marchmesh crate.
+//!
+//! - [`read_capped`] reads a *regular* file of at most a byte cap: `/dev/zero`, FIFOs and
+//!   folders are refused up front instead of growing until the kernel kills the process.
+//!   The cap is [`DEFAULT_READ_CAP_BYTES`] (1 GiB) unless the environment variable
+//!   [`READ_CAP_ENV`] (`MARCHMESH_MAX_READ_MIB`, in MiB) overrides it.
+//! - [`publish_new`] writes bytes to a unique temporary file beside the target and publishes
+//!   it with a hard link, which fails if the target exists: exactly one of concurrent writers
+//!   wins, the others get [`SafeIoError::Exists`], and a failed write leaves no partial file.
+
+use std::fs::File;
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Default largest file [`read_capped`] accepts: 1 GiB.
+pub const DEFAULT_READ_CAP_BYTES: u64 = 1 << 30;
+
+/// Environment variable overriding the read cap, in MiB (a positive integer).
+pub const READ_CAP_ENV: &str = "MARCHMESH_MAX_READ_MIB";
+
+/// Why a safe read or write failed. Every variant names the file.
+#[derive(Debug, thiserror::Error)]
+pub enum SafeIoError {
+    /// The OS refused an operation.
+    #[error("{}: {action}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What was attempted.
+        action: &'static str,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// The path is a folder, device, FIFO or socket, not a regular file.
+    #[error("{}: not a regular file ({kind})", path.display())]
+    NotRegularFile {
+        /// The path.
+        path: PathBuf,
+        /// What it is instead (`"folder"`, `"device, FIFO or socket"`).
+        kind: &'static str,
+    },
+    /// The file is larger than the read cap.
+    #[error(
+        "{}: file is larger than the read limit of {cap_bytes} bytes (set {READ_CAP_ENV} in MiB to raise it)",
+        path.display()
+    )]
+    TooLarge {
+        /// The file.
+        path: PathBuf,
+        /// The cap in bytes.
+        cap_bytes: u64,
+    },
+    /// The target already exists (or was created by a concurrent writer) and overwriting
+    /// was not allowed.
+    #[error("{}: already exists (nothing was overwritten)", path.display())]
+    Exists {
+        /// The target.
+        path: PathBuf,
+    },
+}
+
+/// The read cap in bytes: [`READ_CAP_ENV`] in MiB if set to a positive integer, else
+/// [`DEFAULT_READ_CAP_BYTES`].
+pub fn read_cap_bytes() -> u64 {
+    std::env::var(READ_CAP_ENV)
+        .ok()
+        .and_then(|v| v.trim().parse::<u64>().ok())
+        .filter(|&mib| mib > 0)
+        .map_or(DEFAULT_READ_CAP_BYTES, |mib| mib.saturating_mul(1 << 20))
+}
+
+/// Reads the whole of a regular file of at most `cap_bytes` bytes (symlinks are followed).
+///
+/// Errors: the path is not a regular file, is larger than the cap (checked on the metadata and
+/// again while reading, so a growing file cannot exceed it), or the OS fails.
+pub fn read_capped(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> {
+    let io = |action| {
+        let path = path.to_path_buf();
+        move |source| SafeIoError::Io {
+            path,
+            action,
+            source,
+        }
+    };
+    let file = File::open(path).map_err(io("cannot open"))?;
+    let meta = file.metadata().map_err(io("cannot stat"))?;
+    if meta.is_dir() {
+        return Err(SafeIoError::NotRegularFile {
+            path: path.to_path_buf(),
+            kind: "folder",
+        });
+    }
+    if !meta.is_file() {
+        return Err(SafeIoError::NotRegularFile {
+            path: path.to_path_buf(),
+            kind: "device, FIFO or socket",
+        });
+    }
+    let too_large = || SafeIoError::TooLarge {
+        path: path.to_path_buf(),
+        cap_bytes,
+    };
+    if meta.len() > cap_bytes {
+        return Err(too_large());
+    }
+    let mut bytes = Vec::new();
+    bytes
+        .try_reserve_exact(usize::try_from(meta.len()).map_err(|_| too_large())?)
+        .map_err(|_| too_large())?;
+    file.take(cap_bytes.saturating_add(1))
+        .read_to_end(&mut bytes)
+        .map_err(io("cannot read"))?;
+    if bytes.len() as u64 > cap_bytes {
+        return Err(too_large());
+    }
+    Ok(bytes)
+}
+
+/// [`read_capped`] with the [`read_cap_bytes`] cap.
+pub fn read_regular(path: &Path) -> Result<Vec<u8>, SafeIoError> {
+    read_capped(path, read_cap_bytes())
+}
+
+/// A temporary file name unique to this process and call, beside `target`.
+fn unique_temporary(target: &Path) -> PathBuf {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    let name = target
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    target.with_file_name(format!(".{name}.tmp-{}-{n}-{nanos}", std::process::id()))
+}
+
+/// Writes `bytes` to a new file at `target` atomically and without overwriting anything:
+/// the data goes to a unique temporary file beside it, is flushed to disk, then hard-linked
+/// to `target` (which fails if `target` exists, even as a dangling symlink or a special
+/// file); the temporary name is always removed.
+///
+/// Errors: [`SafeIoError::Exists`] if `target` exists (exactly one of concurrent callers
+/// succeeds), or an I/O error; on any error no file is left at `target` by this call.
+pub fn publish_new(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
+    let temporary = unique_temporary(target);
+    let io = |action| {
+        let path = target.to_path_buf();
+        move |source| SafeIoError::Io {
+            path,
+            action,
+            source,
+        }
+    };
+    let write = || -> Result<(), SafeIoError> {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temporary)
+            .map_err(io("cannot create a temporary file beside"))?;
+        file.write_all(bytes).map_err(io("cannot write"))?;
+        file.sync_all().map_err(io("cannot flush"))?;
+        match std::fs::hard_link(&temporary, target) {
+            Ok(()) => Ok(()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Err(SafeIoError::Exists {
+                path: target.to_path_buf(),
+            }),
+            Err(e) => Err(io("cannot publish")(e)),
+        }
+    };
+    let result = write();
+    let _ = std::fs::remove_file(&temporary);
+    result
+}
+
+/// Replaces `target` with `bytes` atomically (for `--force`): refuses if `target` exists and
+/// is not a regular file (a folder, device such as `/dev/null`, FIFO, or a symlink, dangling
+/// or not), otherwise writes a unique temporary file and renames it over `target`.
+///
+/// Errors: [`SafeIoError::NotRegularFile`] for a non-regular target, or an I/O error; a
+/// failed write leaves `target` as it was and no temporary file.
+pub fn replace_regular(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
+    if let Ok(meta) = std::fs::symlink_metadata(target)
+        && !meta.file_type().is_file()
+    {
+        return Err(SafeIoError::NotRegularFile {
+            path: target.to_path_buf(),
+            kind: if meta.is_dir() {
+                "folder"
+            } else if meta.file_type().is_symlink() {
+                "symbolic link"
+            } else {
+                "device, FIFO or socket"
+            },
+        });
+    }
+    let temporary = unique_temporary(target);
+    let io = |action| {
+        let path = target.to_path_buf();
+        move |source| SafeIoError::Io {
+            path,
+            action,
+            source,
+        }
+    };
+    let write = || -> Result<(), SafeIoError> {
+        let mut file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&temporary)
+            .map_err(io("cannot create a temporary file beside"))?;
+        file.write_all(bytes).map_err(io("cannot write"))?;
+        file.sync_all().map_err(io("cannot flush"))?;
+        std::fs::rename(&temporary, target).map_err(io("cannot publish"))
+    };
+    let result = write();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&temporary);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scratch(name: &str) -> PathBuf {
+        let dir = std::env::temp_dir().join(format!("safeio-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        dir
+    }
+
+    #[test]
+    fn dev_zero_is_refused_not_read() {
+        let e = read_capped(Path::new("/dev/zero"), 1 << 20).unwrap_err();
+        assert!(matches!(e, SafeIoError::NotRegularFile { .. }), "{e}");
+    }
+
+    #[test]
+    fn folders_are_refused_as_folders() {
+        let dir = scratch("folder");
+        let e = read_capped(&dir, 1 << 20).unwrap_err();
+        assert!(e.to_string().contains("folder"), "{e}");
+    }
+
+    #[test]
+    fn files_over_the_cap_are_refused_and_the_message_names_the_override() {
+        let dir = scratch("cap");
+        let f = dir.join("big.bin");
+        std::fs::write(&f, vec![0u8; 100]).unwrap();
+        assert_eq!(read_capped(&f, 100).unwrap().len(), 100);
+        let e = read_capped(&f, 99).unwrap_err();
+        assert!(e.to_string().contains(READ_CAP_ENV), "{e}");
+    }
+
+    #[test]
+    fn publish_new_never_overwrites_and_one_concurrent_writer_wins() {
+        let dir = scratch("publish");
+        let target = dir.join("out.png");
+        let winners: usize = std::thread::scope(|s| {
+            let handles: Vec<_> = (0..12u8)
+                .map(|k| {
+                    let target = &target;
+                    s.spawn(move || publish_new(target, &vec![k; 4096]).is_ok())
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| usize::from(h.join().unwrap()))
+                .sum()
+        });
+        assert_eq!(winners, 1);
+        let bytes = std::fs::read(&target).unwrap();
+        assert!(bytes.iter().all(|&b| b == bytes[0]) && bytes.len() == 4096);
+        let e = publish_new(&target, b"x").unwrap_err();
+        assert!(matches!(e, SafeIoError::Exists { .. }), "{e}");
+        // No temporary files are left behind.
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn dangling_symlinks_and_special_files_are_never_replaced() {
+        let dir = scratch("symlink");
+        let link = dir.join("out.png");
+        std::os::unix::fs::symlink(dir.join("missing"), &link).unwrap();
+        assert!(matches!(
+            publish_new(&link, b"x").unwrap_err(),
+            SafeIoError::Exists { .. }
+        ));
+        assert!(!dir.join("missing").exists());
+        assert!(matches!(
+            replace_regular(&link, b"x").unwrap_err(),
+            SafeIoError::NotRegularFile { .. }
+        ));
+        assert!(matches!(
+            replace_regular(Path::new("/dev/null"), b"x").unwrap_err(),
+            SafeIoError::NotRegularFile { .. }
+        ));
+        let f = dir.join("a.txt");
+        std::fs::write(&f, b"old").unwrap();
+        replace_regular(&f, b"new").unwrap();
+        assert_eq!(std::fs::read(&f).unwrap(), b"new");
+    }
+}
