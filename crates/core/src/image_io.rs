@@ -78,8 +78,13 @@ pub fn encode_color(fb: &Framebuffer, jpeg: bool, path: &Path) -> Result<Vec<u8>
     Ok(bytes.into_inner())
 }
 
-/// File names [`aov_files`] produces, in order.
-pub const AOV_FILE_NAMES: [&str; 5] = [
+/// File names [`aov_files`] produces, in order: `color.pfm` (the linear, unclamped radiance of
+/// each pixel, RGB), `depth.pfm` (distance along the primary ray, +inf for no hit),
+/// `normal.pfm` (unit normal facing the camera, xyz), `mask.pfm` (1 hit, 0 no hit), `work.pfm`
+/// (steps, node visits, primitive tests) and `termination.pfm` (0 hit, 1 miss, 2 max steps,
+/// 3 max distance).
+pub const AOV_FILE_NAMES: [&str; 6] = [
+    "color.pfm",
     "depth.pfm",
     "normal.pfm",
     "mask.pfm",
@@ -87,10 +92,11 @@ pub const AOV_FILE_NAMES: [&str; 5] = [
     "termination.pfm",
 ];
 
-/// The AOVs [`write_aovs`] writes, as `(file name, PFM bytes)` in [`AOV_FILE_NAMES`] order,
-/// so a caller can publish them all-or-nothing.
+/// The AOVs of `fb` as `(file name, PFM bytes)` in [`AOV_FILE_NAMES`] order, so a caller can
+/// publish them all-or-nothing.
 pub fn aov_files(fb: &Framebuffer) -> Vec<(&'static str, Vec<u8>)> {
     let (w, h) = (fb.width, fb.height);
+    let colors: Vec<f32> = fb.color.iter().flat_map(|c: &Vec3| c.to_array()).collect();
     let normals: Vec<f32> = fb.normal.iter().flat_map(|n: &Vec3| n.to_array()).collect();
     let mask: Vec<f32> = fb
         .depth
@@ -114,11 +120,12 @@ pub fn aov_files(fb: &Framebuffer) -> Vec<(&'static str, Vec<u8>)> {
         .map(|t: &Termination| *t as u8 as f32)
         .collect();
     vec![
-        (AOV_FILE_NAMES[0], encode_pfm(w, h, 1, &fb.depth)),
-        (AOV_FILE_NAMES[1], encode_pfm(w, h, 3, &normals)),
-        (AOV_FILE_NAMES[2], encode_pfm(w, h, 1, &mask)),
-        (AOV_FILE_NAMES[3], encode_pfm(w, h, 3, &work)),
-        (AOV_FILE_NAMES[4], encode_pfm(w, h, 1, &term)),
+        (AOV_FILE_NAMES[0], encode_pfm(w, h, 3, &colors)),
+        (AOV_FILE_NAMES[1], encode_pfm(w, h, 1, &fb.depth)),
+        (AOV_FILE_NAMES[2], encode_pfm(w, h, 3, &normals)),
+        (AOV_FILE_NAMES[3], encode_pfm(w, h, 1, &mask)),
+        (AOV_FILE_NAMES[4], encode_pfm(w, h, 3, &work)),
+        (AOV_FILE_NAMES[5], encode_pfm(w, h, 1, &term)),
     ]
 }
 
@@ -213,42 +220,15 @@ pub fn read_pfm(path: &Path) -> Result<PfmImage, ImageIoError> {
     Ok((width, height, channels, data))
 }
 
-/// Writes the AOVs of `fb` into `dir` (created if missing): `color.pfm` (the linear, unclamped
-/// radiance of each pixel, RGB), `depth.pfm` (distance along the primary ray, +inf for no hit), `normal.pfm` (unit normal facing the camera, xyz),
-/// `mask.pfm` (1 hit, 0 no hit), `work.pfm` (steps, node visits, primitive tests) and
-/// `termination.pfm` (0 hit, 1 miss, 2 max steps, 3 max distance).
+/// Writes the AOVs of `fb` ([`AOV_FILE_NAMES`]) into `dir` (created if missing), replacing
+/// files of those names (callers that must not overwrite publish [`aov_files`] themselves).
 pub fn write_aovs(fb: &Framebuffer, dir: &Path) -> Result<(), ImageIoError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
-    let (w, h) = (fb.width, fb.height);
-    let colors: Vec<f32> = fb.color.iter().flat_map(|c: &Vec3| c.to_array()).collect();
-    write_pfm(&dir.join("color.pfm"), w, h, 3, &colors)?;
-    write_pfm(&dir.join("depth.pfm"), w, h, 1, &fb.depth)?;
-    let normals: Vec<f32> = fb.normal.iter().flat_map(|n: &Vec3| n.to_array()).collect();
-    write_pfm(&dir.join("normal.pfm"), w, h, 3, &normals)?;
-    let mask: Vec<f32> = fb
-        .depth
-        .iter()
-        .map(|d| if d.is_finite() { 1.0 } else { 0.0 })
-        .collect();
-    write_pfm(&dir.join("mask.pfm"), w, h, 1, &mask)?;
-    let work: Vec<f32> = fb
-        .work
-        .iter()
-        .flat_map(|w| {
-            [
-                w.steps as f32,
-                w.node_visits as f32,
-                w.primitive_tests as f32,
-            ]
-        })
-        .collect();
-    write_pfm(&dir.join("work.pfm"), w, h, 3, &work)?;
-    let term: Vec<f32> = fb
-        .termination
-        .iter()
-        .map(|t: &Termination| *t as u8 as f32)
-        .collect();
-    write_pfm(&dir.join("termination.pfm"), w, h, 1, &term)
+    for (name, bytes) in aov_files(fb) {
+        let path = dir.join(name);
+        std::fs::write(&path, bytes).map_err(io_err(&path))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

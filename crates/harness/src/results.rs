@@ -148,7 +148,9 @@ impl Row {
                 Some("no reference (see notes)")
             }
             "notes" => Some("no remarks"),
-            "mrays_shadow_per_thread_s" | "mrays_ao_per_thread_s" | "mrays_bounce_per_thread_s"
+            "mrays_shadow_per_thread_s"
+            | "mrays_ao_per_thread_s"
+            | "mrays_bounce_per_thread_s"
             | "mrays_camera_per_thread_s" => Some("no rays of this type were traced"),
             _ => None,
         }

@@ -20,12 +20,22 @@ fn item2_dev_zero_and_folders_are_refused_not_read() {
     let dir = scratch();
     let zero = dir.join("zero.json");
     std::os::unix::fs::symlink("/dev/zero", &zero).expect("symlink");
-    let msg = marchmesh_scene::load(&zero).expect_err("/dev/zero").to_string();
-    assert!(msg.contains("zero.json") && msg.contains("not a regular file"), "{msg}");
+    let msg = marchmesh_scene::load(&zero)
+        .expect_err("/dev/zero")
+        .to_string();
+    assert!(
+        msg.contains("zero.json") && msg.contains("not a regular file"),
+        "{msg}"
+    );
     let folder = dir.join("scene.json");
     std::fs::create_dir_all(&folder).expect("folder");
-    let msg = marchmesh_scene::load(&folder).expect_err("folder").to_string();
-    assert!(msg.contains("scene.json") && msg.contains("folder"), "{msg}");
+    let msg = marchmesh_scene::load(&folder)
+        .expect_err("folder")
+        .to_string();
+    assert!(
+        msg.contains("scene.json") && msg.contains("folder"),
+        "{msg}"
+    );
 }
 
 #[test]
@@ -43,8 +53,13 @@ fn item16_utf8_bom_is_accepted_and_utf16_is_named() {
         bytes.extend_from_slice(&u.to_le_bytes());
     }
     std::fs::write(&utf16, bytes).expect("write");
-    let msg = marchmesh_scene::load(&utf16).expect_err("utf-16").to_string();
-    assert!(msg.contains("utf16.json") && msg.contains("UTF-16"), "{msg}");
+    let msg = marchmesh_scene::load(&utf16)
+        .expect_err("utf-16")
+        .to_string();
+    assert!(
+        msg.contains("utf16.json") && msg.contains("UTF-16"),
+        "{msg}"
+    );
 }
 
 fn nested_repeats(levels: usize) -> String {
