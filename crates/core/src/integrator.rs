@@ -328,6 +328,29 @@ pub(crate) fn timed<T: Clone + Default>(
     start.elapsed().as_nanos() as u64
 }
 
+/// Traces one wavefront's `rays` into `results`: camera rays (with their exact `camera`
+/// samples) through [`Geometry::closest_hits_primary`], timed as camera rays; any other
+/// wavefront through [`Geometry::closest_hits`], timed as bounce rays.
+pub(crate) fn trace_wavefront(
+    geometry: &dyn Geometry,
+    rays: &[Ray],
+    camera: Option<PrimarySamples<'_>>,
+    results: &mut Vec<TraceResult>,
+    stats: &mut RenderStats,
+) {
+    match camera {
+        Some(samples) => {
+            stats.trace_time.camera_ns += timed(results, rays.len(), |r| {
+                geometry.closest_hits_primary(rays, samples, r)
+            })
+        }
+        None => {
+            stats.trace_time.bounce_ns +=
+                timed(results, rays.len(), |r| geometry.closest_hits(rays, r))
+        }
+    }
+}
+
 /// What a traced path vertex met.
 pub(crate) enum Vertex {
     /// An area light's emitting side, before any surface: its emission.
@@ -444,17 +467,9 @@ fn trace_row(
     let mut depth = 0;
     while !paths.is_empty() {
         let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
-        if depth == 0 {
-            // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
-            let samples = PrimarySamples::row(&scene.camera, row);
-            out.stats.trace_time.camera_ns += timed(&mut results, rays.len(), |r| {
-                geometry.closest_hits_primary(&rays, samples, r)
-            });
-        } else {
-            out.stats.trace_time.bounce_ns += timed(&mut results, rays.len(), |r| {
-                geometry.closest_hits(&rays, r)
-            });
-        }
+        // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
+        let camera = (depth == 0).then(|| PrimarySamples::row(&scene.camera, row));
+        trace_wavefront(geometry, &rays, camera, &mut results, &mut out.stats);
         shadow_rays.clear();
         pending.clear();
         ao_rays.clear();

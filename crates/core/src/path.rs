@@ -29,7 +29,7 @@ use marchmesh_scene::{Light, Scene};
 use crate::background::BackgroundSampler;
 use crate::camera::{PrimarySamples, primary_ray, sample_offset};
 use crate::geometry::{Geometry, OcclusionResult, Ray, RenderSpace, TraceResult};
-use crate::integrator::{RowOutput, Shading, Vertex, resolve_vertex, timed};
+use crate::integrator::{RowOutput, Shading, Vertex, resolve_vertex, timed, trace_wavefront};
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
 
 /// Most paths traced together in one wavefront of a row.
@@ -115,17 +115,10 @@ pub(crate) fn trace_row(
         while !paths.is_empty() {
             let camera = paths[0].bounce == 0;
             let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
-            if camera {
-                // The chunk's camera rays are ordered sample-major from sample `first`.
-                let samples = PrimarySamples::row(&scene.camera, row).starting_at(first);
-                out.stats.trace_time.camera_ns += timed(&mut results, rays.len(), |r| {
-                    geometry.closest_hits_primary(&rays, samples, r)
-                });
-            } else {
-                out.stats.trace_time.bounce_ns += timed(&mut results, rays.len(), |r| {
-                    geometry.closest_hits(&rays, r)
-                });
-            }
+            // The chunk's camera rays are ordered sample-major from sample `first`.
+            let samples =
+                camera.then(|| PrimarySamples::row(&scene.camera, row).starting_at(first));
+            trace_wavefront(geometry, &rays, samples, &mut results, &mut out.stats);
             next.clear();
             shadow_rays.clear();
             pending.clear();

@@ -252,6 +252,17 @@ impl SdfGeometry {
     }
 
     fn finish(&self, m: &March, term: Termination) -> TraceResult {
+        self.finish_with(m, term, |p, dir, h| self.normal_material(p, dir, h))
+    }
+
+    /// The trace result of a finished march, the hit's normal and material from
+    /// `normal_material(point, direction, normal step)`.
+    fn finish_with(
+        &self,
+        m: &March,
+        term: Termination,
+        normal_material: impl Fn(Vec3, Vec3, f32) -> (Vec3, MaterialId),
+    ) -> TraceResult {
         let work = RayWork {
             steps: m.evals,
             ..RayWork::default()
@@ -267,7 +278,7 @@ impl SdfGeometry {
         let h = (self.normal_step * m.path_length())
             .max(p.length() * 1e-6)
             .max(1e-30);
-        let (normal, material) = self.normal_material(p, m.dir(), h);
+        let (normal, material) = normal_material(p, m.dir(), h);
         TraceResult {
             hit: Some(Hit {
                 t: m.t,
@@ -324,32 +335,9 @@ impl SdfGeometry {
             }
         };
         let term = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
-        let work = RayWork {
-            steps: m.evals,
-            ..RayWork::default()
-        };
-        if term != Termination::Hit {
-            return TraceResult {
-                hit: None,
-                termination: term,
-                work,
-            };
-        }
-        let p = m.point();
-        let h = (self.normal_step * m.path_length())
-            .max(p.length() * 1e-6)
-            .max(1e-30);
-        let (normal, material) = inside.normal_material(inside.nearest(p).1, p, m.dir(), h);
-        TraceResult {
-            hit: Some(Hit {
-                t: m.t,
-                position: p,
-                normal,
-                material,
-            }),
-            termination: Termination::Hit,
-            work,
-        }
+        self.finish_with(&m, term, |p, dir, h| {
+            inside.normal_material(inside.nearest(p).1, p, dir, h)
+        })
     }
 
     /// Traces `rays` 8 at a time in lockstep; `done(i, march, termination)` receives each
