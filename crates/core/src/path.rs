@@ -24,12 +24,14 @@
 //! most [`PATHS_PER_WAVEFRONT`] paths, so the memory does not grow with the sample count.
 
 use glam::Vec3;
-use marchmesh_scene::{Light, Scene};
+use marchmesh_scene::Scene;
 
 use crate::background::BackgroundSampler;
 use crate::camera::{PrimarySamples, primary_ray, sample_offset};
-use crate::geometry::{Geometry, OcclusionResult, Ray, RenderSpace, TraceResult};
-use crate::integrator::{RowOutput, Shading, Vertex, resolve_vertex, timed, trace_wavefront};
+use crate::geometry::{Geometry, OcclusionResult, Ray, TraceResult};
+use crate::integrator::{
+    RowOutput, Shading, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
+};
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
 
 /// Most paths traced together in one wavefront of a row.
@@ -40,22 +42,6 @@ pub const PATHS_PER_WAVEFRONT: usize = 4096;
 const DIMS_PER_BOUNCE_FIXED: u32 = 4;
 
 const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
-
-/// A light the path tracer samples: area lights come from [`Shading`]; point and directional
-/// lights carry the path tracer's physical meaning.
-enum PathLight {
-    Point {
-        position: Vec3,
-        intensity: f32,
-        shadows: bool,
-    },
-    Directional {
-        to_light: Vec3,
-        intensity: f32,
-        shadows: bool,
-    },
-    Area(crate::emitter::Emitter),
-}
 
 #[derive(Clone, Copy)]
 struct PathState {
@@ -86,7 +72,9 @@ pub(crate) fn trace_row(
     let w = scene.camera.width as usize;
     let mut out = RowOutput::new(w);
     let mut sum = vec![Vec3::ZERO; w];
-    let lights = path_lights(scene, sh);
+    // The same render-space lights as the Whitted integrator, read physically (see the module
+    // docs): ambient lights are skipped.
+    let lights = &sh.lights;
     let chunk = (PATHS_PER_WAVEFRONT / w.max(1)).max(1) as u32;
     let mut paths: Vec<PathState> = Vec::new();
     let mut next: Vec<PathState> = Vec::new();
@@ -171,7 +159,7 @@ pub(crate) fn trace_row(
                     let u = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32);
                     let v = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32 + 1);
                     let (dir, dist, radiance_over_pdf, shadows) = match *light {
-                        PathLight::Point {
+                        ShadingLight::Point {
                             position,
                             intensity,
                             shadows,
@@ -185,12 +173,12 @@ pub(crate) fn trace_row(
                                 shadows,
                             )
                         }
-                        PathLight::Directional {
+                        ShadingLight::Directional {
                             to_light,
                             intensity,
                             shadows,
                         } => (to_light, f32::INFINITY, Vec3::splat(intensity), shadows),
-                        PathLight::Area(e) => match e.sample(hit.position, u, v) {
+                        ShadingLight::Area(e) => match e.sample(hit.position, u, v) {
                             Some(s) => (
                                 s.dir,
                                 s.dist,
@@ -273,40 +261,4 @@ pub(crate) fn trace_row(
     }
     out.finish(&sum, sh.spp);
     out
-}
-
-/// The lights as the path tracer samples them, in render space.
-fn path_lights(scene: &Scene, sh: &Shading) -> Vec<PathLight> {
-    let space = RenderSpace::of(scene);
-    let mut area = sh.emitters.iter();
-    let mut lights = Vec::new();
-    for l in &scene.lights {
-        match *l {
-            Light::Ambient { .. } => {}
-            Light::Point {
-                position,
-                intensity,
-                casts_shadows,
-            } => lights.push(PathLight::Point {
-                position: space.point(position).as_vec3(),
-                intensity: intensity as f32,
-                shadows: casts_shadows,
-            }),
-            Light::Directional {
-                direction,
-                intensity,
-                casts_shadows,
-            } => lights.push(PathLight::Directional {
-                to_light: direction.as_vec3().normalize(),
-                intensity: intensity as f32,
-                shadows: casts_shadows,
-            }),
-            Light::Sphere { .. } | Light::Rectangle { .. } => {
-                if let Some(e) = area.next() {
-                    lights.push(PathLight::Area(*e));
-                }
-            }
-        }
-    }
-    lights
 }
