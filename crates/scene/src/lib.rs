@@ -9,6 +9,7 @@
 pub mod format;
 pub mod resolved;
 pub mod validate;
+mod strict;
 
 use std::path::{Path, PathBuf};
 
@@ -71,7 +72,7 @@ pub enum SceneError {
 /// Parses JSON text into the serde model, reporting the JSON path of any error.
 pub fn parse_file_format(text: &str, source_name: &str) -> Result<SceneFile, SceneError> {
     let mut de = serde_json::Deserializer::from_str(text);
-    let parsed: Result<SceneFile, _> = serde_path_to_error::deserialize(&mut de);
+    let parsed: Result<SceneFile, _> = serde_path_to_error::deserialize(strict::Strict(&mut de));
     let file = parsed.map_err(|e| {
         let json_path = e.path().to_string();
         let inner = e.into_inner();

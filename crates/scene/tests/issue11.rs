@@ -106,3 +106,30 @@ fn item16_mesh_and_environment_paths_that_are_folders_are_invalid() {
         "{msg}"
     );
 }
+
+#[test]
+fn item13_json_arrays_are_refused_where_the_format_has_objects() {
+    let base = std::path::Path::new(".");
+    for (text, path) in [
+        ("[]", "."),
+        (r#"{"objects": [{"shape": {"sphere": [2]}}]}"#, "objects[0].shape.sphere"),
+        (r#"{"camera": [[0, 0, -4]], "objects": []}"#, "camera"),
+        (r#"{"objects": [[{"sphere": {"radius": 1}}]]}"#, "objects[0]"),
+    ] {
+        let msg = marchmesh_scene::parse_scene(text, "arr.json", base)
+            .expect_err(text)
+            .to_string();
+        assert!(
+            msg.contains("arr.json") && msg.contains("invalid type: sequence") && msg.contains(path),
+            "{text}: {msg}"
+        );
+    }
+    // Vectors and the per-axis scale stay arrays.
+    marchmesh_scene::parse_scene(
+        r#"{"objects": [{"shape": {"sphere": {"radius": 1}},
+             "transform": {"translate": [0, 1, 0], "scale": [1, 2, 1]}}]}"#,
+        "ok.json",
+        base,
+    )
+    .expect("arrays where the format has arrays");
+}
