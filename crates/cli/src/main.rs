@@ -130,7 +130,8 @@ struct RenderArgs {
     /// Overwrite existing output files.
     #[arg(long)]
     force: bool,
-    /// Refuse renders whose buffers would exceed this many MiB.
+    /// Refuse renders whose estimated memory (the backend's build: triangles, grids,
+    /// instances; then the image buffers) would exceed this many MiB.
     #[arg(long, default_value_t = 4096)]
     memory_limit_mib: u64,
 }
@@ -303,7 +304,8 @@ fn render(args: RenderArgs) -> Result<()> {
         kind: Some(kind),
         options,
     };
-    let geometry = backend::build(&scene, &spec)
+    let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
+    let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
         .with_context(|| format!("building scene {}", args.scene.display()))?;
     let build_time = t0.elapsed();
 
@@ -323,7 +325,7 @@ fn render(args: RenderArgs) -> Result<()> {
     };
     let opts = RenderOptions {
         threads: args.threads,
-        memory_limit_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
+        memory_limit_bytes,
     };
     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
     bar.finish_and_clear();

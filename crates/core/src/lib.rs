@@ -23,5 +23,7 @@ pub use camera::PrimarySamples;
 pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
-pub use integrator::{RenderError, RenderOptions, RenderOutput, render};
+pub use integrator::{
+    DEFAULT_MEMORY_LIMIT_BYTES, RenderError, RenderOptions, RenderOutput, render,
+};
 pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};

@@ -11,7 +11,7 @@ use std::fmt;
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use marchmesh_core::Geometry;
+use marchmesh_core::{DEFAULT_MEMORY_LIMIT_BYTES, Geometry};
 use marchmesh_mesh::{BuildQuality, BvhKind, MeshOptions, Tessellation};
 use marchmesh_scene::Scene;
 use marchmesh_sdf::{HitEpsilon, SdfOptions};
@@ -516,6 +516,18 @@ pub fn is_available(_kind: BackendKind) -> bool {
 
 /// Builds the backend named in `spec` for `scene`.
 pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, BackendError> {
+    build_within(scene, spec, DEFAULT_MEMORY_LIMIT_BYTES)
+}
+
+/// [`build`] refusing, before allocating, builds whose estimated memory (tessellated and
+/// loaded triangles, extraction and bake grids, instances) exceeds `memory_limit_bytes`; the
+/// error names the object, the estimate, the limit and the option to change. The reference
+/// backend keeps only the scene's meshes (their reads are capped) and is not estimated.
+pub fn build_within(
+    scene: &Scene,
+    spec: &BackendSpec,
+    memory_limit_bytes: u64,
+) -> Result<Box<dyn Geometry>, BackendError> {
     let kind = spec.kind.ok_or(BackendError::Missing)?;
     let build_err = |e: &dyn fmt::Display| BackendError::Build {
         backend: kind,
@@ -530,12 +542,18 @@ pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, Bac
             Ok(Box::new(g))
         }
         BackendKind::Sdf => {
-            let o = sdf_options(&spec.options)?;
+            let o = SdfOptions {
+                memory_limit_bytes,
+                ..sdf_options(&spec.options)?
+            };
             let g = marchmesh_sdf::build(scene, &o).map_err(|e| build_err(&e))?;
             Ok(Box::new(g))
         }
         BackendKind::Mesh => {
-            let o = mesh_options(&spec.options)?;
+            let o = MeshOptions {
+                memory_limit_bytes,
+                ..mesh_options(&spec.options)?
+            };
             let g = marchmesh_mesh::build(scene, &o).map_err(|e| build_err(&e))?;
             Ok(Box::new(g))
         }

@@ -47,7 +47,10 @@ use obvhs::ray::Ray as ObRay;
 use blas::{Blas, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
-pub use options::{BuildQuality, BvhKind, MeshOptions, Tessellation};
+pub use options::{
+    BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, MAX_SEGMENTS_PER_TURN, MeshOptions,
+    Tessellation,
+};
 use tessellate::{Detail, LocalMesh, ScreenBudget};
 
 /// Why the mesh backend could not build a scene.
@@ -81,9 +84,78 @@ pub enum MeshError {
         /// The limit.
         limit: u64,
     },
+    /// The build would need more memory than [`MeshOptions::memory_limit_bytes`]; refused
+    /// before allocating it.
+    #[error(
+        "{json_path}: {what} would bring the mesh backend's build to about {needed_mib} MiB, over the memory limit of {limit_mib} MiB; raise --memory-limit-mib or coarsen {knob}"
+    )]
+    OverMemoryLimit {
+        /// The object whose geometry crossed the limit.
+        json_path: String,
+        /// What was about to be built (e.g. "16433316 triangles of tessellation").
+        what: String,
+        /// Estimated build memory including this object, MiB (rounded up).
+        needed_mib: u64,
+        /// The limit, MiB.
+        limit_mib: u64,
+        /// The option that controls this object's size.
+        knob: &'static str,
+    },
     /// An option is out of range.
     #[error("invalid mesh backend option: {0}")]
     InvalidOption(String),
+}
+
+/// Bytes per placement (the walk's placement, the instance and its box), for the estimate.
+const INSTANCE_BYTES: u64 = 160;
+
+/// Bytes per cell of a surface-extraction grid (f32 samples plus surface nets' per-cell
+/// vertex map), for the estimate.
+const EXTRACTION_BYTES_PER_CELL: u64 = 12;
+
+/// The build's running memory estimate against [`MeshOptions::memory_limit_bytes`].
+struct BuildBudget {
+    limit_bytes: u64,
+    planned_bytes: u64,
+}
+
+impl BuildBudget {
+    /// Triangles that still fit, `copies` times each.
+    fn triangles_left(&self, copies: u64) -> u64 {
+        self.limit_bytes.saturating_sub(self.planned_bytes)
+            / BUILD_BYTES_PER_TRIANGLE
+            / copies.max(1)
+    }
+
+    /// Adds `bytes` (kept for the rest of the build when `keep`), or refuses.
+    fn take(
+        &mut self,
+        bytes: u64,
+        keep: bool,
+        json_path: &str,
+        what: impl FnOnce() -> String,
+        knob: &'static str,
+    ) -> Result<(), MeshError> {
+        let needed = self.planned_bytes.saturating_add(bytes);
+        if needed > self.limit_bytes {
+            return Err(self.refusal(bytes, json_path, what(), knob));
+        }
+        if keep {
+            self.planned_bytes = needed;
+        }
+        Ok(())
+    }
+
+    /// The error refusing `bytes` more.
+    fn refusal(&self, bytes: u64, json_path: &str, what: String, knob: &'static str) -> MeshError {
+        MeshError::OverMemoryLimit {
+            json_path: json_path.to_string(),
+            what,
+            needed_mib: self.planned_bytes.saturating_add(bytes).div_ceil(1 << 20),
+            limit_mib: self.limit_bytes >> 20,
+            knob,
+        }
+    }
 }
 
 /// One placement of a BLAS: the render-to-local transform and the fallback material.
@@ -194,8 +266,30 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
     // Tessellate analytic shapes at the finest detail any of their placements needs.
     let mut local_meshes: Vec<Option<LocalMesh>> = Vec::with_capacity(groups.len());
     let mut extract_time = Duration::ZERO;
+    let mut budget = BuildBudget {
+        limit_bytes: options.memory_limit_bytes,
+        planned_bytes: 0,
+    };
+    budget.take(
+        (walk.placements.len() as u64).saturating_mul(INSTANCE_BYTES),
+        true,
+        "objects",
+        || format!("{} placements", walk.placements.len()),
+        "max_instances",
+    )?;
     for (key, placements) in &groups {
         let node = placements[0].node;
+        // Triangles are stored once per placement unless instanced.
+        let copies = if options.instancing && placements.len() > 1 {
+            1
+        } else {
+            placements.len() as u64
+        };
+        let triangle_bytes = |triangles: u64| {
+            triangles
+                .saturating_mul(copies)
+                .saturating_mul(BUILD_BYTES_PER_TRIANGLE)
+        };
         match key {
             ShapeKey::Analytic(..) => {
                 let local =
@@ -212,12 +306,39 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
                         .reduce(build::finer)
                         .unwrap_or(Detail::Level(0)),
                 };
-                let mesh =
-                    tessellate::tessellate(&node.kind, detail, options.max_segments_per_turn)
-                        .ok_or_else(|| MeshError::Unsupported {
+                let tessellated = tessellate::tessellate_within(
+                    &node.kind,
+                    detail,
+                    options.max_segments_per_turn,
+                    budget.triangles_left(copies),
+                );
+                let mesh = match tessellated {
+                    Ok(Some(mesh)) => mesh,
+                    Ok(None) => {
+                        return Err(MeshError::Unsupported {
                             json_path: node.json_path.clone(),
                             reason: "shape has no tessellation".into(),
-                        })?;
+                        });
+                    }
+                    Err(too_many) => {
+                        return Err(budget.refusal(
+                            triangle_bytes(too_many.triangles),
+                            &node.json_path,
+                            format!(
+                                "tessellating into {} triangles (segments per turn {:?}) x {copies} placement(s)",
+                                too_many.triangles, too_many.segments
+                            ),
+                            "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
+                        ));
+                    }
+                };
+                budget.take(
+                    triangle_bytes(mesh.triangles.len() as u64),
+                    true,
+                    &node.json_path,
+                    || format!("{} triangles of tessellation", mesh.triangles.len()),
+                    "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
+                )?;
                 if !mesh.segments.is_empty() {
                     let capped = mesh
                         .segments
@@ -255,8 +376,28 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
                     mesh_grid_resolution: options.surface_resolution,
                     cache_dir: None,
                 };
+                let cells = u64::from(options.surface_resolution + 1).pow(3);
+                budget.take(
+                    cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
+                    false,
+                    &node.json_path,
+                    || {
+                        format!(
+                            "a surface-extraction grid of {}^3 cells",
+                            options.surface_resolution
+                        )
+                    },
+                    "the extraction grid (--opt surface_res)",
+                )?;
                 let mesh =
                     extract::extract(node, local, options.surface_resolution, &field_options)?;
+                budget.take(
+                    triangle_bytes(mesh.triangles.len() as u64),
+                    true,
+                    &node.json_path,
+                    || format!("{} extracted triangles", mesh.triangles.len()),
+                    "the extraction grid (--opt surface_res)",
+                )?;
                 report.notes.push(format!(
                     "{}: surface extracted from the distance field, {} triangles at resolution {}",
                     node.json_path,
@@ -266,7 +407,17 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
                 local_meshes.push(Some(mesh));
                 extract_time += te.elapsed();
             }
-            ShapeKey::Mesh(_) => local_meshes.push(None),
+            ShapeKey::Mesh(path) => {
+                let triangles = meshes.get(path).map_or(0, |m| m.triangles.len() as u64);
+                budget.take(
+                    triangle_bytes(triangles),
+                    true,
+                    &node.json_path,
+                    || format!("{triangles} triangles of {} x {copies}", path.display()),
+                    "the mesh (a smaller file, or instancing=true)",
+                )?;
+                local_meshes.push(None)
+            }
         }
     }
     let tessellate_ms = ms(t1.elapsed().saturating_sub(extract_time));
@@ -462,10 +613,11 @@ fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
             o.surface_resolution
         )));
     }
-    if o.max_segments_per_turn < 8 {
-        return Err(MeshError::InvalidOption(
-            "max_segments_per_turn must be >= 8".into(),
-        ));
+    if !(8..=MAX_SEGMENTS_PER_TURN).contains(&o.max_segments_per_turn) {
+        return Err(MeshError::InvalidOption(format!(
+            "max_segments_per_turn must be in 8..={MAX_SEGMENTS_PER_TURN}, got {}",
+            o.max_segments_per_turn
+        )));
     }
     Ok(())
 }

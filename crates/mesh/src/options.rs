@@ -102,9 +102,24 @@ pub struct MeshOptions {
     /// `render.max_distance` of the camera). Exceeding it is an error. Default 4,194,304.
     pub max_instances: u64,
     /// Cap on segments per full turn of any parametric direction (bounds triangle counts
-    /// when the camera touches a shape). Default 4096.
+    /// when the camera touches a shape), `8..=`[`MAX_SEGMENTS_PER_TURN`]. Default 4096.
     pub max_segments_per_turn: u32,
+    /// The build refuses, before allocating, to plan more than this many bytes
+    /// ([`crate::MeshError::OverMemoryLimit`]); estimated at [`BUILD_BYTES_PER_TRIANGLE`] per
+    /// triangle plus extraction grids and instances. Not a `key=value` option: the harness
+    /// sets it from `--memory-limit-mib`. Default 4 GiB.
+    pub memory_limit_bytes: u64,
 }
+
+/// Largest accepted [`MeshOptions::max_segments_per_turn`] (the angle lists alone would
+/// otherwise take gigabytes before any triangle exists).
+pub const MAX_SEGMENTS_PER_TURN: u32 = 1 << 16;
+
+/// Peak bytes a build takes per triangle, for the memory estimate: measured as peak RSS over
+/// triangles for one sphere tessellated to 16.4M triangles (5.2 GB, about 317 bytes each: the
+/// f64 local mesh, its f32 render-space copy, the Bvh2 build and the wide layout) and for a
+/// 10M-triangle OBJ (2.9 GB).
+pub const BUILD_BYTES_PER_TRIANGLE: u64 = 320;
 
 impl MeshOptions {
     /// The documented defaults.
@@ -117,6 +132,7 @@ impl MeshOptions {
         instancing: true,
         max_instances: 1 << 22,
         max_segments_per_turn: 4096,
+        memory_limit_bytes: 4 << 30,
     };
 
     /// Defaults with a fast build: Bvh2, `fast_build`, 1-pixel tessellation error, 64-cell

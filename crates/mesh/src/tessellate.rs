@@ -185,7 +185,20 @@ struct ProfilePoint {
 /// Revolves profile polylines about the y axis at the angles `phi` (increasing, in
 /// `[0, 2 pi)`, at least 3), counter-clockwise from outside when each polyline runs so that
 /// `(-dy, dr)` points outward. A `closed` polyline connects its last point back to its first.
-fn revolve(pieces: &[(Vec<ProfilePoint>, bool)], phi: &[f64], mesh: &mut LocalMesh) {
+fn revolve(
+    pieces: &[(Vec<ProfilePoint>, bool)],
+    phi: &[f64],
+    mesh: &mut LocalMesh,
+    max_triangles: u64,
+) -> Result<(), TooManyTriangles> {
+    // Count first, allocate after: a camera touching a shape can ask for billions.
+    let planned = revolve_triangle_count(pieces, phi.len()) + mesh.triangles.len() as u64;
+    if planned > max_triangles {
+        return Err(TooManyTriangles {
+            triangles: planned,
+            segments: mesh.segments.clone(),
+        });
+    }
     let n = phi.len() as u32;
     let (sin, cos): (Vec<f64>, Vec<f64>) = phi.iter().map(|a| a.sin_cos()).unzip();
     let normals = mesh.normals.get_or_insert_with(Vec::new);
@@ -234,6 +247,34 @@ fn revolve(pieces: &[(Vec<ProfilePoint>, bool)], phi: &[f64], mesh: &mut LocalMe
             }
         }
     }
+    Ok(())
+}
+
+/// Triangles [`revolve`] makes of `pieces` at `n` angles (an upper bound: rows at a pole make
+/// one triangle per segment, not two).
+fn revolve_triangle_count(pieces: &[(Vec<ProfilePoint>, bool)], n: usize) -> u64 {
+    pieces
+        .iter()
+        .map(|(profile, closed)| {
+            let bands = if *closed {
+                profile.len()
+            } else {
+                profile.len().saturating_sub(1)
+            };
+            2 * bands as u64 * n as u64
+        })
+        .sum()
+}
+
+/// A tessellation would make more triangles than allowed ([`tessellate_within`]); nothing
+/// was allocated for them.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("the tessellation would make {triangles} triangles (segments per turn {segments:?})")]
+pub struct TooManyTriangles {
+    /// Triangles the tessellation would make.
+    pub triangles: u64,
+    /// Segments per turn of each parametric direction chosen so far.
+    pub segments: Vec<u32>,
 }
 
 /// `(min, max)` of `f` over `[a, b]`, `f` being a sinusoid with its extremes at
@@ -414,7 +455,12 @@ fn turn(samples: Vec<f64>) -> Vec<f64> {
 
 /// An ellipsoid with semi-axes `radii` (a sphere when they are equal) as a latitude-longitude
 /// grid with single-vertex poles.
-fn lat_long(radii: DVec3, detail: Detail, max_per_turn: u32) -> LocalMesh {
+fn lat_long(
+    radii: DVec3,
+    detail: Detail,
+    max_per_turn: u32,
+    max_triangles: u64,
+) -> Result<LocalMesh, TooManyTriangles> {
     // Work on the unit sphere (second derivatives <= 1 per radian in both directions), with
     // budgets converted to its frame.
     let scaled_budget;
@@ -467,7 +513,7 @@ fn lat_long(radii: DVec3, detail: Detail, max_per_turn: u32) -> LocalMesh {
         segments: vec![phi.len() as u32, 2 * last as u32],
         ..LocalMesh::default()
     };
-    revolve(&[(profile, false)], &phi, &mut mesh);
+    revolve(&[(profile, false)], &phi, &mut mesh, max_triangles)?;
     for p in &mut mesh.positions {
         *p *= radii;
     }
@@ -476,16 +522,34 @@ fn lat_long(radii: DVec3, detail: Detail, max_per_turn: u32) -> LocalMesh {
             *n = (*n / radii).normalize();
         }
     }
-    mesh
+    Ok(mesh)
 }
 
 /// Tessellates an analytic shape (`Sphere`, `Ellipsoid`, `Box`, `Cylinder`, `Torus`,
 /// `Triangle`) in its local frame. Returns `None` for shapes without a finite local
-/// tessellation (plane, mesh, composites).
+/// tessellation (plane, mesh, composites). No triangle cap: see [`tessellate_within`].
 pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<LocalMesh> {
+    // Without a cap the tessellation cannot be refused.
+    tessellate_within(kind, detail, max_per_turn, u64::MAX)
+        .ok()
+        .flatten()
+}
+
+/// [`tessellate`] refusing, before allocating them, tessellations of more than
+/// `max_triangles` triangles.
+///
+/// Errors: [`TooManyTriangles`] with the count the tessellation would have made.
+pub fn tessellate_within(
+    kind: &NodeKind,
+    detail: Detail,
+    max_per_turn: u32,
+    max_triangles: u64,
+) -> Result<Option<LocalMesh>, TooManyTriangles> {
     let mesh = match *kind {
-        NodeKind::Sphere { radius } => lat_long(DVec3::splat(radius), detail, max_per_turn),
-        NodeKind::Ellipsoid { radii } => lat_long(radii, detail, max_per_turn),
+        NodeKind::Sphere { radius } => {
+            lat_long(DVec3::splat(radius), detail, max_per_turn, max_triangles)?
+        }
+        NodeKind::Ellipsoid { radii } => lat_long(radii, detail, max_per_turn, max_triangles)?,
         NodeKind::Cylinder {
             radius,
             half_height,
@@ -521,7 +585,8 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
                 ],
                 &phi,
                 &mut m,
-            );
+                max_triangles,
+            )?;
             m
         }
         NodeKind::Torus {
@@ -571,7 +636,7 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
                 segments: vec![phi.len() as u32, v.len() as u32],
                 ..LocalMesh::default()
             };
-            revolve(&[(profile, true)], &phi, &mut m);
+            revolve(&[(profile, true)], &phi, &mut m, max_triangles)?;
             m
         }
         NodeKind::Box { half_extents } => box_mesh(half_extents),
@@ -583,9 +648,9 @@ pub fn tessellate(kind: &NodeKind, detail: Detail, max_per_turn: u32) -> Option<
             segments: Vec::new(),
             materials: None,
         },
-        _ => return None,
+        _ => return Ok(None),
     };
-    Some(mesh)
+    Ok(Some(mesh))
 }
 
 /// The 12 triangles of an axis-aligned box (exact; flat faces, no vertex normals).

@@ -398,3 +398,34 @@ fn screen_budgets_hold_where_each_part_is_and_coarsen_far_away() {
         }
     }
 }
+
+/// Issue 11 item 3: the triangle count is known, and refused, before the triangles exist.
+#[test]
+fn tessellate_within_refuses_exactly_above_the_cap() {
+    use marchmesh_mesh::tessellate::tessellate_within;
+    for kind in [
+        NodeKind::Sphere { radius: 1.0 },
+        NodeKind::Torus {
+            major_radius: 1.0,
+            minor_radius: 0.25,
+        },
+        NodeKind::Cylinder {
+            radius: 0.5,
+            half_height: 1.0,
+        },
+    ] {
+        let full = tessellate(&kind, Detail::Level(3), 4096).expect("analytic");
+        let count = full.triangles.len() as u64;
+        // The planned count is an upper bound that is exact for rows without poles.
+        let refused = tessellate_within(&kind, Detail::Level(3), 4096, count / 2)
+            .expect_err("half the triangles");
+        assert!(
+            refused.triangles >= count,
+            "{kind:?}: {refused:?} vs {count}"
+        );
+        let fits = tessellate_within(&kind, Detail::Level(3), 4096, refused.triangles)
+            .expect("fits")
+            .expect("analytic");
+        assert_eq!(fits.triangles.len() as u64, count, "{kind:?}");
+    }
+}

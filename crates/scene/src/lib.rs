@@ -8,8 +8,8 @@
 
 pub mod format;
 pub mod resolved;
-pub mod validate;
 mod strict;
+pub mod validate;
 
 use std::path::{Path, PathBuf};
 

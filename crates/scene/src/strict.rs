@@ -358,7 +358,9 @@ mod tests {
             let err = strict::<Scene>(text).expect_err(text).to_string();
             assert!(err.contains("invalid type: sequence"), "{text}: {err}");
         }
-        let err = strict::<Shape>(r#"{"circle": [2]}"#).expect_err("struct variant").to_string();
+        let err = strict::<Shape>(r#"{"circle": [2]}"#)
+            .expect_err("struct variant")
+            .to_string();
         assert!(err.contains("invalid type: sequence"), "{err}");
         assert!(err.contains("line 1 column"), "positioned: {err}");
     }

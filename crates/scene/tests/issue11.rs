@@ -112,15 +112,23 @@ fn item13_json_arrays_are_refused_where_the_format_has_objects() {
     let base = std::path::Path::new(".");
     for (text, path) in [
         ("[]", "."),
-        (r#"{"objects": [{"shape": {"sphere": [2]}}]}"#, "objects[0].shape.sphere"),
+        (
+            r#"{"objects": [{"shape": {"sphere": [2]}}]}"#,
+            "objects[0].shape.sphere",
+        ),
         (r#"{"camera": [[0, 0, -4]], "objects": []}"#, "camera"),
-        (r#"{"objects": [[{"sphere": {"radius": 1}}]]}"#, "objects[0]"),
+        (
+            r#"{"objects": [[{"sphere": {"radius": 1}}]]}"#,
+            "objects[0]",
+        ),
     ] {
         let msg = marchmesh_scene::parse_scene(text, "arr.json", base)
             .expect_err(text)
             .to_string();
         assert!(
-            msg.contains("arr.json") && msg.contains("invalid type: sequence") && msg.contains(path),
+            msg.contains("arr.json")
+                && msg.contains("invalid type: sequence")
+                && msg.contains(path),
             "{text}: {msg}"
         );
     }

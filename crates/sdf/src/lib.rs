@@ -47,6 +47,21 @@ pub enum SdfError {
     /// The field could not be compiled (the message names the node and the reason).
     #[error(transparent)]
     Field(#[from] FieldError),
+    /// Baking the scene's mesh grids would need more memory than
+    /// [`SdfOptions::memory_limit_bytes`]; refused before baking.
+    #[error(
+        "baking {meshes} mesh grid(s) at resolution {resolution} would take about {needed_mib} MiB, over the memory limit of {limit_mib} MiB; raise --memory-limit-mib or lower --opt grid_res"
+    )]
+    OverMemoryLimit {
+        /// Distinct mesh files in the scene.
+        meshes: u64,
+        /// [`SdfOptions::mesh_grid_resolution`].
+        resolution: u32,
+        /// Estimated bytes, MiB (rounded up).
+        needed_mib: u64,
+        /// The limit, MiB.
+        limit_mib: u64,
+    },
     /// An option is out of range.
     #[error("sdf option {name}: {reason}")]
     Option {
@@ -55,6 +70,35 @@ pub enum SdfError {
         /// Why it is rejected.
         reason: String,
     },
+}
+
+/// Bytes per cell of a baked mesh grid for the memory estimate: the f32 sample plus the
+/// bake's per-cell working data (nearest-triangle search and sign).
+pub const BAKE_BYTES_PER_CELL: u64 = 12;
+
+/// Refuses scenes whose mesh grids would not fit in `opts.memory_limit_bytes`.
+fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
+    let mut paths = std::collections::HashSet::new();
+    scene.visit_nodes(|n| {
+        if let marchmesh_scene::NodeKind::Mesh { path } = &n.kind {
+            paths.insert(path.clone());
+        }
+    });
+    let meshes = paths.len() as u64;
+    // Cells on the longest side, plus the apron of one sample each side.
+    let cells_per_grid = u64::from(opts.mesh_grid_resolution + 3).pow(3);
+    let needed = meshes
+        .saturating_mul(cells_per_grid)
+        .saturating_mul(BAKE_BYTES_PER_CELL);
+    if needed > opts.memory_limit_bytes {
+        return Err(SdfError::OverMemoryLimit {
+            meshes,
+            resolution: opts.mesh_grid_resolution,
+            needed_mib: needed.div_ceil(1 << 20),
+            limit_mib: opts.memory_limit_bytes >> 20,
+        });
+    }
+    Ok(())
 }
 
 /// A scene compiled for sphere tracing.
@@ -123,6 +167,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         "mesh_grid_resolution",
         "must be >= 2",
     )?;
+    check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
     let field_opts = FieldOptions {
         mesh_grid_resolution: opts.mesh_grid_resolution,

@@ -75,6 +75,11 @@ pub struct SdfOptions {
     /// Answer ambient occlusion with this many field taps along the normal (Evans 2006, an
     /// approximation) instead of the integrator's sampled rays; 0 (default) = rays.
     pub ao_taps: u32,
+    /// The build refuses, before baking, grids whose estimated memory
+    /// ([`crate::BAKE_BYTES_PER_CELL`] per cell of every distinct mesh's grid) exceeds this
+    /// ([`crate::SdfError::OverMemoryLimit`]). Not a `key=value` option: the harness sets it
+    /// from `--memory-limit-mib`. Default 4 GiB.
+    pub memory_limit_bytes: u64,
 }
 
 impl SdfOptions {
@@ -91,6 +96,7 @@ impl SdfOptions {
         cache_dir: None,
         cone_shadows: false,
         ao_taps: 0,
+        memory_limit_bytes: 4 << 30,
     };
 }
 

@@ -1,0 +1,106 @@
+//! Issue 11 item 3: a backend's build is estimated and refused over the memory limit before
+//! it allocates, with the object, the estimate, the limit and the option named.
+
+use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+
+const MIB: u64 = 1 << 20;
+
+fn scene(text: &str) -> marchmesh_scene::Scene {
+    let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    marchmesh_scene::parse_scene(text, "limit.json", &base).expect("valid scene")
+}
+
+fn spec(kind: BackendKind, options: &[&str]) -> BackendSpec {
+    BackendSpec {
+        kind: Some(kind),
+        options: options
+            .iter()
+            .map(|o| backend::parse_option(o).expect("option"))
+            .collect(),
+    }
+}
+
+fn build_error(scene: &marchmesh_scene::Scene, spec: &BackendSpec, limit: u64) -> String {
+    match backend::build_within(scene, spec, limit) {
+        Ok(_) => panic!("built within {limit} bytes"),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn a_sphere_seen_through_a_tiny_field_of_view_is_refused_not_tessellated() {
+    // 16M triangles (about 5 GB) for a 32x32 image before the limit existed.
+    let s = scene(
+        r#"{ "camera": { "position": [0, 0, -4], "look_at": [0, 0, 0], "width": 32, "height": 32,
+                         "vfov_deg": 1e-3 },
+             "objects": [ { "shape": { "sphere": { "radius": 1 } } } ] }"#,
+    );
+    let msg = build_error(&s, &spec(BackendKind::Mesh, &[]), 100 * MIB);
+    for part in [
+        "objects[0]",
+        "triangles",
+        "100 MiB",
+        "--memory-limit-mib",
+        "tess_px",
+    ] {
+        assert!(msg.contains(part), "{part}: {msg}");
+    }
+    // The same scene at a coarse budget fits.
+    backend::build_within(&s, &spec(BackendKind::Mesh, &["tess_level=3"]), 100 * MIB)
+        .expect("a fixed level-3 sphere is small");
+}
+
+#[test]
+fn segment_caps_beyond_the_documented_maximum_are_refused() {
+    let s = scene(r#"{ "objects": [ { "shape": { "sphere": { "radius": 1 } } } ] }"#);
+    let msg = build_error(
+        &s,
+        &spec(
+            BackendKind::Mesh,
+            &["max_segments=4000000000", "tess_px=1e-9"],
+        ),
+        4096 * MIB,
+    );
+    assert!(
+        msg.contains("max_segments_per_turn must be in 8..=65536"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn extraction_grids_count_against_the_limit() {
+    let s = scene(
+        r#"{ "objects": [ { "shape": { "smooth_union": { "blend_radius": 0.2, "children": [
+               { "shape": { "sphere": { "radius": 1 } } },
+               { "shape": { "box": { "half_extents": [0.5, 0.5, 0.5] } },
+                 "transform": { "translate": [1, 0, 0] } } ] } } } ] }"#,
+    );
+    let msg = build_error(
+        &s,
+        &spec(BackendKind::Mesh, &["surface_res=512"]),
+        200 * MIB,
+    );
+    assert!(
+        msg.contains("surface-extraction grid of 512^3") && msg.contains("surface_res"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn mesh_grids_of_the_sdf_backend_count_against_the_limit() {
+    let s = scene(r#"{ "objects": [ { "shape": { "mesh": { "path": "meshes/bunny.obj" } } } ] }"#);
+    let msg = build_error(&s, &spec(BackendKind::Sdf, &["grid_res=512"]), 1000 * MIB);
+    for part in [
+        "resolution 512",
+        "1000 MiB",
+        "grid_res",
+        "--memory-limit-mib",
+    ] {
+        assert!(msg.contains(part), "{part}: {msg}");
+    }
+    let msg = build_error(&s, &spec(BackendKind::Mesh, &[]), MIB / 2);
+    assert!(
+        msg.contains("bunny.obj") && msg.contains("triangles"),
+        "{msg}"
+    );
+}
