@@ -8,106 +8,17 @@ use crate::FieldError;
 use crate::program::{Affine, Instr, MAX_WINDOW, Op, Program};
 use crate::shapes::TriData;
 
-/// An axis-aligned box that may hold infinities.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Aabb {
-    pub lo: DVec3,
-    pub hi: DVec3,
-}
+pub(crate) use marchmesh_scene::bounds::Aabb;
+use marchmesh_scene::bounds::{LocalBounds, combine, singular_values};
 
-impl Aabb {
-    pub const INFINITE: Aabb = Aabb {
-        lo: DVec3::splat(f64::NEG_INFINITY),
-        hi: DVec3::splat(f64::INFINITY),
-    };
-    fn sym(h: DVec3) -> Aabb {
-        Aabb { lo: -h, hi: h }
-    }
-    fn is_finite(&self) -> bool {
-        self.lo.is_finite() && self.hi.is_finite()
-    }
-    fn any_finite(&self) -> bool {
-        (0..3).any(|a| self.lo[a].is_finite() || self.hi[a].is_finite())
-    }
-    fn hull(&self, o: &Aabb) -> Aabb {
-        Aabb {
-            lo: self.lo.min(o.lo),
-            hi: self.hi.max(o.hi),
-        }
-    }
-    fn intersect(&self, o: &Aabb) -> Aabb {
-        Aabb {
-            lo: self.lo.max(o.lo),
-            hi: self.hi.min(o.hi),
-        }
-    }
-    /// The box containing this box mapped by `xf`.
-    fn transformed(&self, xf: &DAffine3) -> Aabb {
-        if self.is_finite() {
-            let mut lo = DVec3::splat(f64::INFINITY);
-            let mut hi = DVec3::splat(f64::NEG_INFINITY);
-            for i in 0..8 {
-                let c = DVec3::new(
-                    if i & 1 == 0 { self.lo.x } else { self.hi.x },
-                    if i & 2 == 0 { self.lo.y } else { self.hi.y },
-                    if i & 4 == 0 { self.lo.z } else { self.hi.z },
-                );
-                let w = xf.transform_point3(c);
-                lo = lo.min(w);
-                hi = hi.max(w);
-            }
-            Aabb { lo, hi }
-        } else if xf.matrix3 == DMat3::IDENTITY {
-            Aabb {
-                lo: self.lo + xf.translation,
-                hi: self.hi + xf.translation,
-            }
-        } else {
+/// A leaf shape's box in its own frame, from the scene's one definition of shape bounds.
+fn leaf_box(kind: &NodeKind) -> Aabb {
+    match kind.local_bounds() {
+        LocalBounds::Finite(b) => b,
+        LocalBounds::Unbounded | LocalBounds::MeshFile(_) | LocalBounds::Composite => {
             Aabb::INFINITE
         }
     }
-}
-
-/// Smallest singular value of `m` (square root of the smallest eigenvalue of `m^T m`, by
-/// cyclic Jacobi rotations).
-pub(crate) fn min_singular_value(m: &DMat3) -> f64 {
-    let s = m.transpose() * *m;
-    let mut a = [
-        [s.x_axis.x, s.y_axis.x, s.z_axis.x],
-        [s.x_axis.y, s.y_axis.y, s.z_axis.y],
-        [s.x_axis.z, s.y_axis.z, s.z_axis.z],
-    ];
-    for _ in 0..32 {
-        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
-        if off <= 1e-30 * (a[0][0].abs() + a[1][1].abs() + a[2][2].abs()) {
-            break;
-        }
-        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
-            if a[p][q].abs() < 1e-300 {
-                continue;
-            }
-            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-            let t = if theta == 0.0 { 1.0 } else { t };
-            let c = 1.0 / (t * t + 1.0).sqrt();
-            let sn = t * c;
-            // a <- J^T a J with the rotation in the (p, q) plane.
-            for k in 0..3 {
-                let akp = a[k][p];
-                let akq = a[k][q];
-                a[k][p] = c * akp - sn * akq;
-                a[k][q] = sn * akp + c * akq;
-            }
-            for k in 0..3 {
-                let apk = a[p][k];
-                let aqk = a[q][k];
-                a[p][k] = c * apk - sn * aqk;
-                a[q][k] = sn * apk + c * aqk;
-            }
-        }
-    }
-    let l = a[0][0].min(a[1][1]).min(a[2][2]).max(0.0);
-    l.sqrt()
 }
 
 /// A mesh the compiler needs a grid for; the caller resolves it.
@@ -131,7 +42,7 @@ impl Compiler<'_> {
     /// parent frame.
     pub fn node(&mut self, n: &Node, xf: DAffine3) -> Result<Aabb, FieldError> {
         let inv = xf.inverse();
-        let dscale = min_singular_value(&xf.matrix3);
+        let dscale = singular_values(&xf.matrix3)[0];
         if !inv.is_finite()
             || dscale.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater)
             || !dscale.is_finite()
@@ -204,10 +115,10 @@ impl Compiler<'_> {
                             r,
                             k: (c.length_squared() - r * r),
                         },
-                        Aabb::sym(DVec3::splat(*radius)),
+                        leaf_box(&n.kind),
                     )
                 } else {
-                    (Op::Sphere { r: *radius }, Aabb::sym(DVec3::splat(*radius)))
+                    (Op::Sphere { r: *radius }, leaf_box(&n.kind))
                 }
             }
             NodeKind::Plane { normal, offset } => {
@@ -232,14 +143,14 @@ impl Compiler<'_> {
                 Op::Box {
                     b: a3(*half_extents),
                 },
-                Aabb::sym(*half_extents),
+                leaf_box(&n.kind),
             ),
             NodeKind::Ellipsoid { radii } => (
                 Op::Ellipsoid {
                     inv_r: a3(radii.recip()),
                     rmin: radii.min_element(),
                 },
-                Aabb::sym(*radii),
+                leaf_box(&n.kind),
             ),
             NodeKind::Cylinder {
                 radius,
@@ -249,21 +160,18 @@ impl Compiler<'_> {
                     r: *radius,
                     h: *half_height,
                 },
-                Aabb::sym(DVec3::new(*radius, *half_height, *radius)),
+                leaf_box(&n.kind),
             ),
             NodeKind::Torus {
                 major_radius,
                 minor_radius,
-            } => {
-                let o = major_radius + minor_radius;
-                (
-                    Op::Torus {
-                        big: *major_radius,
-                        small: *minor_radius,
-                    },
-                    Aabb::sym(DVec3::new(o, *minor_radius, o)),
-                )
-            }
+            } => (
+                Op::Torus {
+                    big: *major_radius,
+                    small: *minor_radius,
+                },
+                leaf_box(&n.kind),
+            ),
             NodeKind::Triangle { vertices } => {
                 let [a, b, c] = *vertices;
                 let (ba, cb, ac) = (b - a, c - b, a - c);
@@ -289,13 +197,7 @@ impl Compiler<'_> {
                         1.0 / ac.length_squared(),
                     ],
                 };
-                (
-                    Op::Triangle(Box::new(t)),
-                    Aabb {
-                        lo: a.min(b).min(c),
-                        hi: a.max(b).max(c),
-                    },
-                )
+                (Op::Triangle(Box::new(t)), leaf_box(&n.kind))
             }
             NodeKind::Mesh { .. } => {
                 let (grid, bb) = self.meshes.resolve(n)?;
@@ -312,30 +214,19 @@ impl Compiler<'_> {
                     NodeKind::Intersection(_) => Op::Intersection,
                     _ => Op::Subtraction,
                 };
-                let bb = match op {
-                    Op::Union => boxes.iter().skip(1).fold(boxes[0], |a, b| a.hull(b)),
-                    Op::Intersection => boxes.iter().skip(1).fold(boxes[0], |a, b| a.intersect(b)),
-                    _ => boxes[0],
-                };
-                (op, bb)
+                (op, combine(&n.kind, &boxes).unwrap_or(Aabb::INFINITE))
             }
             NodeKind::SmoothUnion {
                 children,
                 blend_radius,
             } => {
                 let boxes = self.children(children)?;
-                let hull = boxes.iter().skip(1).fold(boxes[0], |a, b| a.hull(b));
-                // Each fold lowers the value by at most k/4 below the children's minimum.
-                let grow = blend_radius * 0.25 * (children.len().saturating_sub(1)) as f64;
                 (
                     Op::SmoothUnion {
                         k: *blend_radius,
                         inv_k: 1.0 / blend_radius,
                     },
-                    Aabb {
-                        lo: hull.lo - DVec3::splat(grow),
-                        hi: hull.hi + DVec3::splat(grow),
-                    },
+                    combine(&n.kind, &boxes).unwrap_or(Aabb::INFINITE),
                 )
             }
             NodeKind::Repeat {
@@ -344,7 +235,7 @@ impl Compiler<'_> {
                 count,
             } => {
                 let cb = self.node(child, child.transform)?;
-                let mut bb = cb;
+                let bb = combine(&n.kind, &[cb]).unwrap_or(Aabb::INFINITE);
                 let mut cnt = [0.0; 3];
                 let mut first = [0.0; 3];
                 let mut r = f64::INFINITY;
@@ -366,17 +257,9 @@ impl Compiler<'_> {
                     } else {
                         exact = false;
                     }
-                    match count[a] {
-                        Some(c) => {
-                            cnt[a] = c as f64;
-                            first[a] = -(c as f64 - 1.0) * 0.5 * p;
-                            bb.lo[a] = cb.lo[a] + first[a];
-                            bb.hi[a] = cb.hi[a] - first[a];
-                        }
-                        None => {
-                            bb.lo[a] = f64::NEG_INFINITY;
-                            bb.hi[a] = f64::INFINITY;
-                        }
+                    if let Some(c) = count[a] {
+                        cnt[a] = c as f64;
+                        first[a] = -(c as f64 - 1.0) * 0.5 * p;
                     }
                 }
                 if !r.is_finite() {

@@ -5,6 +5,7 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use glam::{DAffine3, DMat3, DVec3};
+use marchmesh_scene::bounds::{Aabb, singular_values};
 use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 
 use crate::MeshError;
@@ -41,137 +42,46 @@ pub(crate) struct Walk<'a> {
 }
 
 /// Local bounds of a node in its parent's frame (its transform applied); `None` when
-/// unbounded (planes, infinite repetition).
+/// unbounded (planes, infinite repetition). The scene's one definition of shape bounds
+/// (`marchmesh_scene::bounds`), with mesh files' boxes from `mesh_bounds`.
 pub(crate) fn node_bounds(
     node: &Node,
     mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
 ) -> Option<(DVec3, DVec3)> {
-    let local = local_bounds(node, mesh_bounds)?;
-    Some(transform_bounds(&node.transform, local))
+    node.bounds_in_parent(&mesh_box(mesh_bounds))?.finite()
 }
 
-/// Bounds of a node in its own frame (before its transform).
+/// Bounds of a node in its own frame (before its transform); `None` when unbounded.
 pub(crate) fn local_bounds(
     node: &Node,
     mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
 ) -> Option<(DVec3, DVec3)> {
-    let sym = |h: DVec3| Some((-h, h));
-    match &node.kind {
-        NodeKind::Sphere { radius } => sym(DVec3::splat(*radius)),
-        NodeKind::Ellipsoid { radii } => sym(*radii),
-        NodeKind::Box { half_extents } => sym(*half_extents),
-        NodeKind::Cylinder {
-            radius,
-            half_height,
-        } => sym(DVec3::new(*radius, *half_height, *radius)),
-        NodeKind::Torus {
-            major_radius,
-            minor_radius,
-        } => {
-            let r = major_radius + minor_radius;
-            sym(DVec3::new(r, *minor_radius, r))
-        }
-        NodeKind::Triangle { vertices } => Some((
-            vertices[0].min(vertices[1]).min(vertices[2]),
-            vertices[0].max(vertices[1]).max(vertices[2]),
-        )),
-        NodeKind::Plane { .. } => None,
-        NodeKind::Mesh { path } => mesh_bounds.get(path).copied(),
-        NodeKind::Union(children) => {
-            union_all(children.iter().map(|c| node_bounds(c, mesh_bounds)))
-        }
-        NodeKind::SmoothUnion {
-            children,
-            blend_radius,
-        } => union_all(children.iter().map(|c| node_bounds(c, mesh_bounds)))
-            .map(|(lo, hi)| (lo - blend_radius * 0.25, hi + blend_radius * 0.25)),
-        NodeKind::Intersection(children) => {
-            let mut out: Option<(DVec3, DVec3)> = None;
-            let mut any_bounded = false;
-            for c in children {
-                if let Some((lo, hi)) = node_bounds(c, mesh_bounds) {
-                    any_bounded = true;
-                    out = Some(match out {
-                        Some((a, b)) => (a.max(lo), b.min(hi)),
-                        None => (lo, hi),
-                    });
-                }
-            }
-            if any_bounded { out } else { None }
-        }
-        NodeKind::Subtraction(children) => {
-            children.first().and_then(|c| node_bounds(c, mesh_bounds))
-        }
-        NodeKind::Repeat {
-            child,
-            period,
-            count,
-        } => {
-            let (lo, hi) = node_bounds(child, mesh_bounds)?;
-            let mut lo = lo;
-            let mut hi = hi;
-            for axis in 0..3 {
-                if period[axis] > 0.0 {
-                    let n = count[axis]?;
-                    let half_span = f64::from(n.saturating_sub(1)) * 0.5 * period[axis];
-                    lo[axis] -= half_span;
-                    hi[axis] += half_span;
-                }
-            }
-            Some((lo, hi))
-        }
-    }
+    node.bounds_in_own_frame(&mesh_box(mesh_bounds))?.finite()
 }
 
-fn union_all(items: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Option<(DVec3, DVec3)> {
-    let mut out: Option<(DVec3, DVec3)> = None;
-    for b in items {
-        let (lo, hi) = b?;
-        out = Some(match out {
-            Some((a, c)) => (a.min(lo), c.max(hi)),
-            None => (lo, hi),
-        });
-    }
-    out
+fn mesh_box(
+    mesh_bounds: &HashMap<PathBuf, (DVec3, DVec3)>,
+) -> impl Fn(&std::path::Path) -> Option<Aabb> + '_ {
+    |path| mesh_bounds.get(path).map(|&(lo, hi)| Aabb::new(lo, hi))
 }
 
 /// The axis-aligned bounds of a transformed box.
 pub(crate) fn transform_bounds(m: &DAffine3, (lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
-    let centre = m.transform_point3((lo + hi) * 0.5);
-    let half = (hi - lo) * 0.5;
-    let a = m.matrix3;
-    let extent = DVec3::new(
-        a.row(0).abs().dot(half),
-        a.row(1).abs().dot(half),
-        a.row(2).abs().dot(half),
-    );
-    (centre - extent, centre + extent)
+    let b = Aabb::new(lo, hi).transformed(m);
+    (b.lo, b.hi)
 }
 
 /// Distance from the render-space origin (the camera) to a box; 0 inside.
 pub(crate) fn distance_to_box((lo, hi): (DVec3, DVec3)) -> f64 {
-    let d = (lo.max(DVec3::ZERO) - DVec3::ZERO).max(DVec3::ZERO - hi);
-    d.max(DVec3::ZERO).length()
+    Aabb::new(lo, hi).distance_to(DVec3::ZERO)
 }
 
-/// Largest singular value of a 3x3 matrix (power iteration on `M^T M`), slightly rounded up.
+/// Largest singular value of a 3x3 matrix, rounded up by 0.1% and capped by the Frobenius
+/// norm (a hard upper bound), for error budgets that must not be exceeded.
 pub(crate) fn max_stretch(m: &DMat3) -> f64 {
-    let mtm = m.transpose() * *m;
-    let mut v = DVec3::new(0.577, 0.5774, 0.5773);
-    let mut lambda = 0.0;
-    for _ in 0..64 {
-        let w = mtm * v;
-        let len = w.length();
-        if len.is_nan() || len <= 0.0 {
-            break;
-        }
-        lambda = len;
-        v = w / len;
-    }
-    // Power iteration approaches from below; the Frobenius norm is a hard upper bound.
     let frobenius =
         (m.x_axis.length_squared() + m.y_axis.length_squared() + m.z_axis.length_squared()).sqrt();
-    (lambda.sqrt() * 1.001)
+    (singular_values(m)[2] * 1.001)
         .min(frobenius)
         .max(f64::MIN_POSITIVE)
 }
@@ -240,7 +150,13 @@ fn analytic_key(kind: &NodeKind) -> Option<ShapeKey> {
             }
             5
         }
-        _ => return None,
+        NodeKind::Plane { .. }
+        | NodeKind::Mesh { .. }
+        | NodeKind::Union(_)
+        | NodeKind::SmoothUnion { .. }
+        | NodeKind::Intersection(_)
+        | NodeKind::Subtraction(_)
+        | NodeKind::Repeat { .. } => return None,
     };
     Some(ShapeKey::Analytic(tag, p))
 }

@@ -648,7 +648,13 @@ pub fn tessellate_within(
             segments: Vec::new(),
             materials: None,
         },
-        _ => return Ok(None),
+        NodeKind::Plane { .. }
+        | NodeKind::Mesh { .. }
+        | NodeKind::Union(_)
+        | NodeKind::SmoothUnion { .. }
+        | NodeKind::Intersection(_)
+        | NodeKind::Subtraction(_)
+        | NodeKind::Repeat { .. } => return Ok(None),
     };
     Ok(Some(mesh))
 }
@@ -701,32 +707,4 @@ fn box_mesh(half: DVec3) -> LocalMesh {
         segments: Vec::new(),
         materials: None,
     }
-}
-
-/// Exact distance from `p` to the surface of an analytic shape (local frame), for measuring
-/// tessellation error; `None` for shapes without one here (ellipsoid, plane, composites).
-pub fn exact_surface_distance(kind: &NodeKind, p: DVec3) -> Option<f64> {
-    Some(match *kind {
-        NodeKind::Sphere { radius } => (p.length() - radius).abs(),
-        NodeKind::Box { half_extents } => {
-            let q = p.abs() - half_extents;
-            (q.max(DVec3::ZERO).length() + q.max_element().min(0.0)).abs()
-        }
-        NodeKind::Cylinder {
-            radius,
-            half_height,
-        } => {
-            let d = glam::DVec2::new(glam::DVec2::new(p.x, p.z).length(), p.y).abs()
-                - glam::DVec2::new(radius, half_height);
-            (d.x.max(d.y).min(0.0) + d.max(glam::DVec2::ZERO).length()).abs()
-        }
-        NodeKind::Torus {
-            major_radius,
-            minor_radius,
-        } => {
-            let q = glam::DVec2::new(glam::DVec2::new(p.x, p.z).length() - major_radius, p.y);
-            (q.length() - minor_radius).abs()
-        }
-        _ => return None,
-    })
 }

@@ -4,7 +4,7 @@
 //! budget.
 
 use glam::{DVec2, DVec3};
-use marchmesh_mesh::tessellate::{Detail, LocalMesh, exact_surface_distance, tessellate};
+use marchmesh_mesh::tessellate::{Detail, LocalMesh, tessellate};
 use marchmesh_meshio::{LoadReport, TriangleMesh};
 use marchmesh_scene::NodeKind;
 
@@ -428,4 +428,32 @@ fn tessellate_within_refuses_exactly_above_the_cap() {
             .expect("analytic");
         assert_eq!(fits.triangles.len() as u64, count, "{kind:?}");
     }
+}
+
+/// Exact distance from `p` to the surface of an analytic shape (local frame), for measuring
+/// tessellation error; `None` for shapes without one here (ellipsoid, plane, composites).
+fn exact_surface_distance(kind: &NodeKind, p: DVec3) -> Option<f64> {
+    Some(match *kind {
+        NodeKind::Sphere { radius } => (p.length() - radius).abs(),
+        NodeKind::Box { half_extents } => {
+            let q = p.abs() - half_extents;
+            (q.max(DVec3::ZERO).length() + q.max_element().min(0.0)).abs()
+        }
+        NodeKind::Cylinder {
+            radius,
+            half_height,
+        } => {
+            let d = DVec2::new(DVec2::new(p.x, p.z).length(), p.y).abs()
+                - DVec2::new(radius, half_height);
+            (d.x.max(d.y).min(0.0) + d.max(DVec2::ZERO).length()).abs()
+        }
+        NodeKind::Torus {
+            major_radius,
+            minor_radius,
+        } => {
+            let q = DVec2::new(DVec2::new(p.x, p.z).length() - major_radius, p.y);
+            (q.length() - minor_radius).abs()
+        }
+        _ => return None,
+    })
 }

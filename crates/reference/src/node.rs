@@ -8,6 +8,7 @@ use std::sync::Arc;
 use glam::{DAffine3, DMat3, DVec3};
 use marchmesh_field::{Field, FieldOptions};
 use marchmesh_meshio::load_mesh;
+use marchmesh_scene::bounds::{Aabb, LocalBounds, combine};
 use marchmesh_scene::{MaterialId, Node, NodeKind};
 
 use crate::meshbvh::MeshData;
@@ -106,27 +107,28 @@ pub(crate) struct Compiler<'a> {
 }
 
 fn transform_bounds(m: &DAffine3, (lo, hi): (DVec3, DVec3)) -> (DVec3, DVec3) {
-    let mut out = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    for i in 0..8 {
-        let c = DVec3::new(
-            if i & 1 == 0 { lo.x } else { hi.x },
-            if i & 2 == 0 { lo.y } else { hi.y },
-            if i & 4 == 0 { lo.z } else { hi.z },
-        );
-        let p = m.transform_point3(c);
-        out.0 = out.0.min(p);
-        out.1 = out.1.max(p);
-    }
-    out
+    let b = Aabb::new(lo, hi).transformed(m);
+    (b.lo, b.hi)
 }
 
-fn union_bounds(items: impl Iterator<Item = Option<(DVec3, DVec3)>>) -> Option<(DVec3, DVec3)> {
-    let mut acc = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    for b in items {
-        let (lo, hi) = b?;
-        acc = (acc.0.min(lo), acc.1.max(hi));
+/// A leaf shape's box in its own frame (the scene's one definition); `None` when unbounded.
+fn leaf_bounds(kind: &NodeKind) -> Option<(DVec3, DVec3)> {
+    match kind.local_bounds() {
+        LocalBounds::Finite(b) => Some((b.lo, b.hi)),
+        LocalBounds::Unbounded | LocalBounds::MeshFile(_) | LocalBounds::Composite => None,
     }
-    Some(acc)
+}
+
+/// A CSG node's box from its compiled children's (the scene's rules); `None` when unbounded.
+fn combined_bounds(kind: &NodeKind, children: &[RNode]) -> Option<(DVec3, DVec3)> {
+    let boxes: Vec<Aabb> = children
+        .iter()
+        .map(|c| {
+            c.bounds
+                .map_or(Aabb::INFINITE, |(lo, hi)| Aabb::new(lo, hi))
+        })
+        .collect();
+    combine(kind, &boxes)?.finite()
 }
 
 impl Compiler<'_> {
@@ -144,43 +146,36 @@ impl Compiler<'_> {
             reason: reason.to_string(),
         };
         let (kind, local_bounds, solid): (RKind, Option<(DVec3, DVec3)>, bool) = match &node.kind {
-            NodeKind::Sphere { radius } => (
-                RKind::Sphere(*radius),
-                Some((DVec3::splat(-radius), DVec3::splat(*radius))),
-                true,
-            ),
+            NodeKind::Sphere { radius } => (RKind::Sphere(*radius), leaf_bounds(&node.kind), true),
             NodeKind::Ellipsoid { radii } => {
-                (RKind::Ellipsoid(*radii), Some((-*radii, *radii)), true)
+                (RKind::Ellipsoid(*radii), leaf_bounds(&node.kind), true)
             }
-            NodeKind::Box { half_extents } => (
-                RKind::Box(*half_extents),
-                Some((-*half_extents, *half_extents)),
-                true,
-            ),
+            NodeKind::Box { half_extents } => {
+                (RKind::Box(*half_extents), leaf_bounds(&node.kind), true)
+            }
             NodeKind::Cylinder {
                 radius,
                 half_height,
-            } => {
-                let e = DVec3::new(*radius, *half_height, *radius);
-                (RKind::Cylinder(*radius, *half_height), Some((-e, e)), true)
-            }
+            } => (
+                RKind::Cylinder(*radius, *half_height),
+                leaf_bounds(&node.kind),
+                true,
+            ),
             NodeKind::Torus {
                 major_radius,
                 minor_radius,
-            } => {
-                let r = major_radius + minor_radius;
-                let e = DVec3::new(r, *minor_radius, r);
-                (
-                    RKind::Torus(*major_radius, *minor_radius),
-                    Some((-e, e)),
-                    true,
-                )
-            }
-            NodeKind::Plane { normal, offset } => (RKind::Plane(*normal, *offset), None, true),
+            } => (
+                RKind::Torus(*major_radius, *minor_radius),
+                leaf_bounds(&node.kind),
+                true,
+            ),
+            NodeKind::Plane { normal, offset } => (
+                RKind::Plane(*normal, *offset),
+                leaf_bounds(&node.kind),
+                true,
+            ),
             NodeKind::Triangle { vertices } => {
-                let lo = vertices[0].min(vertices[1]).min(vertices[2]);
-                let hi = vertices[0].max(vertices[1]).max(vertices[2]);
-                (RKind::Triangle(*vertices), Some((lo, hi)), false)
+                (RKind::Triangle(*vertices), leaf_bounds(&node.kind), false)
             }
             NodeKind::Mesh { path } => {
                 let mesh = match self.meshes.get(path) {
@@ -212,7 +207,7 @@ impl Compiler<'_> {
             }
             NodeKind::Union(children) => {
                 let c = self.children(children)?;
-                let b = union_bounds(c.iter().map(|c| c.bounds));
+                let b = combined_bounds(&node.kind, &c);
                 let solid = c.iter().all(|c| c.solid);
                 (RKind::Union(c), b, solid)
             }
@@ -225,18 +220,7 @@ impl Compiler<'_> {
                     });
                 }
                 let is_intersection = matches!(node.kind, NodeKind::Intersection(_));
-                let b = if is_intersection {
-                    let mut acc: Option<(DVec3, DVec3)> = None;
-                    for cb in c.iter().filter_map(|c| c.bounds) {
-                        acc = Some(match acc {
-                            None => cb,
-                            Some(a) => (a.0.max(cb.0), a.1.min(cb.1)),
-                        });
-                    }
-                    acc
-                } else {
-                    c[0].bounds
-                };
+                let b = combined_bounds(&node.kind, &c);
                 let kind = if is_intersection {
                     RKind::Intersection(c)
                 } else {

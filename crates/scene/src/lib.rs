@@ -6,6 +6,7 @@
 //! path of the offending value. The format is described for users in `scenes/README.md`;
 //! [`json_schema`] gives its machine-readable schema.
 
+pub mod bounds;
 pub mod format;
 pub mod resolved;
 mod strict;

@@ -302,7 +302,14 @@ impl Node {
             NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => c,
             NodeKind::SmoothUnion { children, .. } => children,
             NodeKind::Repeat { child, .. } => std::slice::from_ref(child),
-            _ => &[],
+            NodeKind::Sphere { .. }
+            | NodeKind::Ellipsoid { .. }
+            | NodeKind::Box { .. }
+            | NodeKind::Cylinder { .. }
+            | NodeKind::Torus { .. }
+            | NodeKind::Triangle { .. }
+            | NodeKind::Plane { .. }
+            | NodeKind::Mesh { .. } => &[],
         }
     }
 

@@ -1,0 +1,370 @@
+//! Bounds every backend agrees on: the f64 box type, each shape's bounds in its own frame and
+//! how composites combine their children's boxes, plus the singular values that turn a
+//! transform's stretch into distance bounds.
+//!
+//! Shapes carry their own bounds (as in pbrt-v4's `Shape::Bounds`): [`NodeKind::local_bounds`]
+//! answers for every variant, so a new shape fails to compile here until its box is written,
+//! and the field compiler, the reference and the mesh backend read the same numbers.
+
+use std::path::Path;
+
+use glam::{DAffine3, DMat3, DVec3};
+
+use crate::resolved::{Node, NodeKind};
+
+/// An axis-aligned box in f64 that may be infinite along some axes (`lo = -inf`, `hi = +inf`
+/// on an axis nothing bounds, e.g. a plane or an infinite repetition).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub lo: DVec3,
+    /// Largest corner.
+    pub hi: DVec3,
+}
+
+impl Aabb {
+    /// All of space.
+    pub const INFINITE: Aabb = Aabb {
+        lo: DVec3::splat(f64::NEG_INFINITY),
+        hi: DVec3::splat(f64::INFINITY),
+    };
+
+    /// The box from `lo` to `hi`.
+    pub const fn new(lo: DVec3, hi: DVec3) -> Aabb {
+        Aabb { lo, hi }
+    }
+
+    /// The box `[-half, half]`.
+    pub fn symmetric(half: DVec3) -> Aabb {
+        Aabb {
+            lo: -half,
+            hi: half,
+        }
+    }
+
+    /// The smallest box holding `points`; `None` for no points.
+    pub fn from_points(points: impl IntoIterator<Item = DVec3>) -> Option<Aabb> {
+        points.into_iter().fold(None, |acc, p| {
+            Some(match acc {
+                None => Aabb { lo: p, hi: p },
+                Some(b) => Aabb {
+                    lo: b.lo.min(p),
+                    hi: b.hi.max(p),
+                },
+            })
+        })
+    }
+
+    /// Finite along every axis.
+    pub fn is_finite(&self) -> bool {
+        self.lo.is_finite() && self.hi.is_finite()
+    }
+
+    /// Finite along at least one side of one axis (bounds something).
+    pub fn any_finite(&self) -> bool {
+        (0..3).any(|a| self.lo[a].is_finite() || self.hi[a].is_finite())
+    }
+
+    /// `Some((lo, hi))` when finite, `None` otherwise.
+    pub fn finite(&self) -> Option<(DVec3, DVec3)> {
+        self.is_finite().then_some((self.lo, self.hi))
+    }
+
+    /// The smallest box holding both.
+    pub fn hull(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            lo: self.lo.min(o.lo),
+            hi: self.hi.max(o.hi),
+        }
+    }
+
+    /// The common part (may be empty: `lo > hi` on some axis).
+    pub fn intersect(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            lo: self.lo.max(o.lo),
+            hi: self.hi.min(o.hi),
+        }
+    }
+
+    /// Grown by `margin` on every side.
+    pub fn grown(&self, margin: f64) -> Aabb {
+        Aabb {
+            lo: self.lo - DVec3::splat(margin),
+            hi: self.hi + DVec3::splat(margin),
+        }
+    }
+
+    /// The box holding this box mapped by `xf` (its eight corners). An infinite box stays
+    /// exact under a pure translation and becomes [`Aabb::INFINITE`] under anything else.
+    pub fn transformed(&self, xf: &DAffine3) -> Aabb {
+        if self.is_finite() {
+            let corners = (0..8).map(|i| {
+                xf.transform_point3(DVec3::new(
+                    if i & 1 == 0 { self.lo.x } else { self.hi.x },
+                    if i & 2 == 0 { self.lo.y } else { self.hi.y },
+                    if i & 4 == 0 { self.lo.z } else { self.hi.z },
+                ))
+            });
+            Aabb::from_points(corners).unwrap_or(*self)
+        } else if xf.matrix3 == DMat3::IDENTITY {
+            Aabb {
+                lo: self.lo + xf.translation,
+                hi: self.hi + xf.translation,
+            }
+        } else {
+            Aabb::INFINITE
+        }
+    }
+
+    /// Distance from `p` to the box; 0 inside.
+    pub fn distance_to(&self, p: DVec3) -> f64 {
+        (self.lo - p).max(p - self.hi).max(DVec3::ZERO).length()
+    }
+}
+
+/// What bounds a node in its own frame, per [`NodeKind`] variant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LocalBounds<'a> {
+    /// A leaf shape with a finite box.
+    Finite(Aabb),
+    /// A shape that bounds nothing (a plane).
+    Unbounded,
+    /// A mesh file: its box is known once the file is loaded.
+    MeshFile(&'a Path),
+    /// A composite: its box follows from its children's ([`combine`]).
+    Composite,
+}
+
+impl NodeKind {
+    /// The node's bounds in its own frame (before its transform), as far as the node alone
+    /// decides them. Exhaustive over the variants: a new shape must say its box here.
+    pub fn local_bounds(&self) -> LocalBounds<'_> {
+        match self {
+            NodeKind::Sphere { radius } => {
+                LocalBounds::Finite(Aabb::symmetric(DVec3::splat(*radius)))
+            }
+            NodeKind::Ellipsoid { radii } => LocalBounds::Finite(Aabb::symmetric(*radii)),
+            NodeKind::Box { half_extents } => LocalBounds::Finite(Aabb::symmetric(*half_extents)),
+            NodeKind::Cylinder {
+                radius,
+                half_height,
+            } => LocalBounds::Finite(Aabb::symmetric(DVec3::new(*radius, *half_height, *radius))),
+            NodeKind::Torus {
+                major_radius,
+                minor_radius,
+            } => {
+                let outer = major_radius + minor_radius;
+                LocalBounds::Finite(Aabb::symmetric(DVec3::new(outer, *minor_radius, outer)))
+            }
+            NodeKind::Triangle { vertices } => LocalBounds::Finite(Aabb {
+                lo: vertices[0].min(vertices[1]).min(vertices[2]),
+                hi: vertices[0].max(vertices[1]).max(vertices[2]),
+            }),
+            NodeKind::Plane { .. } => LocalBounds::Unbounded,
+            NodeKind::Mesh { path } => LocalBounds::MeshFile(path),
+            NodeKind::Union(_)
+            | NodeKind::SmoothUnion { .. }
+            | NodeKind::Intersection(_)
+            | NodeKind::Subtraction(_)
+            | NodeKind::Repeat { .. } => LocalBounds::Composite,
+        }
+    }
+}
+
+/// A composite's box in its own frame from its children's boxes in that frame (each child's
+/// own transform applied; [`Aabb::INFINITE`] for an unbounded child). Leaves give `None`.
+///
+/// Union: the hull. Smooth union: the hull grown by `blend_radius / 4` per fold (the
+/// polynomial smooth minimum lowers the value by at most k/4 below the children's minimum,
+/// Quilez 2013). Intersection: the common part. Subtraction: the first child. Repetition:
+/// the child's box spread over the copies, infinite along an axis repeated without end.
+pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
+    let hull = || {
+        let first = *children.first()?;
+        Some(children.iter().skip(1).fold(first, |a, b| a.hull(b)))
+    };
+    match kind {
+        NodeKind::Union(_) => hull(),
+        NodeKind::SmoothUnion { blend_radius, .. } => {
+            let folds = children.len().saturating_sub(1) as f64;
+            hull().map(|h| h.grown(blend_radius * 0.25 * folds))
+        }
+        NodeKind::Intersection(_) => children.iter().fold(None, |acc: Option<Aabb>, b| {
+            Some(acc.map_or(*b, |a| a.intersect(b)))
+        }),
+        NodeKind::Subtraction(_) => children.first().copied(),
+        NodeKind::Repeat { period, count, .. } => {
+            let mut b = *children.first()?;
+            for axis in 0..3 {
+                if period[axis] > 0.0 {
+                    match count[axis] {
+                        Some(n) => {
+                            let half_span = f64::from(n.saturating_sub(1)) * 0.5 * period[axis];
+                            b.lo[axis] -= half_span;
+                            b.hi[axis] += half_span;
+                        }
+                        None => {
+                            b.lo[axis] = f64::NEG_INFINITY;
+                            b.hi[axis] = f64::INFINITY;
+                        }
+                    }
+                }
+            }
+            Some(b)
+        }
+        NodeKind::Sphere { .. }
+        | NodeKind::Ellipsoid { .. }
+        | NodeKind::Box { .. }
+        | NodeKind::Cylinder { .. }
+        | NodeKind::Torus { .. }
+        | NodeKind::Triangle { .. }
+        | NodeKind::Plane { .. }
+        | NodeKind::Mesh { .. } => None,
+    }
+}
+
+impl Node {
+    /// The node's box in its parent's frame (its transform applied), recursively;
+    /// `mesh_bounds` gives a mesh file's box in its own frame (`None`: unknown, which makes
+    /// the result unknown too). [`Aabb::INFINITE`] along axes nothing bounds.
+    pub fn bounds_in_parent(&self, mesh_bounds: &dyn Fn(&Path) -> Option<Aabb>) -> Option<Aabb> {
+        Some(
+            self.bounds_in_own_frame(mesh_bounds)?
+                .transformed(&self.transform),
+        )
+    }
+
+    /// [`Node::bounds_in_parent`] before the node's own transform.
+    pub fn bounds_in_own_frame(&self, mesh_bounds: &dyn Fn(&Path) -> Option<Aabb>) -> Option<Aabb> {
+        match self.kind.local_bounds() {
+            LocalBounds::Finite(b) => Some(b),
+            LocalBounds::Unbounded => Some(Aabb::INFINITE),
+            LocalBounds::MeshFile(path) => mesh_bounds(path),
+            LocalBounds::Composite => {
+                let boxes = self
+                    .children()
+                    .iter()
+                    .map(|c| c.bounds_in_parent(mesh_bounds))
+                    .collect::<Option<Vec<Aabb>>>()?;
+                combine(&self.kind, &boxes)
+            }
+        }
+    }
+}
+
+/// The three singular values of `m`, smallest first: square roots of the eigenvalues of
+/// `m^T m` by cyclic Jacobi rotations (Golub & Van Loan, Matrix Computations, 8.5). The
+/// smallest scales distances into a bound under non-uniform scale; the largest is the
+/// transform's greatest stretch.
+pub fn singular_values(m: &DMat3) -> [f64; 3] {
+    let s = m.transpose() * *m;
+    let mut a = [
+        [s.x_axis.x, s.y_axis.x, s.z_axis.x],
+        [s.x_axis.y, s.y_axis.y, s.z_axis.y],
+        [s.x_axis.z, s.y_axis.z, s.z_axis.z],
+    ];
+    for _ in 0..32 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        if off <= 1e-30 * (a[0][0].abs() + a[1][1].abs() + a[2][2].abs()) {
+            break;
+        }
+        for (p, q) in [(0usize, 1usize), (0, 2), (1, 2)] {
+            if a[p][q].abs() < 1e-300 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let sn = t * c;
+            // a <- J^T a J with the rotation in the (p, q) plane.
+            for row in &mut a {
+                let (akp, akq) = (row[p], row[q]);
+                row[p] = c * akp - sn * akq;
+                row[q] = sn * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - sn * aqk;
+                a[q][k] = sn * apk + c * aqk;
+            }
+        }
+    }
+    let mut values = [a[0][0], a[1][1], a[2][2]].map(|l| l.max(0.0).sqrt());
+    values.sort_by(f64::total_cmp);
+    values
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn singular_values_of_a_rotated_scale_are_the_scales() {
+        let rot = DMat3::from_euler(glam::EulerRot::XYZ, 0.3, -1.1, 2.0);
+        let m = rot * DMat3::from_diagonal(DVec3::new(3.0, 0.5, 2.0)) * rot.transpose();
+        let s = singular_values(&m);
+        for (got, want) in s.iter().zip([0.5, 2.0, 3.0]) {
+            assert!((got - want).abs() < 1e-12, "{s:?}");
+        }
+        assert_eq!(singular_values(&DMat3::ZERO), [0.0; 3]);
+    }
+
+    #[test]
+    fn transformed_boxes_hold_every_corner_and_infinite_boxes_stay_honest() {
+        let b = Aabb::symmetric(DVec3::new(1.0, 2.0, 3.0));
+        let xf = DAffine3::from_rotation_y(0.7) * DAffine3::from_translation(DVec3::X);
+        let t = b.transformed(&xf);
+        for i in 0..8 {
+            let c = DVec3::new(
+                if i & 1 == 0 { -1.0 } else { 1.0 },
+                if i & 2 == 0 { -2.0 } else { 2.0 },
+                if i & 4 == 0 { -3.0 } else { 3.0 },
+            );
+            let p = xf.transform_point3(c);
+            assert!(p.cmpge(t.lo - 1e-12).all() && p.cmple(t.hi + 1e-12).all());
+        }
+        let slab = Aabb::new(
+            DVec3::new(f64::NEG_INFINITY, -1.0, f64::NEG_INFINITY),
+            DVec3::new(f64::INFINITY, 1.0, f64::INFINITY),
+        );
+        let moved = slab.transformed(&DAffine3::from_translation(DVec3::Y));
+        assert_eq!((moved.lo.y, moved.hi.y), (0.0, 2.0));
+        assert_eq!(slab.transformed(&xf), Aabb::INFINITE);
+        assert_eq!(b.distance_to(DVec3::new(4.0, 0.0, 0.0)), 3.0);
+    }
+
+    fn leaf(kind: NodeKind) -> Node {
+        Node {
+            transform: DAffine3::IDENTITY,
+            material: 0,
+            name: None,
+            json_path: "test".into(),
+            kind,
+        }
+    }
+
+    #[test]
+    fn smooth_unions_grow_per_fold_and_repeats_spread_over_their_copies() {
+        let sphere = || leaf(NodeKind::Sphere { radius: 1.0 });
+        let smooth = leaf(NodeKind::SmoothUnion {
+            children: vec![sphere(), sphere(), sphere()],
+            blend_radius: 0.4,
+        });
+        let three = smooth.bounds_in_own_frame(&|_| None).expect("bounded");
+        assert!((three.hi.x - 1.2).abs() < 1e-12, "{three:?}");
+        let repeat = leaf(NodeKind::Repeat {
+            child: Box::new(sphere()),
+            period: DVec3::new(4.0, 0.0, 3.0),
+            count: [Some(3), None, None],
+        });
+        let b = repeat.bounds_in_own_frame(&|_| None).expect("bounded");
+        assert_eq!((b.lo.x, b.hi.x), (-5.0, 5.0));
+        assert_eq!((b.lo.y, b.hi.y), (-1.0, 1.0));
+        assert!(b.lo.z.is_infinite() && b.hi.z.is_infinite());
+        let mesh = leaf(NodeKind::Mesh {
+            path: "m.obj".into(),
+        });
+        assert_eq!(mesh.bounds_in_parent(&|_| None), None, "unknown mesh box");
+    }
+}
