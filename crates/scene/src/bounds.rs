@@ -283,11 +283,9 @@ pub fn singular_values(m: &DMat3) -> [f64; 3] {
                 row[p] = c * akp - sn * akq;
                 row[q] = sn * akp + c * akq;
             }
-            for k in 0..3 {
-                let (apk, aqk) = (a[p][k], a[q][k]);
-                a[p][k] = c * apk - sn * aqk;
-                a[q][k] = sn * apk + c * aqk;
-            }
+            let (row_p, row_q) = (a[p], a[q]);
+            a[p] = std::array::from_fn(|k| c * row_p[k] - sn * row_q[k]);
+            a[q] = std::array::from_fn(|k| sn * row_p[k] + c * row_q[k]);
         }
     }
     let mut values = [a[0][0], a[1][1], a[2][2]].map(|l| l.max(0.0).sqrt());
