@@ -73,15 +73,88 @@ pub struct RayWork {
     pub primitive_tests: u32,
 }
 
-/// The result of a closest-hit query.
+/// The result of a closest-hit query: it holds a hit exactly when its termination is
+/// [`Termination::Hit`] (the constructors make any other combination unrepresentable).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[must_use]
 pub struct TraceResult {
-    /// The closest hit, if `termination == Hit`.
-    pub hit: Option<Hit>,
-    /// How the query ended.
-    pub termination: Termination,
+    hit: Option<Hit>,
+    termination: Termination,
     /// Work done.
     pub work: RayWork,
+}
+
+/// How a closest-hit query ended without a hit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoHit {
+    /// Nothing was hit: the ray left the scene's bounds.
+    Miss,
+    /// An iterative method ran out of steps before deciding.
+    MaxSteps,
+    /// The ray reached `t_max` or the backend's maximum distance without a hit.
+    MaxDistance,
+}
+
+impl From<NoHit> for Termination {
+    fn from(n: NoHit) -> Termination {
+        match n {
+            NoHit::Miss => Termination::Miss,
+            NoHit::MaxSteps => Termination::MaxSteps,
+            NoHit::MaxDistance => Termination::MaxDistance,
+        }
+    }
+}
+
+impl TryFrom<Termination> for NoHit {
+    type Error = Termination;
+
+    /// The no-hit reason of a termination; `Err(Termination::Hit)` for a hit.
+    fn try_from(t: Termination) -> Result<NoHit, Termination> {
+        match t {
+            Termination::Hit => Err(t),
+            Termination::Miss => Ok(NoHit::Miss),
+            Termination::MaxSteps => Ok(NoHit::MaxSteps),
+            Termination::MaxDistance => Ok(NoHit::MaxDistance),
+        }
+    }
+}
+
+impl TraceResult {
+    /// A query that found `hit`.
+    pub const fn found(hit: Hit, work: RayWork) -> TraceResult {
+        TraceResult {
+            hit: Some(hit),
+            termination: Termination::Hit,
+            work,
+        }
+    }
+
+    /// A query that ended without a hit, for the reason `why`.
+    pub fn not_found(why: NoHit, work: RayWork) -> TraceResult {
+        TraceResult {
+            hit: None,
+            termination: why.into(),
+            work,
+        }
+    }
+
+    /// [`TraceResult::found`] for `Some`, a [`NoHit::Miss`] for `None`.
+    pub fn found_or_miss(hit: Option<Hit>, work: RayWork) -> TraceResult {
+        match hit {
+            Some(h) => TraceResult::found(h, work),
+            None => TraceResult::not_found(NoHit::Miss, work),
+        }
+    }
+
+    /// The closest hit, if the query found one.
+    pub fn hit(&self) -> Option<Hit> {
+        self.hit
+    }
+
+    /// How the query ended.
+    pub fn termination(&self) -> Termination {
+        self.termination
+    }
 }
 
 /// The result of an occlusion query.

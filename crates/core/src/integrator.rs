@@ -379,8 +379,8 @@ pub(crate) fn resolve_vertex(
     aov: bool,
 ) -> Vertex {
     out.stats.add_work(&res.work);
-    out.stats.add_termination(res.termination, false);
-    let hit = res.hit.filter(|h| {
+    out.stats.add_termination(res.termination(), false);
+    let hit = res.hit().filter(|h| {
         let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
         if !ok {
             out.stats.non_finite_hits += 1;
@@ -388,7 +388,7 @@ pub(crate) fn resolve_vertex(
         ok
     });
     if aov {
-        out.termination[px] = res.termination;
+        out.termination[px] = res.termination();
         out.work[px] = res.work;
     }
     let t_geometry = hit.map_or(ray.t_max, |h| h.t);

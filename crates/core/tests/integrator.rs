@@ -49,25 +49,20 @@ impl Geometry for Spheres {
                 }
             }
         }
-        TraceResult {
-            hit: best,
-            termination: if best.is_some() {
-                Termination::Hit
-            } else {
-                Termination::Miss
-            },
-            work: RayWork {
+        TraceResult::found_or_miss(
+            best,
+            RayWork {
                 primitive_tests: self.0.len() as u32,
                 ..Default::default()
             },
-        }
+        )
     }
 
     fn occluded(&self, ray: &Ray) -> OcclusionResult {
         let r = self.closest_hit(ray);
         OcclusionResult {
-            occluded: r.hit.is_some(),
-            termination: r.termination,
+            occluded: r.hit().is_some(),
+            termination: r.termination(),
             work: r.work,
         }
     }

@@ -66,7 +66,7 @@ fn bench(c: &mut Criterion) {
                 .iter()
                 .step_by(97)
                 .filter(|r| {
-                    let a = g.closest_hit(r).hit.map_or(f32::INFINITY, |h| h.t);
+                    let a = g.closest_hit(r).hit().map_or(f32::INFINITY, |h| h.t);
                     let b = raw_closest(&raw, r);
                     a == b || (a - b).abs() <= 1e-5 * b
                 })

@@ -117,7 +117,7 @@ fn main() -> Res<()> {
                     // Single rays only (no packets).
                     hits = rays
                         .iter()
-                        .filter(|r| g.closest_hit(r).hit.is_some())
+                        .filter(|r| g.closest_hit(r).hit().is_some())
                         .count();
                 } else if bvh == "raw" {
                     hits = rays
@@ -131,7 +131,7 @@ fn main() -> Res<()> {
                             g.closest_hits(r, o);
                         }
                     });
-                    hits += out.iter().filter(|o| o.hit.is_some()).count();
+                    hits += out.iter().filter(|o| o.hit().is_some()).count();
                 }
                 (rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6, hits)
             };

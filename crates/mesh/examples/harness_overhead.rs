@@ -10,8 +10,8 @@ mod support;
 use std::time::Instant;
 
 use marchmesh_core::{
-    BackgroundSampler, Geometry, GeometryReport, OcclusionResult, Ray, RenderOptions, Termination,
-    TraceResult, render,
+    BackgroundSampler, Geometry, GeometryReport, NoHit, OcclusionResult, Ray, RenderOptions,
+    Termination, TraceResult, render,
 };
 use marchmesh_mesh::{BvhKind, MeshOptions, build};
 use support::*;
@@ -21,11 +21,7 @@ struct Miss;
 
 impl Geometry for Miss {
     fn closest_hit(&self, _: &Ray) -> TraceResult {
-        TraceResult {
-            hit: None,
-            termination: Termination::Miss,
-            work: Default::default(),
-        }
+        TraceResult::not_found(NoHit::Miss, Default::default())
     }
     fn occluded(&self, _: &Ray) -> OcclusionResult {
         OcclusionResult {

@@ -37,7 +37,7 @@ use std::time::{Duration, Instant};
 
 use glam::{Affine3A, DAffine3, DVec3, Vec3, Vec3A};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
+    Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
     TraceResult,
 };
 use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh};
@@ -895,21 +895,16 @@ impl MeshGeometry {
                 ..RayWork::default()
             };
             out[k] = match best[k] {
-                Some((slot, t)) => TraceResult {
-                    hit: Some(Hit {
+                Some((slot, t)) => TraceResult::found(
+                    Hit {
                         t,
                         position: rays8[k].origin + rays8[k].dir * t,
                         normal: flat.normal(&r[k], slot),
                         material: flat.material(slot).unwrap_or(self.flat_materials_default),
-                    }),
-                    termination: Termination::Hit,
+                    },
                     work,
-                },
-                None => TraceResult {
-                    hit: None,
-                    termination: Termination::Miss,
-                    work,
-                },
+                ),
+                None => TraceResult::not_found(NoHit::Miss, work),
             };
         }
         true
@@ -941,11 +936,7 @@ impl Geometry for MeshGeometry {
         let mut work = RayWork::default();
         let mut r = self.ob_ray(ray);
         if r.tmax.is_nan() || r.tmax < r.tmin {
-            return TraceResult {
-                hit: None,
-                termination: Termination::Miss,
-                work,
-            };
+            return TraceResult::not_found(NoHit::Miss, work);
         }
         let mut best: Option<(HitSource, u32)> = None;
         if let Some(flat) = &self.flat
@@ -972,11 +963,7 @@ impl Geometry for MeshGeometry {
             work.primitive_tests += inner.primitive_tests;
         }
         let Some((source, slot)) = best else {
-            return TraceResult {
-                hit: None,
-                termination: Termination::Miss,
-                work,
-            };
+            return TraceResult::not_found(NoHit::Miss, work);
         };
         let t = r.tmax;
         let (normal, material) = match source {
@@ -999,16 +986,15 @@ impl Geometry for MeshGeometry {
                 )
             }
         };
-        TraceResult {
-            hit: Some(Hit {
+        TraceResult::found(
+            Hit {
                 t,
                 position: ray.origin + ray.dir * t,
                 normal,
                 material,
-            }),
-            termination: Termination::Hit,
+            },
             work,
-        }
+        )
     }
 
     fn occluded(&self, ray: &Ray) -> OcclusionResult {

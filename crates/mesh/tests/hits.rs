@@ -33,7 +33,7 @@ fn sphere_hits_match_the_analytic_sphere_within_the_chord_budget() {
             DVec3::new(0.2, 0.0, 0.0) - cam,
             1.0,
         );
-        match (r.hit, exact) {
+        match (r.hit(), exact) {
             (Some(h), Some(t)) => {
                 hits += 1;
                 // The mesh lies inside the sphere, within the chord budget of it.
@@ -98,7 +98,7 @@ fn bunny_hits_match_a_brute_force_f64_ray_caster() {
             let r = g.closest_hit(&ray);
             let truth =
                 brute_force_hit(&positions, &mesh.triangles, DVec3::ZERO, ray.dir.as_dvec3());
-            match (r.hit, truth) {
+            match (r.hit(), truth) {
                 (Some(h), Some(t)) => {
                     hits += 1;
                     assert!(
@@ -131,7 +131,7 @@ fn assert_same_hits(
     let mut hits = 0;
     for ray in rays {
         let (ra, rb) = (a.closest_hit(ray), b.closest_hit(ray));
-        match (ra.hit, rb.hit) {
+        match (ra.hit(), rb.hit()) {
             (Some(x), Some(y)) => {
                 hits += 1;
                 assert!(
@@ -324,7 +324,7 @@ fn planes_cover_max_distance_and_are_exact() {
         };
         let r = g.closest_hit(&ray);
         if t > 0.0 && t < 499.0 {
-            let h = r.hit.expect("plane hit within max_distance");
+            let h = r.hit().expect("plane hit within max_distance");
             assert!(
                 (f64::from(h.t) - t).abs() < 1e-5 * t.max(1.0),
                 "t {} vs {t}",
@@ -334,7 +334,7 @@ fn planes_cover_max_distance_and_are_exact() {
             checked += 1;
         } else if !(0.0..=501.0).contains(&t) {
             assert!(
-                r.hit.is_none(),
+                r.hit().is_none(),
                 "hit behind the camera or beyond max_distance at {t}"
             );
         }
@@ -401,7 +401,7 @@ fn depth_error_against_the_analytic_sphere_falls_as_the_screen_budget_shrinks() 
         let mut worst: f64 = 0.0;
         for ray in camera_rays(&s, 64) {
             if let (Some(h), Some(_)) = (
-                g.closest_hit(&ray).hit,
+                g.closest_hit(&ray).hit(),
                 ray_sphere(DVec3::ZERO, ray.dir.as_dvec3(), centre, 1.0),
             ) {
                 // The hit point's distance from the exact sphere (the chord error; depth

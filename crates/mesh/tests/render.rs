@@ -99,14 +99,14 @@ fn single_triangle_and_empty_scenes_build() {
         .expect("one triangle");
         let hits = common::camera_rays(&s, 16)
             .iter()
-            .filter(|r| marchmesh_core::Geometry::closest_hit(&g, r).hit.is_some())
+            .filter(|r| marchmesh_core::Geometry::closest_hit(&g, r).hit().is_some())
             .count();
         assert!(hits > 20, "{bvh:?}: {hits}");
     }
     let empty = common::scene(r#"{"camera": {"width": 8, "height": 8}}"#);
     let g = build(&empty, &MeshOptions::DEFAULT).expect("empty scene");
     let r = marchmesh_core::Geometry::closest_hit(&g, &common::camera_rays(&empty, 1)[0]);
-    assert!(r.hit.is_none());
+    assert!(r.hit().is_none());
 }
 
 #[test]

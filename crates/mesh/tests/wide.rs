@@ -34,7 +34,7 @@ fn both(scene: &Scene, options: MeshOptions) -> (impl Geometry, impl Geometry) {
 fn assert_identical(a: &dyn Geometry, b: &dyn Geometry, rays: &[Ray], label: &str) -> usize {
     let mut hits = 0;
     for (k, ray) in rays.iter().enumerate() {
-        let (x, y) = (a.closest_hit(ray).hit, b.closest_hit(ray).hit);
+        let (x, y) = (a.closest_hit(ray).hit(), b.closest_hit(ray).hit());
         match (x, y) {
             (Some(x), Some(y)) => {
                 hits += 1;
@@ -139,7 +139,7 @@ fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
                 t_min: 0.0,
                 t_max: f32::INFINITY,
             };
-            if g.closest_hit(&ray).hit.is_none() {
+            if g.closest_hit(&ray).hit().is_none() {
                 missed += 1;
             }
         }
@@ -179,8 +179,8 @@ fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
             packets.closest_hits(r, o);
         }
         for (k, (ray, p)) in rays.iter().zip(&out).enumerate() {
-            let one = single.closest_hit(ray).hit;
-            match (one, p.hit) {
+            let one = single.closest_hit(ray).hit();
+            match (one, p.hit()) {
                 (Some(a), Some(b)) => {
                     hits += 1;
                     assert_eq!(a.t.to_bits(), b.t.to_bits(), "scene {i} ray {k}");

@@ -37,8 +37,8 @@ use std::time::Instant;
 
 use glam::{DAffine3, DVec3};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, OcclusionResult, PrimarySamples, Ray, RayWork, RenderSpace,
-    Termination, TraceResult,
+    Geometry, GeometryReport, Hit, NoHit, OcclusionResult, PrimarySamples, Ray, RayWork,
+    RenderSpace, Termination, TraceResult,
 };
 use marchmesh_scene::Scene;
 
@@ -216,15 +216,10 @@ impl ReferenceGeometry {
                 material,
             })
         });
-        let termination = match (&hit, work.exhausted) {
-            (Some(_), _) => Termination::Hit,
-            (None, true) => Termination::MaxSteps,
-            (None, false) => Termination::Miss,
-        };
-        TraceResult {
-            hit,
-            termination,
-            work: ray_work(&work),
+        match (hit, work.exhausted) {
+            (Some(hit), _) => TraceResult::found(hit, ray_work(&work)),
+            (None, true) => TraceResult::not_found(NoHit::MaxSteps, ray_work(&work)),
+            (None, false) => TraceResult::not_found(NoHit::Miss, ray_work(&work)),
         }
     }
 }

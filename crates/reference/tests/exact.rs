@@ -93,9 +93,9 @@ proptest! {
         let dir = r.dir.as_dvec3();
         let res = g.closest_hit(&r);
         let size = 4.0;
-        match res.hit {
+        match res.hit() {
             Some(h) => {
-                prop_assert_eq!(res.termination, Termination::Hit);
+                prop_assert_eq!(res.termination(), Termination::Hit);
                 let t = f64::from(h.t);
                 let p = dir * t;
                 let f = field.distance_f64(p);
@@ -152,7 +152,7 @@ proptest! {
             }
         }
         let res = g.closest_hit(&r);
-        match (first, res.hit) {
+        match (first, res.hit()) {
             (Some(ts), Some(h)) => prop_assert!((f64::from(h.t) - ts).abs() < 2e-3, "sampled {ts}, reference {}", h.t),
             (None, None) => {}
             (Some(ts), None) => prop_assert!(false, "sampling finds the solid at {ts}, the reference misses"),
@@ -191,7 +191,7 @@ fn repetition_equals_its_flattened_copies() {
             );
             let r = ray(DVec3::ZERO, d);
             let (a, b) = (gr.closest_hit(&r), gf.closest_hit(&r));
-            match (a.hit, b.hit) {
+            match (a.hit(), b.hit()) {
                 (Some(a), Some(b)) => {
                     hits += 1;
                     assert!((a.t - b.t).abs() < 1e-5, "t {} vs {}", a.t, b.t);
@@ -215,8 +215,8 @@ fn infinite_repetition_is_walked_and_bounded() {
     // Along a lattice line between spheres: every sphere centre is 0.5 away: a miss.
     let r = ray(DVec3::ZERO, DVec3::Z);
     let res = g.closest_hit(&Ray { t_max: 200.0, ..r });
-    assert!(res.hit.is_none(), "{res:?}");
-    assert_eq!(res.termination, Termination::Miss);
+    assert!(res.hit().is_none(), "{res:?}");
+    assert_eq!(res.termination(), Termination::Miss);
     assert!(
         res.work.steps >= 200,
         "walked only {} cells",
@@ -231,7 +231,7 @@ fn infinite_repetition_is_walked_and_bounded() {
         DVec3::new(-0.4, 0.05, 1.0),
     ] {
         let r = ray(DVec3::ZERO, d);
-        let h = g.closest_hit(&r).hit.expect("hit");
+        let h = g.closest_hit(&r).hit().expect("hit");
         let dir = r.dir.as_dvec3();
         assert!((near(dir * f64::from(h.t)) - 0.2).abs() < 1e-5, "{}", h.t);
         for k in 0..2000 {
@@ -249,7 +249,7 @@ fn infinite_repetition_is_walked_and_bounded() {
     )
     .unwrap();
     let res = tight.closest_hit(&Ray { t_max: 200.0, ..r });
-    assert_eq!(res.termination, Termination::MaxSteps);
+    assert_eq!(res.termination(), Termination::MaxSteps);
 }
 
 #[test]
@@ -286,7 +286,7 @@ fn bunny_hits_match_brute_force_over_every_triangle() {
                 }
             }
             let res = g.closest_hit(&r);
-            match res.hit {
+            match res.hit() {
                 Some(h) => {
                     hits += 1;
                     assert!(
@@ -307,7 +307,7 @@ fn rays_from_inside_hit_the_exit_and_open_meshes_are_not_solids() {
     let scene = scene_with(r#"{"shape": {"box": {"half_extents": [1, 1, 1]}}}"#);
     let h = geometry(&scene)
         .closest_hit(&ray(DVec3::ZERO, DVec3::Z))
-        .hit
+        .hit()
         .unwrap();
     assert!((h.t - 1.0).abs() < 1e-6);
     assert!(
@@ -333,9 +333,9 @@ fn grazing_and_tangent_rays() {
     // The silhouette is at asin(r / d) from the view axis: 1e-6 rad inside hits, outside misses.
     let asin = (1.0f64 / 5.0).asin();
     let hit = g.closest_hit(&ray(DVec3::ZERO, DVec3::new(0.0, (asin - 1e-6).tan(), 1.0)));
-    assert!(hit.hit.is_some());
+    assert!(hit.hit().is_some());
     let miss = g.closest_hit(&ray(DVec3::ZERO, DVec3::new(0.0, (asin + 1e-6).tan(), 1.0)));
-    assert!(miss.hit.is_none());
+    assert!(miss.hit().is_none());
 }
 
 #[test]
@@ -429,7 +429,7 @@ fn far_off_axis_silhouette_matches_an_f64_pinhole() {
                 scene.render.max_distance,
             );
             let i = (row * scene.camera.width + col) as usize;
-            if (g.closest_hit(&r).termination == Termination::Hit) != truth[i] {
+            if (g.closest_hit(&r).termination() == Termination::Hit) != truth[i] {
                 f32_mismatches += 1;
             }
         }
@@ -448,7 +448,7 @@ fn far_off_axis_silhouette_matches_an_f64_pinhole() {
 fn rays_starting_inside_see_each_objects_boundary_but_one_boundary_per_csg_node() {
     let t = |objects: &str, d: DVec3| {
         let scene = scene_with(objects);
-        let h = geometry(&scene).closest_hit(&ray(DVec3::ZERO, d)).hit;
+        let h = geometry(&scene).closest_hit(&ray(DVec3::ZERO, d)).hit();
         h.map(|h| h.t).unwrap_or(f32::INFINITY)
     };
     let near = |a: f32, b: f32| (a - b).abs() < 1e-5;

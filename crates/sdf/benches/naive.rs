@@ -7,7 +7,7 @@
 
 use glam::{DAffine3, Vec3};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
+    Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
     TraceResult,
 };
 use marchmesh_field::V3;
@@ -203,10 +203,10 @@ impl Geometry for NaiveGeometry {
                 material: self.dist_mat(p).1,
             }
         });
-        TraceResult {
-            hit,
-            termination,
-            work,
+        match (hit, NoHit::try_from(termination)) {
+            (Some(hit), _) => TraceResult::found(hit, work),
+            (None, Ok(why)) => TraceResult::not_found(why, work),
+            (None, Err(_)) => TraceResult::not_found(NoHit::Miss, work),
         }
     }
 

@@ -31,8 +31,8 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 use marchmesh_core::{
-    Cone, Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, Shortcuts, SurfacePoint,
-    Termination, TraceResult, Visibility,
+    Cone, Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, Shortcuts,
+    SurfacePoint, Termination, TraceResult, Visibility,
 };
 use marchmesh_field::{Field, FieldError, FieldOptions};
 use marchmesh_scene::{MaterialId, Scene};
@@ -312,28 +312,23 @@ impl SdfGeometry {
             steps: m.evals,
             ..RayWork::default()
         };
-        if term != Termination::Hit {
-            return TraceResult {
-                hit: None,
-                termination: term,
-                work,
-            };
+        if let Ok(why) = NoHit::try_from(term) {
+            return TraceResult::not_found(why, work);
         }
         let p = m.point();
         let h = (self.normal_step * m.path_length())
             .max(p.length() * 1e-6)
             .max(1e-30);
         let (normal, material) = normal_material(p, m.dir(), h);
-        TraceResult {
-            hit: Some(Hit {
+        TraceResult::found(
+            Hit {
                 t: m.t,
                 position: p,
                 normal,
                 material,
-            }),
-            termination: Termination::Hit,
+            },
             work,
-        }
+        )
     }
 
     fn occ(m: &March, term: Termination) -> OcclusionResult {
@@ -371,13 +366,7 @@ impl SdfGeometry {
     fn closest_from_inside(&self, inside: &Inside, ray: &Ray) -> TraceResult {
         let mut m = match March::new(ray, &self.params, true) {
             Ok(m) => m,
-            Err(t) => {
-                return TraceResult {
-                    hit: None,
-                    termination: t,
-                    work: RayWork::default(),
-                };
-            }
+            Err(why) => return TraceResult::not_found(why, RayWork::default()),
         };
         let term = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
         self.finish_with(&m, term, |p, dir, h| {
@@ -401,7 +390,7 @@ impl SdfGeometry {
                 *next += 1;
                 match March::new(&rays[i], &self.params, refine) {
                     Ok(m) => return Some((i, m)),
-                    Err(t) => done(i, None, t),
+                    Err(t) => done(i, None, t.into()),
                 }
             }
             None
@@ -432,11 +421,7 @@ impl Geometry for SdfGeometry {
             return self.closest_from_inside(inside, ray);
         }
         match March::new(ray, &self.params, true) {
-            Err(t) => TraceResult {
-                hit: None,
-                termination: t,
-                work: RayWork::default(),
-            },
+            Err(why) => TraceResult::not_found(why, RayWork::default()),
             Ok(mut m) => {
                 let t = self.run(&mut m);
                 self.finish(&m, t)
@@ -449,7 +434,7 @@ impl Geometry for SdfGeometry {
             return match March::new(ray, &self.params, false) {
                 Err(t) => OcclusionResult {
                     occluded: false,
-                    termination: t,
+                    termination: t.into(),
                     work: RayWork::default(),
                 },
                 Ok(mut m) => {
@@ -461,7 +446,7 @@ impl Geometry for SdfGeometry {
         match March::new(ray, &self.params, false) {
             Err(t) => OcclusionResult {
                 occluded: false,
-                termination: t,
+                termination: t.into(),
                 work: RayWork::default(),
             },
             Ok(mut m) => {
@@ -486,11 +471,11 @@ impl Geometry for SdfGeometry {
         self.lockstep(rays, true, |i, m, t| {
             out[i] = match m {
                 Some(m) => self.finish(m, t),
-                None => TraceResult {
-                    hit: None,
-                    termination: t,
-                    work: RayWork::default(),
-                },
+                // A ray that never started marching (March::new refused it) has no hit.
+                None => TraceResult::not_found(
+                    NoHit::try_from(t).unwrap_or(NoHit::Miss),
+                    RayWork::default(),
+                ),
             };
         });
     }

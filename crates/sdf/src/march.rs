@@ -29,7 +29,7 @@
 //!   clearance (another surface closing in, e.g. at a contact).
 
 use glam::Vec3;
-use marchmesh_core::{Ray, Termination};
+use marchmesh_core::{NoHit, Ray, Termination};
 
 /// Per-ray constants shared by every ray of a geometry.
 #[derive(Debug, Clone, Copy)]
@@ -126,7 +126,7 @@ pub(crate) struct March {
 
 impl March {
     /// Starts a ray; `Err` when it cannot reach the scene's bounds (no evaluation needed).
-    pub fn new(ray: &Ray, p: &Params, refine: bool) -> Result<March, Termination> {
+    pub fn new(ray: &Ray, p: &Params, refine: bool) -> Result<March, NoHit> {
         let mut t0 = ray.t_min.max(0.0);
         let mut t1 = ray.t_max.min(p.max_distance);
         let mut end_is_miss = false;
@@ -140,10 +140,10 @@ impl March {
             let enter = nan_max(nan_max(tn.x, tn.y), tn.z);
             let exit = nan_min(nan_min(tf.x, tf.y), tf.z);
             if exit < enter || exit < t0 {
-                return Err(Termination::Miss);
+                return Err(NoHit::Miss);
             }
             if enter > t1 {
-                return Err(Termination::MaxDistance);
+                return Err(NoHit::MaxDistance);
             }
             // Start a little before the box (the field is a bound everywhere anyway).
             t0 = t0.max(enter * 0.999);
@@ -153,7 +153,7 @@ impl March {
             }
         }
         if t1.is_nan() || t1 < t0 {
-            return Err(Termination::MaxDistance);
+            return Err(NoHit::MaxDistance);
         }
         Ok(March {
             o: ray.origin,

@@ -48,9 +48,9 @@ proptest! {
         let dir = Vec3::new(px, py, 1.0).normalize();
         let r = g.closest_hit(&ray(Vec3::ZERO, dir));
         let exact = sphere_t(Vec3::ZERO, dir, Vec3::new(0.0, 0.0, 5.0), 1.0);
-        match (exact, r.hit) {
+        match (exact, r.hit()) {
             (Some(t), Some(h)) => {
-                prop_assert_eq!(r.termination, Termination::Hit);
+                prop_assert_eq!(r.termination(), Termination::Hit);
                 // On the surface to f32 precision; t as exact unless grazing (where t is
                 // ill-conditioned: a position error along the surface moves t a lot).
                 let c = Vec3::new(0.0, 0.0, 5.0);
@@ -65,7 +65,7 @@ proptest! {
                 let n = (h.position - Vec3::new(0.0, 0.0, 5.0)).normalize();
                 prop_assert!(h.normal.dot(n) > 0.9999, "normal {:?} exact {:?}", h.normal, n);
             }
-            (None, None) => prop_assert!(matches!(r.termination, Termination::Miss | Termination::MaxDistance)),
+            (None, None) => prop_assert!(matches!(r.termination(), Termination::Miss | Termination::MaxDistance)),
             // Within the hit epsilon of the silhouette either answer is acceptable.
             (e, h) => {
                 let closest = {
@@ -95,8 +95,8 @@ fn step_exhaustion_is_reported_not_drawn() {
     )
     .unwrap();
     let r = g.closest_hit(&ray(Vec3::ZERO, Vec3::new(0.0, -0.02, 1.0)));
-    assert_eq!(r.termination, Termination::MaxSteps);
-    assert!(r.hit.is_none());
+    assert_eq!(r.termination(), Termination::MaxSteps);
+    assert!(r.hit().is_none());
     assert_eq!(r.work.steps, 4);
     let o = g.occluded(&ray(Vec3::ZERO, Vec3::new(0.0, -0.02, 1.0)));
     assert_eq!(o.termination, Termination::MaxSteps);
@@ -104,8 +104,8 @@ fn step_exhaustion_is_reported_not_drawn() {
     // With the default budget it hits.
     let g = build(&s, &SdfOptions::DEFAULT).unwrap();
     let r = g.closest_hit(&ray(Vec3::ZERO, Vec3::new(0.0, -0.02, 1.0)));
-    assert_eq!(r.termination, Termination::Hit);
-    assert!((r.hit.unwrap().t - 50.01).abs() < 0.05, "{:?}", r.hit);
+    assert_eq!(r.termination(), Termination::Hit);
+    assert!((r.hit().unwrap().t - 50.01).abs() < 0.05, "{:?}", r.hit());
 }
 
 #[test]
@@ -120,19 +120,19 @@ fn max_distance_and_miss() {
     )
     .unwrap();
     let r = g.closest_hit(&ray(Vec3::ZERO, Vec3::Z));
-    assert_eq!(r.termination, Termination::MaxDistance);
+    assert_eq!(r.termination(), Termination::MaxDistance);
     let g = build(&s, &SdfOptions::DEFAULT).unwrap();
     assert_eq!(
-        g.closest_hit(&ray(Vec3::ZERO, Vec3::Z)).termination,
+        g.closest_hit(&ray(Vec3::ZERO, Vec3::Z)).termination(),
         Termination::Hit
     );
     // Pointing away from the scene box: a miss without a single evaluation.
     let r = g.closest_hit(&ray(Vec3::ZERO, -Vec3::Z));
-    assert_eq!(r.termination, Termination::Miss);
+    assert_eq!(r.termination(), Termination::Miss);
     assert_eq!(r.work.steps, 0);
     // Passing next to the sphere: a miss after leaving the box.
     let r = g.closest_hit(&ray(Vec3::ZERO, Vec3::new(0.21, 0.0, 1.0)));
-    assert_eq!(r.termination, Termination::Miss);
+    assert_eq!(r.termination(), Termination::Miss);
     assert!(r.work.steps > 0);
     // An unbounded scene (plane) ends at the max distance.
     let s = scene(
@@ -141,7 +141,7 @@ fn max_distance_and_miss() {
     );
     let g = build(&s, &SdfOptions::DEFAULT).unwrap();
     assert_eq!(
-        g.closest_hit(&ray(Vec3::ZERO, Vec3::Y)).termination,
+        g.closest_hit(&ray(Vec3::ZERO, Vec3::Y)).termination(),
         Termination::MaxDistance
     );
 }
@@ -177,10 +177,13 @@ fn over_relaxation_never_steps_through_a_thin_surface() {
                 // concerns rays that really hit (refined onto the surface).
                 let on_surface =
                     |h: &marchmesh_core::Hit| plain.field().distance(h.position).abs() < 1e-4 * h.t;
-                if let Some(ha) = a.hit.filter(on_surface) {
+                if let Some(ha) = a.hit().filter(on_surface) {
                     hits += 1;
-                    let hb = b.hit.unwrap_or_else(|| {
-                        panic!("omega {omega}: relaxed missed {d:?} ({:?})", b.termination)
+                    let hb = b.hit().unwrap_or_else(|| {
+                        panic!(
+                            "omega {omega}: relaxed missed {d:?} ({:?})",
+                            b.termination()
+                        )
                     });
                     // Depth is ill-conditioned at grazing incidence; compare elsewhere.
                     let grazing = ha.normal.dot(r.dir).abs() < 0.2;
@@ -298,8 +301,8 @@ fn scale_invariance_of_the_cone_epsilon() {
         let s = parse_scene(&json, "t", std::path::Path::new(".")).unwrap();
         let g = build(&s, &SdfOptions::DEFAULT).unwrap();
         let r = g.closest_hit(&ray(Vec3::ZERO, Vec3::new(0.0, 0.2, 1.0)));
-        assert_eq!(r.termination, Termination::Hit, "scale {scale}");
-        let t = r.hit.unwrap().t as f64 / scale;
+        assert_eq!(r.termination(), Termination::Hit, "scale {scale}");
+        let t = r.hit().unwrap().t as f64 / scale;
         let g1 = build(
             &s,
             &SdfOptions {
@@ -310,7 +313,7 @@ fn scale_invariance_of_the_cone_epsilon() {
         .unwrap();
         let t1 = g1
             .closest_hit(&ray(Vec3::ZERO, Vec3::new(0.0, 0.2, 1.0)))
-            .hit
+            .hit()
             .unwrap()
             .t as f64
             / scale;
@@ -365,7 +368,7 @@ fn normals_of_unsigned_and_bound_fields() {
     for i in 0..20 {
         for j in 0..20 {
             let d = Vec3::new(i as f32 / 40.0 - 0.25, j as f32 / 40.0 - 0.25, 1.0);
-            if let Some(h) = g.closest_hit(&ray(Vec3::ZERO, d)).hit {
+            if let Some(h) = g.closest_hit(&ray(Vec3::ZERO, d)).hit() {
                 // Within a few normal steps of an edge the field's gradient turns around
                 // the edge (correctly for the field); compare the face normal inside.
                 let q = h.position - Vec3::new(0.0, 0.0, 5.0);
@@ -396,7 +399,7 @@ fn normals_of_unsigned_and_bound_fields() {
         let d = Vec3::new(i as f32 / 40.0 - 0.12, 0.05, 1.0);
         let h = g
             .closest_hit(&ray(Vec3::ZERO, d))
-            .hit
+            .hit()
             .expect("hits the ellipsoid");
         let q = h.position - Vec3::new(0.0, 0.0, 5.0);
         assert!(((q / r).length() - 1.0).abs() < 1e-4);
@@ -471,11 +474,11 @@ fn absolute_epsilon_extremes_still_converge() {
                 );
                 let a = g.closest_hit(&r);
                 let b = reference.closest_hit(&r);
-                if a.termination == Termination::MaxSteps {
+                if a.termination() == Termination::MaxSteps {
                     exhausted += 1;
                     continue;
                 }
-                if let (Some(ha), Some(hb)) = (a.hit, b.hit)
+                if let (Some(ha), Some(hb)) = (a.hit(), b.hit())
                     && ha.normal.dot(r.dir).abs() > 0.2
                 {
                     assert!(

@@ -131,7 +131,7 @@ pub fn shadow_rays(g: &dyn Geometry, primary: &[Ray], scale: f32) -> Vec<Ray> {
     let light = Vec3::new(1.0, 2.0, -1.0).normalize();
     primary
         .iter()
-        .filter_map(|r| g.closest_hit(r).hit.map(|h| (r, h)))
+        .filter_map(|r| g.closest_hit(r).hit().map(|h| (r, h)))
         .map(|(r, h)| {
             let n = if h.normal.dot(r.dir) > 0.0 {
                 -h.normal
@@ -212,7 +212,7 @@ pub fn trace_backend(g: &dyn Geometry, primary: &[Ray], shadow: &[Ray]) -> f64 {
         .with_max_len(1)
         .map(|c| {
             c.iter()
-                .filter_map(|r| g.closest_hit(r).hit.map(|h| f64::from(h.t)))
+                .filter_map(|r| g.closest_hit(r).hit().map(|h| f64::from(h.t)))
                 .sum::<f64>()
         })
         .sum();
