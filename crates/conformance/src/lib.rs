@@ -10,11 +10,13 @@
 //! marchmesh_conformance::conformance_suite!(
 //!     backend = |scene| marchmesh_sdf::build(scene, &Default::default()).map(|g| Box::new(g) as _),
 //!     reference = |scene| marchmesh_reference::build(scene, &Default::default()).map(|g| Box::new(g) as _),
-//!     tolerance = |case| marchmesh_conformance::Tolerance::default(),
+//!     tolerance = |case: marchmesh_conformance::CaseId| marchmesh_conformance::Tolerance::default(),
 //! );
 //! ```
 //!
-//! To add a case: add it to [`CASES`] and a line to the macro's list below.
+//! To add a case: add `name => json` to the `cases!` list (which defines [`CaseId`] and
+//! [`CASES`]) and the name to one of [`conformance_suite!`]'s lists; the compiler flags a
+//! case missing from the macro and a tolerance naming a case that does not exist.
 
 use std::path::{Path, PathBuf};
 
@@ -55,9 +57,11 @@ impl Default for Tolerance {
     }
 }
 
-/// A conformance scene: a name and its JSON (camera size is forced to 64x64).
+/// A conformance scene: its id, its name and its JSON (camera size is forced to 64x64).
 pub struct Case {
-    /// Test name.
+    /// Which case.
+    pub id: CaseId,
+    /// Test name (the id's name).
     pub name: &'static str,
     /// Scene JSON; relative mesh paths resolve against `scenes/` of the repository.
     pub json: &'static str,
@@ -69,222 +73,178 @@ macro_rules! cam {
     };
 }
 
-/// Every case, each a small scene exercising one shape, operator or numerical situation.
-pub const CASES: &[Case] = &[
-    Case {
-        name: "sphere",
-        json: concat!(
+/// Declares every case once: the [`CaseId`] enum (tolerances match on it, so a misspelt case
+/// fails to compile) and [`CASES`].
+macro_rules! cases {
+    ($($name:ident => $json:expr,)*) => {
+        /// A conformance case. [`conformance_suite!`] must list every variant (an exhaustive
+        /// match in its expansion fails to compile otherwise).
+        #[allow(non_camel_case_types)]
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum CaseId {
+            $(
+                #[doc = concat!("The `", stringify!($name), "` case.")]
+                $name,
+            )*
+        }
+
+        /// Every case, each a small scene exercising one shape, operator or numerical
+        /// situation.
+        pub const CASES: &[Case] = &[$(Case { id: CaseId::$name, name: stringify!($name), json: $json }),*];
+    };
+}
+
+cases! {
+    sphere => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"sphere": {"radius": 1}}}]}"#
         ),
-    },
-    Case {
-        name: "box_rotated",
-        json: concat!(
+    box_rotated => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"box": {"half_extents": [0.8, 0.5, 0.6]}}, "transform": {"rotate_deg": [20, 35, 10]}}]}"#
         ),
-    },
-    Case {
-        name: "ellipsoid",
-        json: concat!(
+    ellipsoid => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"ellipsoid": {"radii": [1.3, 0.6, 0.8]}}, "transform": {"rotate_deg": [0, 30, 0]}}]}"#
         ),
-    },
-    Case {
-        name: "cylinder",
-        json: concat!(
+    cylinder => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"cylinder": {"radius": 0.7, "height": 1.6}}, "transform": {"rotate_deg": [25, 0, 15]}}]}"#
         ),
-    },
-    Case {
-        name: "torus",
-        json: concat!(
+    torus => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"torus": {"major_radius": 1.1, "minor_radius": 0.35}}, "transform": {"rotate_deg": [-40, 0, 0]}}]}"#
         ),
-    },
-    Case {
-        name: "plane_and_sphere_shadow",
-        json: concat!(
+    plane_and_sphere_shadow => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}},
                 {"shape": {"sphere": {"radius": 0.8}}, "transform": {"translate": [0, -0.2, 0]}}]}"#
         ),
-    },
-    Case {
-        name: "triangle",
-        json: concat!(
+    triangle => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"triangle": {"vertices": [[-1.2, -0.8, 0.3], [1.3, -0.6, -0.2], [0.1, 1.2, 0.1]]}}}]}"#
         ),
-    },
-    Case {
-        name: "nonuniform_scale",
-        json: concat!(
+    nonuniform_scale => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"scale": [1.5, 0.5, 0.8], "rotate_deg": [0, 0, 20]}}]}"#
         ),
-    },
-    Case {
-        name: "union",
-        json: concat!(
+    union => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"union": {"children": [
                 {"shape": {"box": {"half_extents": [0.6, 0.6, 0.6]}}},
                 {"shape": {"sphere": {"radius": 0.75}}, "transform": {"translate": [0.4, 0.4, -0.4]}, "material": {"color": [1, 0, 0]}}]}}}]}"#
         ),
-    },
-    Case {
-        name: "intersection",
-        json: concat!(
+    intersection => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"intersection": {"children": [
                 {"shape": {"box": {"half_extents": [0.8, 0.8, 0.8]}}},
                 {"shape": {"sphere": {"radius": 1.05}}, "material": {"color": [1, 0, 0]}}]}}, "transform": {"rotate_deg": [0, 30, 0]}}]}"#
         ),
-    },
-    Case {
-        name: "subtraction",
-        json: concat!(
+    subtraction => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"subtraction": {"children": [
                 {"shape": {"box": {"half_extents": [0.8, 0.8, 0.8]}}},
                 {"shape": {"sphere": {"radius": 0.9}}, "transform": {"translate": [0, 0.5, -0.5]}, "material": {"color": [1, 0, 0]}}]}}, "transform": {"rotate_deg": [0, -25, 0]}}]}"#
         ),
-    },
-    Case {
-        name: "smooth_union",
-        json: concat!(
+    smooth_union => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"smooth_union": {"blend_radius": 0.4, "children": [
                 {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [-0.5, 0, 0]}},
                 {"shape": {"sphere": {"radius": 0.6}}, "transform": {"translate": [0.6, 0.1, 0]}}]}}}]}"#
         ),
-    },
-    Case {
-        name: "repeat_finite",
-        json: concat!(
+    repeat_finite => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"repeat": {"period": [1, 0, 1], "count": [3, null, 2],
                 "child": {"shape": {"sphere": {"radius": 0.35}}}}}}]}"#
         ),
-    },
     // Copies wider than their cells: the union of whole copies, never clipped at the border
     // (a clipped rendering of this scene differs on ~400 px at 256x256).
-    Case {
-        name: "repeat_overlapping",
-        json: concat!(
+    repeat_overlapping => concat!(
             "{",
             cam!(),
             r#", "objects": [{"shape": {"repeat": {"period": [1, 0, 1], "count": [3, null, 3],
                 "child": {"shape": {"sphere": {"radius": 0.45}}, "transform": {"translate": [0.3, 0, 0.2]}}}}}]}"#
         ),
-    },
-    Case {
-        name: "repeat_infinite",
-        json: r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50},
+    repeat_infinite => r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50},
             "objects": [{"shape": {"repeat": {"period": [2, 0, 2],
                 "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}],
             "render": {"max_distance": 40}}"#,
-    },
-    Case {
-        name: "tiny_scale",
-        json: r#"{"camera": {"position": [0, 1.5e-3, -5e-3], "look_at": [0, 0, 0], "vfov_deg": 40},
+    tiny_scale => r#"{"camera": {"position": [0, 1.5e-3, -5e-3], "look_at": [0, 0, 0], "vfov_deg": 40},
             "objects": [{"shape": {"torus": {"major_radius": 1.1e-3, "minor_radius": 0.35e-3}}, "transform": {"rotate_deg": [-40, 0, 0]}},
                         {"shape": {"box": {"half_extents": [3e-3, 1e-4, 3e-3]}}, "transform": {"translate": [0, -1e-3, 0]}}],
             "render": {"max_distance": 1}}"#,
-    },
-    Case {
-        name: "huge_scale",
-        json: r#"{"camera": {"position": [0, 1.5e3, -5e3], "look_at": [0, 0, 0], "vfov_deg": 40},
+    huge_scale => r#"{"camera": {"position": [0, 1.5e3, -5e3], "look_at": [0, 0, 0], "vfov_deg": 40},
             "objects": [{"shape": {"torus": {"major_radius": 1.1e3, "minor_radius": 0.35e3}}, "transform": {"rotate_deg": [-40, 0, 0]}},
                         {"shape": {"box": {"half_extents": [3e3, 1e2, 3e3]}}, "transform": {"translate": [0, -1e3, 0]}}],
             "render": {"max_distance": 1e5}}"#,
-    },
-    Case {
-        name: "far_from_origin",
-        json: r#"{"camera": {"position": [1e5, 1e5, 1e5], "look_at": [1e5, 1e5, 1.00005e5]},
+    far_from_origin => r#"{"camera": {"position": [1e5, 1e5, 1e5], "look_at": [1e5, 1e5, 1.00005e5]},
             "objects": [{"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [1e5, 1e5, 1.00005e5]}}]}"#,
-    },
     // A ray starting inside a solid (scenes/README.md, "Rays that start inside a solid"):
     // top-level objects are independent surfaces, so a ray sees the first boundary crossing
     // of any object; a CSG node is one solid whose boundary is seen.
-    Case {
-        name: "camera_inside_one",
-        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60},
+    camera_inside_one => r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60},
             "objects": [{"shape": {"sphere": {"radius": 5}}},
                         {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [0, 0, 2]}, "material": {"color": [1, 0, 0]}}]}"#,
-    },
-    Case {
-        name: "camera_inside_two",
-        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+    camera_inside_two => r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
             "objects": [{"shape": {"sphere": {"radius": 3}}, "transform": {"translate": [0, 0, 0.5]}},
                         {"shape": {"box": {"half_extents": [1.5, 1.2, 4]}}, "transform": {"translate": [0.4, 0.2, 0], "rotate_deg": [0, 15, 10]}, "material": {"color": [1, 0, 0]}}]}"#,
-    },
-    Case {
-        name: "camera_inside_subtraction",
-        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+    camera_inside_subtraction => r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
             "objects": [{"shape": {"subtraction": {"children": [
                 {"shape": {"box": {"half_extents": [3, 3, 4]}}},
                 {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0.3, 0, 2.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
-    },
-    Case {
-        name: "camera_inside_union",
-        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
+    camera_inside_union => r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
             "objects": [{"shape": {"union": {"children": [
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 0.5]}},
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [1.5, 0, 1.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
-    },
-    Case {
-        name: "camera_inside_repeat",
-        json: r#"{"camera": {"position": [0, 0, 0], "look_at": [0.3, 0.2, 1], "vfov_deg": 80},
+    camera_inside_repeat => r#"{"camera": {"position": [0, 0, 0], "look_at": [0.3, 0.2, 1], "vfov_deg": 80},
             "objects": [{"shape": {"repeat": {"period": [1.2, 0, 1.2], "count": [3, null, 3],
                 "child": {"shape": {"sphere": {"radius": 1}}}}}}]}"#,
-    },
     // A flattened, rotated sphere in front of a two-sided triangle, seen with a 5 degree
     // field of view: sphere tracing once reported interior pixels of the triangle as misses.
-    Case {
-        name: "flat_ellipsoid_before_triangle",
-        json: r#"{"camera": {"position": [6, 8, -60], "look_at": [0, 0.5, 0], "vfov_deg": 5},
+    flat_ellipsoid_before_triangle => r#"{"camera": {"position": [6, 8, -60], "look_at": [0, 0.5, 0], "vfov_deg": 5},
             "objects": [
                 {"shape": {"triangle": {"vertices": [[-2, -1, 1], [2, -0.8, 1.5], [0.2, 2.2, 2]]}}},
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0.3, -1.2, -0.5],
                     "rotate_deg": [-10, 0, 5], "scale": [0.6, 0.08, 0.5]}, "material": {"color": [1, 0, 0]}}]}"#,
-    },
-    Case {
-        name: "bunny",
-        json: r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40},
+    bunny => r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40},
             "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": 0.25}}]}"#,
-    },
-];
+}
+
+impl CaseId {
+    /// The case's entry in [`CASES`].
+    pub fn case(self) -> &'static Case {
+        // Declared in variant order by `cases!`.
+        &CASES[self as usize]
+    }
+
+    /// The test name.
+    pub fn name(self) -> &'static str {
+        self.case().name
+    }
+}
 
 /// The repository's `scenes/` folder (mesh paths in cases resolve against it).
 pub fn scenes_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
 }
 
-/// Parses case `name` at 64x64.
-pub fn case_scene(name: &str) -> Scene {
-    let case = CASES
-        .iter()
-        .find(|c| c.name == name)
-        .unwrap_or_else(|| panic!("no conformance case named {name}"));
+/// Parses case `id` at 64x64.
+pub fn case_scene(id: CaseId) -> Scene {
+    let case = id.case();
+    let name = case.name;
     marchmesh_scene::parse_scene(case.json, case.name, &scenes_dir())
         .and_then(|s| s.with_image_size(SIDE, SIDE).map_err(|e| panic!("{e}")))
         .unwrap_or_else(|e| panic!("conformance case {name} is invalid: {e}"))
@@ -302,13 +262,14 @@ pub struct CaseResult {
 /// A function that builds a geometry for a scene.
 pub type Builder<'a, E> = &'a dyn Fn(&Scene) -> Result<Box<dyn Geometry>, E>;
 
-/// Renders case `name` with both builders and compares.
+/// Renders case `id` with both builders and compares.
 pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
-    name: &str,
+    id: CaseId,
     backend: Builder<'_, E1>,
     reference: Builder<'_, E2>,
 ) -> CaseResult {
-    let scene = case_scene(name);
+    let name = id.name();
+    let scene = case_scene(id);
     let bg = BackgroundSampler::load(&scene.background).expect("colour background");
     let opts = RenderOptions {
         threads: 1,
@@ -332,16 +293,20 @@ pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
 /// Cases whose silhouette must match the reference to [`TWO_PIXEL_SILHOUETTE`] pixels on every
 /// backend, whatever its tolerance says: minimal scenes where any disagreement is a bug in
 /// what the scene means, not an approximation (issue 10's camera-inside and sdf-holes scenes).
-pub const TWO_PIXEL_CASES: &[&str] = &["camera_inside_one", "flat_ellipsoid_before_triangle"];
+pub const TWO_PIXEL_CASES: &[CaseId] = &[
+    CaseId::camera_inside_one,
+    CaseId::flat_ellipsoid_before_triangle,
+];
 
 /// Silhouette pixels allowed on [`TWO_PIXEL_CASES`].
 pub const TWO_PIXEL_SILHOUETTE: usize = 2;
 
 /// Panics with every violated bound of `tol` (and of [`TWO_PIXEL_CASES`]).
-pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
+pub fn check(id: CaseId, r: &CaseResult, tol: &Tolerance) {
+    let name = id.name();
     let a = &r.accuracy;
     let mut failures = Vec::new();
-    if TWO_PIXEL_CASES.contains(&name) && a.silhouette_mismatch > TWO_PIXEL_SILHOUETTE {
+    if TWO_PIXEL_CASES.contains(&id) && a.silhouette_mismatch > TWO_PIXEL_SILHOUETTE {
         failures.push(format!(
             "{} silhouette pixels > {TWO_PIXEL_SILHOUETTE}",
             a.silhouette_mismatch
@@ -395,7 +360,9 @@ pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
 /// Instantiates one `#[test]` per conformance case for a backend.
 ///
 /// `backend` and `reference` are closures `Fn(&Scene) -> Result<Box<dyn Geometry>, E>`;
-/// `tolerance` is a closure `Fn(&str) -> Tolerance` giving the bounds for each case name.
+/// `tolerance` is a function `fn(CaseId) -> Tolerance` giving the bounds for each case. The
+/// lists below must name every [`CaseId`] exactly once: an exhaustive match in the expansion
+/// fails to compile when one is missing, and a misspelt one does not exist.
 /// Two groups can be marked `#[ignore = reason]` for a backend that does not meet them yet:
 /// `ignore_inside_overlapping = "reason"` (a camera inside overlapping solids:
 /// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`, `camera_inside_repeat`) and
@@ -404,15 +371,30 @@ pub fn check(name: &str, r: &CaseResult, tol: &Tolerance) {
 macro_rules! conformance_suite {
     (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr
      $(, ignore_inside_overlapping = $inside:literal)? $(, ignore_flat_ellipsoid = $flat:literal)? $(,)?) => {
-        $crate::conformance_suite!(@group $backend, $reference, $tol, [];
-            sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
-            nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
-            repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_subtraction,
-            bunny);
+        $crate::conformance_suite!(@all $backend, $reference, $tol, [$($inside)?], [$($flat)?];
+            [sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
+             nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
+             repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin,
+             camera_inside_subtraction, bunny],
+            [camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat],
+            [flat_ellipsoid_before_triangle]);
+    };
+    (@all $backend:expr, $reference:expr, $tol:expr, [$($inside:literal)?], [$($flat:literal)?];
+     [$($plain:ident),*], [$($overlapping:ident),*], [$($ellipsoid:ident),*]) => {
+        $crate::conformance_suite!(@group $backend, $reference, $tol, []; $($plain),*);
         $crate::conformance_suite!(@group $backend, $reference, $tol, [$($inside)?];
-            camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat);
+            $($overlapping),*);
         $crate::conformance_suite!(@group $backend, $reference, $tol, [$($flat)?];
-            flat_ellipsoid_before_triangle);
+            $($ellipsoid),*);
+        /// Compile-time check that the lists above name every case.
+        #[allow(dead_code)]
+        fn every_case_is_listed(id: $crate::CaseId) {
+            match id {
+                $($crate::CaseId::$plain => {})*
+                $($crate::CaseId::$overlapping => {})*
+                $($crate::CaseId::$ellipsoid => {})*
+            }
+        }
     };
     (@group $backend:expr, $reference:expr, $tol:expr, []; $($name:ident),* $(,)?) => {
         $crate::conformance_suite!(@cases $backend, $reference, $tol, any(), ""; $($name),*);
@@ -426,12 +408,12 @@ macro_rules! conformance_suite {
             #[test]
             #[cfg_attr($ignore, ignore = $reason)]
             fn $name() {
-                let name = stringify!($name);
+                let id = $crate::CaseId::$name;
                 let backend = $backend;
                 let reference = $reference;
-                let tol: fn(&str) -> $crate::Tolerance = $tol;
-                let r = $crate::run_case(name, &backend, &reference);
-                $crate::check(name, &r, &tol(name));
+                let tol: fn($crate::CaseId) -> $crate::Tolerance = $tol;
+                let r = $crate::run_case(id, &backend, &reference);
+                $crate::check(id, &r, &tol(id));
             }
         )*
     };
@@ -442,13 +424,11 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_case_parses_and_is_listed_in_the_macro() {
-        let listed = "sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle, nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite, repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin, camera_inside_one, camera_inside_two, camera_inside_subtraction, camera_inside_union, camera_inside_repeat, flat_ellipsoid_before_triangle, bunny";
-        let names: Vec<&str> = listed.split(", ").collect();
-        assert_eq!(names.len(), CASES.len());
-        for c in CASES {
-            assert!(names.contains(&c.name), "{} not in the macro list", c.name);
-            let s = case_scene(c.name);
+    fn every_case_parses_at_the_suite_size_and_ids_index_their_entries() {
+        for (k, c) in CASES.iter().enumerate() {
+            assert_eq!(c.id as usize, k, "{}", c.name);
+            assert_eq!(c.id.name(), c.name);
+            let s = case_scene(c.id);
             assert_eq!((s.camera.width, s.camera.height), (SIDE, SIDE));
         }
     }

@@ -5,7 +5,7 @@
 //! 64x64, by design: the budget is in pixels) and 128-cell CSG extraction. Loosened cases
 //! say why; everything else meets the suite's default tolerances.
 
-use marchmesh_conformance::{Tolerance, conformance_suite};
+use marchmesh_conformance::{CaseId, Tolerance, conformance_suite};
 use marchmesh_core::Geometry;
 use marchmesh_mesh::{MeshOptions, Tessellation, build};
 use marchmesh_scene::Scene;
@@ -22,13 +22,13 @@ fn reference(scene: &Scene) -> Result<Box<dyn Geometry>, marchmesh_reference::Re
     marchmesh_reference::build(scene, &Default::default()).map(|g| Box::new(g) as Box<dyn Geometry>)
 }
 
-fn tolerance(case: &str) -> Tolerance {
+fn tolerance(case: CaseId) -> Tolerance {
     let t = Tolerance::default();
     match case {
         // Surface nets round the sharp rim where the sphere carves the box: measured 1.63 deg
         // mean normal error and 1.22% material mismatch at the rim (intersection and smooth
         // union meet the defaults).
-        "subtraction" => Tolerance {
+        CaseId::subtraction => Tolerance {
             normal_deg_mean: 2.5,
             material_mismatch_pct: 2.0,
             ..t
@@ -36,7 +36,7 @@ fn tolerance(case: &str) -> Tolerance {
         // The camera is inside overlapping copies, so the repetition is extracted as one
         // surface (128 cells): surface nets round the creases where the copies meet,
         // measured 1.49 deg mean normal error (0 silhouette pixels).
-        "camera_inside_repeat" => Tolerance {
+        CaseId::camera_inside_repeat => Tolerance {
             normal_deg_mean: 2.5,
             ..t
         },

@@ -74,7 +74,7 @@ fn assert_identical(a: &dyn Geometry, b: &dyn Geometry, rays: &[Ray], label: &st
 fn wide_matches_bvh2_on_every_conformance_case() {
     let mut total = 0;
     for case in marchmesh_conformance::CASES {
-        let scene = marchmesh_conformance::case_scene(case.name);
+        let scene = marchmesh_conformance::case_scene(case.id);
         let (bvh2, wide) = both(&scene, MeshOptions::fast());
         total += assert_identical(&bvh2, &wide, &camera_rays(&scene, 48), case.name);
     }
@@ -151,7 +151,7 @@ fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
 fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
     let mut scenes: Vec<Scene> = marchmesh_conformance::CASES
         .iter()
-        .map(|c| marchmesh_conformance::case_scene(c.name))
+        .map(|c| marchmesh_conformance::case_scene(c.id))
         .collect();
     scenes.push(scene(
         r#"{"camera": {"position": [0.02, 0.12, 0.35], "look_at": [-0.02, 0.1, 0], "vfov_deg": 40},

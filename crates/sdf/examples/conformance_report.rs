@@ -27,7 +27,7 @@ fn main() {
         "case | silhouette % | depth rel p95 | normal mean deg | normal p95 deg | material mismatch | exhaustion % | mean steps"
     );
     for c in CASES {
-        let scene = marchmesh_conformance::case_scene(c.name);
+        let scene = marchmesh_conformance::case_scene(c.id);
         match backend(&scene) {
             Err(e) => {
                 println!("{} | backend cannot build: {e}", c.name);
@@ -46,7 +46,7 @@ fn main() {
                 }
             }
         }
-        let r = run_case(c.name, &backend, &reference);
+        let r = run_case(c.id, &backend, &reference);
         let a = &r.accuracy;
         println!(
             "{} | {:.2} | {:.2e} | {:.3} | {:.3} | {} | {:.3} | {:.1}",
