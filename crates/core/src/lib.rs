@@ -6,6 +6,7 @@
 //! ([`emitter`]) and samplers ([`sampling`]), framebuffers with per-pixel AOVs ([`framebuffer`]), backgrounds and image
 //! output. It talks to geometry only through [`Geometry`]; backends never shade.
 
+pub mod backend;
 pub mod background;
 pub mod camera;
 pub mod compare;
@@ -18,6 +19,7 @@ pub mod path;
 pub mod sampling;
 pub mod stats;
 
+pub use backend::Backend;
 pub use background::{BackgroundError, BackgroundSampler};
 pub use camera::PrimarySamples;
 pub use compare::{Accuracy, compare};

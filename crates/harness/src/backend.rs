@@ -1,20 +1,22 @@
 //! One place that knows every backend: build any of them for a scene from a name and
 //! `key=value` options, as given on the command line or in a suite file.
 //!
-//! Each backend has an option table ([`option_table`]): key, value type, default and meaning.
-//! Options are applied in order onto the backend's documented defaults (later keys override
-//! earlier ones); unknown keys and unparsable values are errors that name the backend, the
-//! key and the valid keys. Range checks are left to the backend's own `build`, whose errors
-//! name the field.
+//! Each backend implements [`marchmesh_core::Backend`]: its options are a serde type in its
+//! own crate whose field doc comments are the `--opt help` text ([`option_docs`], read from
+//! the type's JSON Schema) and whose defaults are the backend's. `key=value` pairs become a
+//! JSON object deserialized into that type ([`settings`]); unknown keys and unparsable values
+//! are errors that name the backend, the key and the valid keys or the value. Range checks are
+//! left to the backend's own build, whose errors name the field. The registry is generic over
+//! the trait: a new backend is a [`BackendKind`] variant and one arm in each match below.
 
 use std::fmt;
-use std::path::PathBuf;
 use std::str::FromStr;
 
-use marchmesh_core::{DEFAULT_MEMORY_LIMIT_BYTES, Geometry};
-use marchmesh_mesh::{BuildQuality, BvhKind, MeshOptions, Tessellation};
+use marchmesh_core::{Backend, DEFAULT_MEMORY_LIMIT_BYTES, Geometry};
+use marchmesh_mesh::MeshBackend;
+use marchmesh_reference::ReferenceBackend;
 use marchmesh_scene::Scene;
-use marchmesh_sdf::{HitEpsilon, SdfOptions};
+use marchmesh_sdf::SdfBackend;
 
 /// The geometry backends.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -95,9 +97,6 @@ pub enum BackendError {
     },
 }
 
-/// Message of the reference backend's build error while it is not linked in.
-pub const NOT_BUILT: &str = "not built into this binary yet";
-
 /// Parses `key=value`.
 pub fn parse_option(s: &str) -> Result<(String, String), String> {
     match s.split_once('=') {
@@ -106,244 +105,204 @@ pub fn parse_option(s: &str) -> Result<(String, String), String> {
     }
 }
 
-/// One documented option key of a backend.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// One option key of a backend, read from its settings type's JSON Schema.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct OptionDoc {
     /// The key as written in `key=value`.
-    pub key: &'static str,
-    /// The value type (`float`, `int`, `bool`, `path|none`, or the accepted words).
-    pub ty: &'static str,
-    /// What it controls, with units.
-    pub doc: &'static str,
+    pub key: String,
+    /// The value type (`float`, `int`, `bool`, `text`, the accepted words, `|none` when it
+    /// may be unset).
+    pub ty: String,
+    /// What it controls, with units (the field's doc comment).
+    pub doc: String,
+    /// The documented default, written as it would be parsed (`none` when unset).
+    pub default: String,
 }
 
-const SDF_OPTIONS: &[OptionDoc] = &[
-    OptionDoc {
-        key: "eps_px",
-        ty: "float",
-        doc: "hit epsilon as a fraction of the pixel footprint at the point (scale invariant)",
-    },
-    OptionDoc {
-        key: "eps_abs",
-        ty: "float",
-        doc: "absolute hit epsilon, world units (replaces eps_px)",
-    },
-    OptionDoc {
-        key: "max_steps",
-        ty: "int",
-        doc: "most field evaluations per ray; rays that run out count as misses",
-    },
-    OptionDoc {
-        key: "max_distance",
-        ty: "float|none",
-        doc: "longest ray, world units; none = the scene's render.max_distance",
-    },
-    OptionDoc {
-        key: "relaxation",
-        ty: "float",
-        doc: "over-relaxation factor in [1, 2) with overlap fallback (1 = off)",
-    },
-    OptionDoc {
-        key: "refine_steps",
-        ty: "int",
-        doc: "plain steps after a hit to move it onto the surface",
-    },
-    OptionDoc {
-        key: "normal_step",
-        ty: "float",
-        doc: "central-difference normal step, fraction of the pixel footprint",
-    },
-    OptionDoc {
-        key: "lockstep",
-        ty: "bool",
-        doc: "trace batches 8 rays in lockstep (same results)",
-    },
-    OptionDoc {
-        key: "grid_res",
-        ty: "int",
-        doc: "cells on the longest side of baked mesh distance grids",
-    },
-    OptionDoc {
-        key: "cache_dir",
-        ty: "path|none",
-        doc: "folder caching baked grids (none = no disk cache)",
-    },
-    OptionDoc {
-        key: "cone_shadows",
-        ty: "bool",
-        doc: "area-light soft shadows from one cone march per light (approximate) instead of sampled rays",
-    },
-    OptionDoc {
-        key: "ao_taps",
-        ty: "int",
-        doc: "ambient occlusion from this many field taps along the normal (approximate); 0 = sampled rays",
-    },
-];
+/// The options of backend `B`, from its settings type: keys in alphabetical order.
+pub fn option_docs<B: Backend>() -> Vec<OptionDoc> {
+    let schema = serde_json::to_value(schemars::schema_for!(B::Settings)).unwrap_or_default();
+    let defaults = serde_json::to_value(B::documented_defaults()).unwrap_or_default();
+    let Some(props) = schema.get("properties").and_then(|p| p.as_object()) else {
+        return Vec::new();
+    };
+    props
+        .iter()
+        .map(|(key, prop)| (key, prop, defaults.get(key)))
+        .map(|(key, prop, default)| OptionDoc {
+            key: key.clone(),
+            // `none` is worth saying only where it is the default (elsewhere leaving the key
+            // out keeps the default).
+            ty: match default {
+                None | Some(serde_json::Value::Null) => type_text(prop, &schema),
+                Some(_) => type_text(prop, &schema).replace("|none", ""),
+            },
+            doc: prop
+                .get("description")
+                .and_then(|d| d.as_str())
+                .unwrap_or_default()
+                .replace('\n', " "),
+            default: match default {
+                None | Some(serde_json::Value::Null) => "none".into(),
+                Some(serde_json::Value::String(s)) => s.clone(),
+                Some(v) => v.to_string(),
+            },
+        })
+        .collect()
+}
 
-const MESH_OPTIONS: &[OptionDoc] = &[
-    OptionDoc {
-        key: "preset",
-        ty: "fast|default|quality",
-        doc: "start from MeshOptions::fast()/DEFAULT/quality() (give it first)",
-    },
-    OptionDoc {
-        key: "bvh",
-        ty: "bvh2|cwbvh|wide",
-        doc: "BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2",
-    },
-    OptionDoc {
-        key: "build",
-        ty: "fastest|very_fast|fast|medium|slow|very_slow",
-        doc: "obvhs build preset",
-    },
-    OptionDoc {
-        key: "tess_px",
-        ty: "float",
-        doc: "tessellation chord error on screen, pixels",
-    },
-    OptionDoc {
-        key: "tess_chord",
-        ty: "float",
-        doc: "tessellation chord error, world units (replaces tess_px)",
-    },
-    OptionDoc {
-        key: "tess_level",
-        ty: "int",
-        doc: "fixed tessellation: 8*2^level segments per turn, <= 12 (replaces tess_px)",
-    },
-    OptionDoc {
-        key: "surface_res",
-        ty: "int",
-        doc: "surface-nets cells on the longest side of CSG / smooth-union objects (8..=512)",
-    },
-    OptionDoc {
-        key: "packets",
-        ty: "bool",
-        doc: "trace 8 rays of a batch as one packet (bvh=wide, no instances)",
-    },
-    OptionDoc {
-        key: "instancing",
-        ty: "bool",
-        doc: "instance repeated shapes under a TLAS (false = flatten into one BVH)",
-    },
-    OptionDoc {
-        key: "max_instances",
-        ty: "int",
-        doc: "largest instance count an infinite repetition may expand to",
-    },
-    OptionDoc {
-        key: "max_segments",
-        ty: "int",
-        doc: "cap on segments per full turn of any parametric direction",
-    },
-];
-
-const REFERENCE_OPTIONS: &[OptionDoc] = &[];
-
-/// The documented options of `kind`.
-pub fn option_table(kind: BackendKind) -> &'static [OptionDoc] {
-    match kind {
-        BackendKind::Reference => REFERENCE_OPTIONS,
-        BackendKind::Sdf => SDF_OPTIONS,
-        BackendKind::Mesh => MESH_OPTIONS,
+/// The value type of a schema property as help text.
+fn type_text(prop: &serde_json::Value, root: &serde_json::Value) -> String {
+    let resolve = |v: &serde_json::Value| -> serde_json::Value {
+        match v.get("$ref").and_then(|r| r.as_str()) {
+            Some(r) => r
+                .strip_prefix("#/")
+                .map(|path| {
+                    path.split('/')
+                        .fold(root, |node, part| {
+                            node.get(part).unwrap_or(&serde_json::Value::Null)
+                        })
+                        .clone()
+                })
+                .unwrap_or_default(),
+            None => v.clone(),
+        }
+    };
+    let mut words: Vec<String> = Vec::new();
+    let mut add = |v: &serde_json::Value| {
+        let v = resolve(v);
+        if let Some(values) = v.get("enum").and_then(|e| e.as_array()) {
+            words.extend(values.iter().filter_map(|x| x.as_str().map(str::to_string)));
+        }
+        if let Some(options) = v.get("oneOf").and_then(|e| e.as_array()) {
+            words.extend(
+                options
+                    .iter()
+                    .filter_map(|o| o.get("const").and_then(|c| c.as_str()).map(str::to_string)),
+            );
+        }
+        let types = match v.get("type") {
+            Some(serde_json::Value::String(t)) => vec![t.clone()],
+            Some(serde_json::Value::Array(ts)) => ts
+                .iter()
+                .filter_map(|t| t.as_str().map(str::to_string))
+                .collect(),
+            _ => Vec::new(),
+        };
+        for t in types {
+            words.push(
+                match t.as_str() {
+                    "number" => "float",
+                    "integer" => "int",
+                    "boolean" => "bool",
+                    "string" => "text",
+                    "null" => "none",
+                    other => other,
+                }
+                .to_string(),
+            );
+        }
+    };
+    match prop.get("anyOf").and_then(|a| a.as_array()) {
+        Some(alternatives) => alternatives.iter().for_each(&mut add),
+        None => add(prop),
     }
+    // "none" last: the value may be left unset.
+    words.sort_by_key(|w| w == "none");
+    words.dedup();
+    words.join("|")
 }
 
-/// The default value of option `key` of `kind`, written as it would be parsed, read from
-/// the backend's `DEFAULT` options (so it cannot drift from the backend). `none` when the
-/// key is unset by default; `None` for an unknown key.
-pub fn default_value(kind: BackendKind, key: &str) -> Option<String> {
-    let f = |x: f64| format!("{x}");
-    Some(match kind {
-        BackendKind::Reference => return None,
-        BackendKind::Sdf => {
-            let o = SdfOptions::DEFAULT;
-            match key {
-                "eps_px" => match o.hit_epsilon {
-                    HitEpsilon::PixelCone(k) => f(k),
-                    HitEpsilon::Absolute(_) => "none".into(),
-                },
-                "eps_abs" => match o.hit_epsilon {
-                    HitEpsilon::Absolute(e) => f(e),
-                    HitEpsilon::PixelCone(_) => "none".into(),
-                },
-                "max_steps" => o.max_steps.to_string(),
-                "max_distance" => o.max_distance.map_or("none".into(), f),
-                "relaxation" => f(o.relaxation),
-                "refine_steps" => o.refine_steps.to_string(),
-                "normal_step" => f(o.normal_step),
-                "lockstep" => o.lockstep.to_string(),
-                "grid_res" => o.mesh_grid_resolution.to_string(),
-                "cache_dir" => o
-                    .cache_dir
-                    .map_or("none".into(), |p| p.display().to_string()),
-                "cone_shadows" => o.cone_shadows.to_string(),
-                "ao_taps" => o.ao_taps.to_string(),
-                _ => return None,
-            }
-        }
-        BackendKind::Mesh => {
-            let o = MeshOptions::DEFAULT;
-            match key {
-                "preset" => "default".into(),
-                "bvh" => match o.bvh {
-                    BvhKind::Bvh2 => "bvh2",
-                    BvhKind::CwBvh => "cwbvh",
-                    BvhKind::Wide => "wide",
-                }
-                .into(),
-                "build" => match o.build_quality {
-                    BuildQuality::Fastest => "fastest",
-                    BuildQuality::VeryFast => "very_fast",
-                    BuildQuality::Fast => "fast",
-                    BuildQuality::Medium => "medium",
-                    BuildQuality::Slow => "slow",
-                    BuildQuality::VerySlow => "very_slow",
-                }
-                .into(),
-                "tess_px" | "tess_chord" | "tess_level" => match (key, o.tessellation) {
-                    ("tess_px", Tessellation::ScreenError { pixels }) => f(pixels),
-                    ("tess_chord", Tessellation::ChordError { world }) => f(world),
-                    ("tess_level", Tessellation::FixedLevel(l)) => l.to_string(),
-                    _ => "none".into(),
-                },
-                "surface_res" => o.surface_resolution.to_string(),
-                "packets" => o.packets.to_string(),
-                "instancing" => o.instancing.to_string(),
-                "max_instances" => o.max_instances.to_string(),
-                "max_segments" => o.max_segments_per_turn.to_string(),
-                _ => return None,
-            }
-        }
-    })
-}
-
-/// The option table of `kind` as aligned text (for `--opt help`).
+/// The options of `kind` as aligned text (for `--opt help`).
 pub fn option_help(kind: BackendKind) -> String {
-    let table = option_table(kind);
+    let table = match kind {
+        BackendKind::Reference => option_docs::<ReferenceBackend>(),
+        BackendKind::Sdf => option_docs::<SdfBackend>(),
+        BackendKind::Mesh => option_docs::<MeshBackend>(),
+    };
     if table.is_empty() {
         return format!("backend `{kind}` has no options\n");
     }
     let kw = table.iter().map(|o| o.key.len()).max().unwrap_or(0);
     let tw = table.iter().map(|o| o.ty.len()).max().unwrap_or(0);
     let mut s = format!("options of backend `{kind}` (key=value):\n");
-    for o in table {
-        let d = default_value(kind, o.key).unwrap_or_default();
+    for o in &table {
         s += &format!(
             "  {:kw$}  {:tw$}  default {:8}  {}\n",
-            o.key, o.ty, d, o.doc
+            o.key, o.ty, o.default, o.doc
         );
     }
     s
 }
 
-fn valid_keys(kind: BackendKind) -> String {
-    let keys: Vec<&str> = option_table(kind).iter().map(|o| o.key).collect();
-    if keys.is_empty() {
-        "it has no options".into()
-    } else {
-        format!("valid keys: {}", keys.join(", "))
+/// A `key=value` value as JSON: `none`/`null` is null, `true`/`false` (and yes/no, on/off)
+/// booleans, finite numbers numbers; anything else, and every value of a `text` key, a
+/// string. The settings type then accepts or refuses it.
+fn json_value(value: &str, text_key: bool) -> serde_json::Value {
+    use serde_json::Value;
+    if value.eq_ignore_ascii_case("none") || value == "null" {
+        return Value::Null;
     }
+    if text_key {
+        return Value::String(value.to_string());
+    }
+    match value {
+        "true" | "yes" | "on" => return Value::Bool(true),
+        "false" | "no" | "off" => return Value::Bool(false),
+        _ => {}
+    }
+    if let Ok(u) = value.parse::<u64>() {
+        return Value::from(u);
+    }
+    if let Ok(i) = value.parse::<i64>() {
+        return Value::from(i);
+    }
+    match value
+        .parse::<f64>()
+        .ok()
+        .and_then(serde_json::Number::from_f64)
+    {
+        Some(n) => Value::Number(n),
+        None => Value::String(value.to_string()),
+    }
+}
+
+/// The settings of backend `B` from `key=value` pairs (a key given twice: the later wins).
+///
+/// Errors: [`BackendError::BadOption`] naming the backend and the key: an unknown key (with
+/// the valid keys) or a value its field refuses (with the value).
+pub fn settings<B: Backend>(
+    kind: BackendKind,
+    pairs: &[(String, String)],
+) -> Result<B::Settings, BackendError> {
+    let docs = option_docs::<B>();
+    let mut map = serde_json::Map::new();
+    for (key, value) in pairs {
+        let Some(doc) = docs.iter().find(|d| &d.key == key) else {
+            let keys: Vec<&str> = docs.iter().map(|d| d.key.as_str()).collect();
+            return Err(bad(
+                kind,
+                key,
+                if keys.is_empty() {
+                    "unknown option; it has no options".into()
+                } else {
+                    format!("unknown option; valid keys: {}", keys.join(", "))
+                },
+            ));
+        };
+        let text_key = doc.ty.split('|').any(|t| t == "text");
+        map.insert(key.clone(), json_value(value, text_key));
+    }
+    let value = serde_json::Value::Object(map);
+    serde_path_to_error::deserialize::<_, B::Settings>(&value).map_err(|e| {
+        let key = e.path().to_string();
+        let given = pairs
+            .iter()
+            .rev()
+            .find(|(k, _)| *k == key)
+            .map_or(String::new(), |(_, v)| format!(" (given `{v}`)"));
+        bad(kind, &key, format!("{}{given}", e.into_inner()))
+    })
 }
 
 fn bad(kind: BackendKind, key: &str, reason: String) -> BackendError {
@@ -354,167 +313,26 @@ fn bad(kind: BackendKind, key: &str, reason: String) -> BackendError {
     }
 }
 
-fn parse_f64(v: &str) -> Result<f64, String> {
-    match v.parse::<f64>() {
-        Ok(x) if x.is_finite() => Ok(x),
-        Ok(_) => Err(format!("`{v}` is not a finite number")),
-        Err(_) => Err(format!("`{v}` is not a number")),
-    }
-}
-
-fn parse_int<T: FromStr>(v: &str) -> Result<T, String> {
-    v.parse::<T>()
-        .map_err(|_| format!("`{v}` is not a non-negative integer in range"))
-}
-
-fn parse_bool(v: &str) -> Result<bool, String> {
-    match v {
-        "true" | "1" | "yes" | "on" => Ok(true),
-        "false" | "0" | "no" | "off" => Ok(false),
-        _ => Err(format!("`{v}` is not a boolean (true/false)")),
-    }
-}
-
-fn is_none(v: &str) -> bool {
-    v.eq_ignore_ascii_case("none")
-}
-
-/// Applies `key=value` options in order onto the SDF defaults.
-pub fn sdf_options(options: &[(String, String)]) -> Result<SdfOptions, BackendError> {
-    let kind = BackendKind::Sdf;
-    let mut o = SdfOptions::DEFAULT;
-    for (k, v) in options {
-        let r: Result<(), String> = (|| {
-            match k.as_str() {
-                "eps_px" => o.hit_epsilon = HitEpsilon::PixelCone(parse_f64(v)?),
-                "eps_abs" => o.hit_epsilon = HitEpsilon::Absolute(parse_f64(v)?),
-                "max_steps" => o.max_steps = parse_int(v)?,
-                "max_distance" => {
-                    o.max_distance = if is_none(v) {
-                        None
-                    } else {
-                        Some(parse_f64(v)?)
-                    }
-                }
-                "relaxation" => o.relaxation = parse_f64(v)?,
-                "refine_steps" => o.refine_steps = parse_int(v)?,
-                "normal_step" => o.normal_step = parse_f64(v)?,
-                "lockstep" => o.lockstep = parse_bool(v)?,
-                "grid_res" => o.mesh_grid_resolution = parse_int(v)?,
-                "cache_dir" => {
-                    o.cache_dir = if is_none(v) {
-                        None
-                    } else {
-                        Some(PathBuf::from(v))
-                    }
-                }
-                "cone_shadows" => o.cone_shadows = parse_bool(v)?,
-                "ao_taps" => o.ao_taps = parse_int(v)?,
-                _ => return Err(format!("unknown option; {}", valid_keys(kind))),
-            }
-            Ok(())
-        })();
-        r.map_err(|reason| bad(kind, k, reason))?;
-    }
-    Ok(o)
-}
-
-/// Applies `key=value` options in order onto the mesh defaults.
-pub fn mesh_options(options: &[(String, String)]) -> Result<MeshOptions, BackendError> {
-    let kind = BackendKind::Mesh;
-    let mut o = MeshOptions::DEFAULT;
-    // A preset sets every field: apply it first so `--opt x=1 --opt preset=fast` keeps x.
-    let presets_first = options
-        .iter()
-        .filter(|(k, _)| k == "preset")
-        .chain(options.iter().filter(|(k, _)| k != "preset"));
-    for (k, v) in presets_first {
-        let r: Result<(), String> = (|| {
-            match k.as_str() {
-                "preset" => {
-                    o = match v.as_str() {
-                        "fast" => MeshOptions::fast(),
-                        "default" => MeshOptions::DEFAULT,
-                        "quality" => MeshOptions::quality(),
-                        _ => return Err(format!("`{v}` is not one of fast, default, quality")),
-                    }
-                }
-                "bvh" => {
-                    o.bvh = match v.to_ascii_lowercase().as_str() {
-                        "bvh2" => BvhKind::Bvh2,
-                        "cwbvh" => BvhKind::CwBvh,
-                        "wide" => BvhKind::Wide,
-                        _ => return Err(format!("`{v}` is not one of bvh2, cwbvh, wide")),
-                    }
-                }
-                "build" => {
-                    o.build_quality = match v.as_str() {
-                        "fastest" => BuildQuality::Fastest,
-                        "very_fast" => BuildQuality::VeryFast,
-                        "fast" => BuildQuality::Fast,
-                        "medium" => BuildQuality::Medium,
-                        "slow" => BuildQuality::Slow,
-                        "very_slow" => BuildQuality::VerySlow,
-                        _ => {
-                            return Err(format!(
-                                "`{v}` is not one of fastest, very_fast, fast, medium, slow, very_slow"
-                            ));
-                        }
-                    }
-                }
-                "tess_px" => {
-                    o.tessellation = Tessellation::ScreenError {
-                        pixels: parse_f64(v)?,
-                    }
-                }
-                "tess_chord" => {
-                    o.tessellation = Tessellation::ChordError {
-                        world: parse_f64(v)?,
-                    }
-                }
-                "tess_level" => o.tessellation = Tessellation::FixedLevel(parse_int(v)?),
-                "surface_res" => o.surface_resolution = parse_int(v)?,
-                "packets" => o.packets = parse_bool(v)?,
-                "instancing" => o.instancing = parse_bool(v)?,
-                "max_instances" => o.max_instances = parse_int(v)?,
-                "max_segments" => o.max_segments_per_turn = parse_int(v)?,
-                _ => return Err(format!("unknown option; {}", valid_keys(kind))),
-            }
-            Ok(())
-        })();
-        r.map_err(|reason| bad(kind, k, reason))?;
-    }
-    Ok(o)
-}
-
-/// Checks the options of the reference backend (it has none yet).
-fn reference_options(options: &[(String, String)]) -> Result<(), BackendError> {
-    let kind = BackendKind::Reference;
-    if let Some((k, _)) = options.first() {
-        return Err(bad(
-            kind,
-            k,
-            format!("unknown option; {}", valid_keys(kind)),
-        ));
-    }
-    Ok(())
-}
-
-/// Checks `spec`'s options without building anything (suite validation).
+/// Checks `spec`'s options without building anything (for validating suite files early):
+/// unknown keys, unparsable values and inconsistent settings are errors.
 pub fn check_options(spec: &BackendSpec) -> Result<(), BackendError> {
-    match spec.kind.ok_or(BackendError::Missing)? {
-        BackendKind::Reference => reference_options(&spec.options),
-        BackendKind::Sdf => sdf_options(&spec.options).map(drop),
-        BackendKind::Mesh => mesh_options(&spec.options).map(drop),
+    let kind = spec.kind.ok_or(BackendError::Missing)?;
+    let build_err = |e: &dyn fmt::Display| BackendError::BadOption {
+        backend: kind,
+        key: "options".into(),
+        reason: e.to_string(),
+    };
+    match kind {
+        BackendKind::Reference => settings::<ReferenceBackend>(kind, &spec.options).map(drop),
+        BackendKind::Sdf => settings::<SdfBackend>(kind, &spec.options).map(drop),
+        BackendKind::Mesh => settings::<MeshBackend>(kind, &spec.options)?
+            .options()
+            .map(drop)
+            .map_err(|e| build_err(&e)),
     }
 }
 
-/// Whether `kind` is linked into this binary.
-pub fn is_available(_kind: BackendKind) -> bool {
-    true
-}
-
-/// Builds the backend named in `spec` for `scene`.
+/// Builds `kind`'s geometry for `scene` from `key=value` options (default memory limit).
 pub fn build(scene: &Scene, spec: &BackendSpec) -> Result<Box<dyn Geometry>, BackendError> {
     build_within(scene, spec, DEFAULT_MEMORY_LIMIT_BYTES)
 }
@@ -529,40 +347,38 @@ pub fn build_within(
     memory_limit_bytes: u64,
 ) -> Result<Box<dyn Geometry>, BackendError> {
     let kind = spec.kind.ok_or(BackendError::Missing)?;
-    let build_err = |e: &dyn fmt::Display| BackendError::Build {
-        backend: kind,
-        reason: e.to_string(),
-    };
     match kind {
         BackendKind::Reference => {
-            reference_options(&spec.options)?;
-            let g =
-                marchmesh_reference::build(scene, &marchmesh_reference::ReferenceOptions::DEFAULT)
-                    .map_err(|e| build_err(&e))?;
-            Ok(Box::new(g))
+            build_as::<ReferenceBackend>(kind, scene, &spec.options, memory_limit_bytes)
         }
-        BackendKind::Sdf => {
-            let o = SdfOptions {
-                memory_limit_bytes,
-                ..sdf_options(&spec.options)?
-            };
-            let g = marchmesh_sdf::build(scene, &o).map_err(|e| build_err(&e))?;
-            Ok(Box::new(g))
-        }
+        BackendKind::Sdf => build_as::<SdfBackend>(kind, scene, &spec.options, memory_limit_bytes),
         BackendKind::Mesh => {
-            let o = MeshOptions {
-                memory_limit_bytes,
-                ..mesh_options(&spec.options)?
-            };
-            let g = marchmesh_mesh::build(scene, &o).map_err(|e| build_err(&e))?;
-            Ok(Box::new(g))
+            build_as::<MeshBackend>(kind, scene, &spec.options, memory_limit_bytes)
         }
     }
+}
+
+/// Parses `B`'s settings and builds it.
+fn build_as<B: Backend>(
+    kind: BackendKind,
+    scene: &Scene,
+    pairs: &[(String, String)],
+    memory_limit_bytes: u64,
+) -> Result<Box<dyn Geometry>, BackendError> {
+    let settings = settings::<B>(kind, pairs)?;
+    let geometry =
+        B::build(scene, &settings, memory_limit_bytes).map_err(|e| BackendError::Build {
+            backend: kind,
+            reason: e.to_string(),
+        })?;
+    Ok(Box::new(geometry))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use marchmesh_mesh::{BuildQuality, BvhKind, MeshOptions, Tessellation};
+    use marchmesh_sdf::{HitEpsilon, SdfOptions};
 
     fn opts(pairs: &[(&str, &str)]) -> Vec<(String, String)> {
         pairs
@@ -571,56 +387,72 @@ mod tests {
             .collect()
     }
 
+    fn sdf(pairs: &[(&str, &str)]) -> Result<SdfOptions, BackendError> {
+        settings::<SdfBackend>(BackendKind::Sdf, &opts(pairs)).map(|s| s.options())
+    }
+
+    fn mesh(pairs: &[(&str, &str)]) -> Result<MeshOptions, String> {
+        settings::<MeshBackend>(BackendKind::Mesh, &opts(pairs))
+            .map_err(|e| e.to_string())?
+            .options()
+            .map_err(|e| e.to_string())
+    }
+
+    /// Every key with its documented default, as `key=value` pairs.
+    fn documented(kind: BackendKind, docs: Vec<OptionDoc>) -> Vec<(String, String)> {
+        let pairs: Vec<(String, String)> = docs
+            .into_iter()
+            .filter(|d| d.default != "none")
+            .map(|d| (d.key, d.default))
+            .collect();
+        assert!(!pairs.is_empty(), "{kind}");
+        pairs
+    }
+
     #[test]
-    fn every_documented_key_parses_its_default_or_an_example() {
-        for kind in [BackendKind::Sdf, BackendKind::Mesh] {
-            for o in option_table(kind) {
-                let d = default_value(kind, o.key).expect("every key has a default");
-                let value = match (d.as_str(), o.ty) {
-                    ("none", "float") => "0.01".to_string(),
-                    ("none", "int") => "3".to_string(),
-                    _ => d,
+    fn the_documented_defaults_parse_back_to_the_backends_defaults() {
+        let s = documented(BackendKind::Sdf, option_docs::<SdfBackend>());
+        let got = settings::<SdfBackend>(BackendKind::Sdf, &s).expect("defaults parse");
+        assert_eq!(got.options(), SdfOptions::DEFAULT);
+        let m = documented(BackendKind::Mesh, option_docs::<MeshBackend>());
+        let got = settings::<MeshBackend>(BackendKind::Mesh, &m).expect("defaults parse");
+        assert_eq!(got.options().expect("consistent"), MeshOptions::DEFAULT);
+    }
+
+    #[test]
+    fn every_key_has_a_type_a_doc_and_accepts_an_example() {
+        for (kind, docs) in [
+            (BackendKind::Sdf, option_docs::<SdfBackend>()),
+            (BackendKind::Mesh, option_docs::<MeshBackend>()),
+        ] {
+            for d in docs {
+                assert!(!d.ty.is_empty() && !d.doc.is_empty(), "{kind} {d:?}");
+                let example = match (d.default.as_str(), d.ty.split('|').next()) {
+                    ("none", Some("float")) => "0.01".to_string(),
+                    ("none", Some("int")) => "3".to_string(),
+                    ("none", Some("text")) => "somewhere".to_string(),
+                    (default, _) => default.to_string(),
                 };
                 let spec = BackendSpec {
                     kind: Some(kind),
-                    options: opts(&[(o.key, &value)]),
+                    options: opts(&[(&d.key, &example)]),
                 };
-                check_options(&spec).unwrap_or_else(|e| panic!("{kind} {}: {e}", o.key));
+                check_options(&spec).unwrap_or_else(|e| panic!("{kind} {}: {e}", d.key));
             }
         }
     }
 
     #[test]
-    fn defaults_in_the_table_match_the_structs() {
-        let all_defaults = |kind| -> Vec<(String, String)> {
-            option_table(kind)
-                .iter()
-                .filter_map(|o| {
-                    let d = default_value(kind, o.key)?;
-                    (d != "none" || o.ty.contains("none")).then(|| (o.key.to_string(), d))
-                })
-                .collect()
-        };
-        assert_eq!(
-            sdf_options(&all_defaults(BackendKind::Sdf)).unwrap(),
-            SdfOptions::DEFAULT
-        );
-        assert_eq!(
-            mesh_options(&all_defaults(BackendKind::Mesh)).unwrap(),
-            MeshOptions::DEFAULT
-        );
-    }
-
-    #[test]
     fn values_land_in_the_right_fields() {
-        let s = sdf_options(&opts(&[
+        let s = sdf(&[
             ("eps_abs", "1e-4"),
             ("max_steps", "64"),
             ("relaxation", "1.5"),
             ("grid_res", "32"),
             ("max_distance", "100"),
             ("lockstep", "false"),
-        ]))
+            ("cache_dir", "123"),
+        ])
         .unwrap();
         assert_eq!(s.hit_epsilon, HitEpsilon::Absolute(1e-4));
         assert_eq!(s.max_steps, 64);
@@ -628,40 +460,38 @@ mod tests {
         assert_eq!(s.mesh_grid_resolution, 32);
         assert_eq!(s.max_distance, Some(100.0));
         assert!(!s.lockstep);
+        assert_eq!(
+            s.cache_dir,
+            Some("123".into()),
+            "a path key keeps digits as text"
+        );
         // Issue 11 item 16: a preset given after an option no longer drops that option.
-        let late = mesh_options(&opts(&[("bvh", "cwbvh"), ("preset", "fast")])).unwrap();
+        let late = mesh(&[("bvh", "cwbvh"), ("preset", "fast")]).unwrap();
         assert_eq!(late.bvh, BvhKind::CwBvh);
-        let m = mesh_options(&opts(&[
+        let m = mesh(&[
             ("preset", "fast"),
             ("bvh", "cwbvh"),
             ("build", "very_slow"),
             ("tess_level", "5"),
             ("surface_res", "48"),
             ("instancing", "false"),
-        ]))
+        ])
         .unwrap();
         assert_eq!(m.bvh, BvhKind::CwBvh);
         assert_eq!(m.build_quality, BuildQuality::VerySlow);
         assert_eq!(m.tessellation, Tessellation::FixedLevel(5));
         assert_eq!(m.surface_resolution, 48);
         assert!(!m.instancing);
-        let later_wins = mesh_options(&opts(&[("tess_level", "5"), ("tess_px", "2")])).unwrap();
-        assert_eq!(
-            later_wins.tessellation,
-            Tessellation::ScreenError { pixels: 2.0 }
-        );
+        let e = mesh(&[("tess_level", "5"), ("tess_px", "2")]).unwrap_err();
+        assert!(e.contains("one of tess_px, tess_chord, tess_level"), "{e}");
     }
 
     #[test]
     fn unknown_keys_name_backend_key_and_valid_keys() {
-        let e = sdf_options(&opts(&[("epsilon", "0.1")]))
-            .unwrap_err()
-            .to_string();
+        let e = sdf(&[("epsilon", "0.1")]).unwrap_err().to_string();
         assert!(e.contains("`sdf`") && e.contains("`epsilon`"), "{e}");
         assert!(e.contains("eps_abs") && e.contains("max_steps") && e.contains("grid_res"));
-        let e = mesh_options(&opts(&[("tess", "1")]))
-            .unwrap_err()
-            .to_string();
+        let e = mesh(&[("tess", "1")]).unwrap_err();
         assert!(e.contains("`mesh`") && e.contains("`tess`") && e.contains("tess_level"));
         let e = check_options(&BackendSpec {
             kind: Some(BackendKind::Reference),
@@ -708,10 +538,19 @@ mod tests {
     }
 
     #[test]
-    fn help_lists_every_key() {
+    fn help_lists_every_key_with_its_type_and_default() {
         let h = option_help(BackendKind::Mesh);
-        for o in option_table(BackendKind::Mesh) {
-            assert!(h.contains(o.key));
+        for d in option_docs::<MeshBackend>() {
+            assert!(h.contains(&d.key), "{h}");
         }
+        assert!(h.contains("bvh2|cwbvh|wide"), "{h}");
+        assert!(h.contains("default wide"), "{h}");
+        let h = option_help(BackendKind::Sdf);
+        assert!(h.contains("eps_abs") && h.contains("float|none"), "{h}");
+        assert!(
+            h.contains("eps_px        float  "),
+            "no |none where a default exists: {h}"
+        );
+        assert!(option_help(BackendKind::Reference).contains("has no options"));
     }
 }

@@ -27,6 +27,7 @@ mod options;
 // states why the CPU feature is present); the only unsafe code besides the counting allocator.
 #[allow(unsafe_code)]
 mod packet;
+mod settings;
 pub mod tessellate;
 #[allow(unsafe_code)]
 mod wide;
@@ -51,6 +52,7 @@ pub use options::{
     BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, MAX_SEGMENTS_PER_TURN, MeshOptions,
     Tessellation,
 };
+pub use settings::{MeshBackend, MeshPreset, MeshSettings};
 use tessellate::{Detail, LocalMesh, ScreenBudget};
 
 /// Why the mesh backend could not build a scene.

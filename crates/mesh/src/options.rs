@@ -2,9 +2,12 @@
 //! surface-extraction resolution, instancing.
 
 use obvhs::BvhBuildParams;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 /// Which obvhs BVH layout the triangles are traversed in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
 pub enum BvhKind {
     /// Binary BVH (`obvhs::bvh2::Bvh2`), 48-byte nodes, up to 8 triangles per leaf (per preset).
     Bvh2,
@@ -18,7 +21,8 @@ pub enum BvhKind {
 }
 
 /// obvhs build presets (`BvhBuildParams::*_build()`), from fastest build to best traversal.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
 pub enum BuildQuality {
     /// `fastest_build`: PLOC with minimal search, no reinsertion, one triangle per leaf.
     Fastest,

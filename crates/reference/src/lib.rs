@@ -267,3 +267,40 @@ impl Geometry for ReferenceGeometry {
         self.report.clone()
     }
 }
+
+/// `key=value` options of the reference backend: none (it is exact; its internal limits
+/// are [`ReferenceOptions`] and stay at their defaults). Unknown keys are refused.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(deny_unknown_fields)]
+pub struct ReferenceSettings {}
+
+/// The reference backend: exact analytic f64 ray casting, the ground truth.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReferenceBackend;
+
+impl marchmesh_core::Backend for ReferenceBackend {
+    const NAME: &'static str = "reference";
+    type Settings = ReferenceSettings;
+    type Error = ReferenceError;
+    type Geometry = ReferenceGeometry;
+
+    /// The reference keeps only the scene's meshes, whose reads are capped; it is not
+    /// estimated against `memory_limit_bytes`.
+    fn build(
+        scene: &Scene,
+        _settings: &ReferenceSettings,
+        _memory_limit_bytes: u64,
+    ) -> Result<ReferenceGeometry, ReferenceError> {
+        build(scene, &ReferenceOptions::DEFAULT)
+    }
+}

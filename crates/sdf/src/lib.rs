@@ -26,6 +26,7 @@ mod cone;
 mod inside;
 mod march;
 mod options;
+mod settings;
 
 use std::time::Instant;
 
@@ -40,6 +41,7 @@ use marchmesh_scene::{MaterialId, Scene};
 use inside::Inside;
 use march::{March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
+pub use settings::{SdfBackend, SdfSettings};
 
 /// Why the SDF backend could not build a scene.
 #[derive(Debug, thiserror::Error)]
