@@ -27,7 +27,7 @@ fn stop_flag() -> Arc<AtomicBool> {
             eprintln!("\nsecond Ctrl-C: exiting without writing");
             std::process::exit(130);
         }
-        eprintln!("\nCtrl-C: stopping after the current configuration (Ctrl-C again to abort)");
+        eprintln!("\nCtrl-C: stopping after the current round (Ctrl-C again to abort)");
     });
     stop
 }
@@ -60,11 +60,62 @@ impl Bars {
     }
 }
 
+/// Writes `results.json` of the run so far after every rotation block, atomically: a crash or
+/// kill loses at most the block being measured, and the folder says what is missing.
+struct Checkpointing<'a> {
+    bars: Bars,
+    template: &'a Results,
+    dir: &'a Path,
+}
+
+impl Progress for Checkpointing<'_> {
+    fn start(&mut self, total: usize) {
+        self.bars.start(total);
+    }
+    fn config(&mut self, index: usize, id: &str) {
+        self.bars.config(index, id);
+    }
+    fn phase(&mut self, what: &str) {
+        self.bars.phase(what);
+    }
+    fn done(&mut self, index: usize) {
+        self.bars.done(index);
+    }
+    fn note(&mut self, message: &str) {
+        self.bars.note(message);
+    }
+    fn checkpoint(&mut self, so_far: &bench::Outcome) {
+        let results = results_of(self.template.clone(), so_far.clone());
+        if let Err(e) = results.write_json(&self.dir.join("results.json")) {
+            self.bars.note(&format!("checkpoint not written: {e}"));
+        }
+    }
+}
+
+/// `template` (suite, provenance, ...) filled with what `outcome` measured.
+fn results_of(template: Results, outcome: bench::Outcome) -> Results {
+    Results {
+        interrupted: outcome.interrupted,
+        rows: outcome.rows,
+        failures: outcome.failures,
+        references: outcome.references,
+        steps_histograms: outcome.steps_histograms,
+        timings: outcome.timings,
+        rotation_seed: Some(outcome.rotation_seed),
+        missing: outcome.missing,
+        ..template
+    }
+}
+
 impl Progress for Bars {
     fn start(&mut self, total: usize) {
         self.overall.set_length(total as u64);
     }
     fn config(&mut self, index: usize, id: &str) {
+        if let Some(b) = self.current.take() {
+            b.finish_and_clear();
+            self.multi.remove(&b);
+        }
         let bar = self.multi.add(ProgressBar::new_spinner());
         bar.set_style(
             ProgressStyle::with_template("  {spinner} {prefix}: {msg} ({elapsed})")
@@ -80,10 +131,6 @@ impl Progress for Bars {
         }
     }
     fn done(&mut self, _index: usize) {
-        if let Some(b) = self.current.take() {
-            b.finish_and_clear();
-            self.multi.remove(&b);
-        }
         self.overall.inc(1);
     }
     fn note(&mut self, message: &str) {
@@ -100,72 +147,132 @@ fn repo_root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// Appends a formatted line to a `String`.
+macro_rules! outln {
+    ($out:expr, $($arg:tt)*) => {{
+        use std::fmt::Write as _;
+        let _ = writeln!($out, $($arg)*);
+    }};
+}
+
+/// Writes `text` to stdout; a closed pipe (`marchmesh compare A B | head`) is not an error.
+fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
+    use std::io::Write as _;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("writing to stdout"),
+        _ => Ok(()),
+    }
+}
+
 pub fn bench(args: BenchArgs) -> Result<()> {
     let suite_path = suite::locate(&args.suite, &repo_root());
     let suite = suite::load(&suite_path)?;
+    if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
+        bail!(
+            "--threads {t} is over the limit of {} (0 = all cores)",
+            marchmesh_core::MAX_THREADS
+        );
+    }
+    let seed = args
+        .seed
+        .unwrap_or_else(marchmesh_harness::schedule::clock_seed);
     let options = BenchOptions {
         quick: args.quick,
         threads: args.threads,
         filter: args.filter.clone(),
         images_dir: None,
+        seed,
+        hold_memory_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
+        machine: marchmesh_harness::results::hostname(),
     };
-    let configs = bench::configurations(&suite, &options);
+    let mut configs = bench::configurations(&suite, &options);
+    if let Some(shard) = args.shard {
+        configs = bench::shard(&configs, shard);
+    }
     for s in &suite.skipped {
         eprintln!("skipped: {s}");
     }
     if args.list {
+        let mut text = String::new();
         for c in &configs {
-            println!("{}", c.id);
+            outln!(text, "{}", c.id);
         }
-        return Ok(());
+        return print_ignoring_broken_pipe(&text);
     }
     if configs.is_empty() {
         bail!(
-            "no configuration of suite {} matches the filter {:?}",
+            "no configuration of suite {} matches{}{}",
             suite_path.display(),
             args.filter
+                .as_deref()
+                .map(|f| format!(" the filter {f:?}"))
+                .unwrap_or_default(),
+            args.shard
+                .map(|s| format!(" in shard {s}"))
+                .unwrap_or_default()
         );
     }
     let (run_id, dir) = report::create_run_dir(&args.out, &suite.name)
         .with_context(|| format!("creating a run folder in {}", args.out.display()))?;
     eprintln!(
-        "suite {} ({}): {} configurations -> {}",
+        "suite {} ({}){}: {} configurations, rotation seed {seed} -> {}",
         suite.name,
         suite_path.display(),
+        args.shard
+            .map(|s| format!(" shard {s}"))
+            .unwrap_or_default(),
         configs.len(),
         dir.display()
     );
-    let provenance = Provenance::collect(command_line());
+    let template = Results {
+        run_id: run_id.clone(),
+        suite: suite.name.clone(),
+        suite_file: suite_path.display().to_string(),
+        description: suite.description.clone(),
+        provenance: Provenance::collect(command_line()),
+        interrupted: false,
+        rows: Vec::new(),
+        failures: Vec::new(),
+        skipped: suite.skipped.clone(),
+        references: Vec::new(),
+        steps_histograms: Default::default(),
+        timings: Default::default(),
+        rotation_seed: Some(seed),
+        missing: configs.iter().map(|c| c.id.clone()).collect(),
+        shard: args.shard.map(|s| s.to_string()),
+        merged_from: Vec::new(),
+    };
+    // The folder says from the start what is still missing.
+    template
+        .write_json(&dir.join("results.json"))
+        .with_context(|| format!("writing results into {}", dir.display()))?;
     let options = BenchOptions {
         images_dir: suite.images.then(|| dir.join("images")),
         ..options
     };
     let stop = stop_flag();
-    let mut bars = Bars::new();
-    let outcome = bench::run(&configs, &options, &mut bars, &stop);
-    bars.overall.finish_and_clear();
-    let elapsed = bars.started.elapsed();
-    let results = Results {
-        run_id: run_id.clone(),
-        suite: suite.name.clone(),
-        suite_file: suite_path.display().to_string(),
-        description: suite.description.clone(),
-        provenance,
-        interrupted: outcome.interrupted,
-        rows: outcome.rows,
-        failures: outcome.failures,
-        skipped: suite.skipped.clone(),
-        references: outcome.references,
-        steps_histograms: outcome.steps_histograms,
+    let mut progress = Checkpointing {
+        bars: Bars::new(),
+        template: &template,
+        dir: &dir,
     };
+    let outcome = bench::run(&configs, &options, &mut progress, &stop);
+    if let Some(b) = progress.bars.current.take() {
+        b.finish_and_clear();
+    }
+    progress.bars.overall.finish_and_clear();
+    let elapsed = progress.bars.started.elapsed();
+    let mut results = results_of(template.clone(), outcome);
+    results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
     let plots = report::write_run(&results, &dir)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing results into {}", dir.display()))?;
     println!(
-        "{}: {} configurations measured, {} failed{} in {:.1} s; {} plots",
+        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots",
         dir.display(),
         results.rows.len(),
         results.failures.len(),
+        results.missing.len(),
         if results.interrupted {
             " (interrupted)"
         } else {
@@ -177,6 +284,58 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
+    for m in &results.missing {
+        eprintln!("missing: {m}");
+    }
+    if results.interrupted {
+        bail!(
+            "interrupted: {} of {} configurations missing (listed in {})",
+            results.missing.len(),
+            configs.len(),
+            dir.join("results.json").display()
+        );
+    }
+    if !results.failures.is_empty() {
+        bail!(
+            "{} of {} configurations failed (see {})",
+            results.failures.len(),
+            configs.len(),
+            dir.join("summary.md").display()
+        );
+    }
+    Ok(())
+}
+
+/// `marchmesh merge RUN... --out DIR`.
+pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
+    refuse_non_empty(out, "--out")?;
+    let inputs = runs
+        .iter()
+        .map(|r| {
+            let res = Results::read_json(&results_path(r))?;
+            Ok((r.display().to_string(), res))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let run_id = out
+        .file_name()
+        .map_or_else(|| "merged".into(), |n| n.to_string_lossy().into_owned());
+    let merged = Results::merge(inputs, run_id, command_line())?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let plots = report::write_run(&merged, out)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("writing the merged run into {}", out.display()))?;
+    let machines: std::collections::BTreeSet<&str> =
+        merged.rows.iter().map(|r| r.machine.as_str()).collect();
+    println!(
+        "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots",
+        out.display(),
+        merged.merged_from.len(),
+        merged.rows.len(),
+        machines.len(),
+        merged.failures.len(),
+        merged.missing.len(),
+        plots.len()
+    );
     Ok(())
 }
 
@@ -206,23 +365,6 @@ pub fn report(dir: &Path) -> Result<()> {
         res.rows.len()
     );
     Ok(())
-}
-
-/// Appends a formatted line to a `String`.
-macro_rules! outln {
-    ($out:expr, $($arg:tt)*) => {{
-        use std::fmt::Write as _;
-        let _ = writeln!($out, $($arg)*);
-    }};
-}
-
-/// Writes `text` to stdout; a closed pipe (`marchmesh compare A B | head`) is not an error.
-fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
-    use std::io::Write as _;
-    match std::io::stdout().lock().write_all(text.as_bytes()) {
-        Err(e) if e.kind() != std::io::ErrorKind::BrokenPipe => Err(e).context("writing to stdout"),
-        _ => Ok(()),
-    }
 }
 
 pub fn compare(a: &Path, b: &Path) -> Result<()> {
@@ -291,7 +433,67 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
         "{matched} configurations matched (geometric mean render ratio {:.3}x); {only_a} only in A, {only_b} only in B",
         (log_sum / matched as f64).exp()
     );
+    verdict_view(&mut out, &ra, &rb);
     print_ignoring_broken_pipe(&out)
+}
+
+/// Whether every verdict of A (headlines at PSNR >= 40 dB and matched-accuracy claims) holds
+/// in B, each run read on its own clock, and how far each speed ratio moved.
+fn verdict_view(out: &mut String, ra: &Results, rb: &Results) {
+    use marchmesh_harness::verdicts::{Clock, compare_runs, movement_summary};
+    let claims = compare_runs(ra, rb, 40.0);
+    outln!(
+        out,
+        "\nverdicts (A on {} time, B on {} time; moved = change of A's winner / runner-up time ratio):",
+        Clock::for_run(ra).name(),
+        Clock::for_run(rb).name()
+    );
+    if claims.is_empty() {
+        outln!(
+            out,
+            "no verdict is in both runs (no setting has sdf and mesh rows with accuracy)"
+        );
+        return;
+    }
+    outln!(
+        out,
+        "{:<64} {:>10} {:>10} {:>6} {:>8}",
+        "claim",
+        "winner A",
+        "winner B",
+        "agree",
+        "moved"
+    );
+    for c in &claims {
+        outln!(
+            out,
+            "{:<64} {:>10} {:>10} {:>6} {:>8}",
+            c.claim,
+            c.winners.0,
+            c.winners.1,
+            if c.agree { "yes" } else { "NO" },
+            c.moved_pct.map_or("n/a".into(), |m| format!("{m:.1}%"))
+        );
+    }
+    if let Some((moved, disagree)) = movement_summary(&claims) {
+        let headlines: Vec<_> = claims
+            .iter()
+            .filter(|c| c.claim.starts_with("headline"))
+            .collect();
+        let headline_max = headlines
+            .iter()
+            .filter_map(|c| c.moved_pct)
+            .fold(0.0_f64, f64::max);
+        outln!(
+            out,
+            "{} claims: {disagree} disagree; ratios moved by median {:.1}%, at most {:.1}%; headlines: {} of {} agree, at most {headline_max:.1}% moved",
+            claims.len(),
+            moved.median,
+            moved.max,
+            headlines.iter().filter(|c| c.agree).count(),
+            headlines.len()
+        );
+    }
 }
 
 pub fn stability(args: StabilityArgs) -> Result<()> {

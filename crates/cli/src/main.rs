@@ -43,7 +43,17 @@ enum Command {
         /// The run folder (holding results.json).
         dir: PathBuf,
     },
-    /// Print the ratios of two runs, configuration by configuration (B / A).
+    /// Combine shard runs (`bench --shard K/N`) of one suite and commit into one run folder.
+    Merge {
+        /// Shard run folders (or their results.json).
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// The merged run folder (created; must be new or empty: nothing is overwritten).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Print the ratios of two runs, configuration by configuration (B / A), then whether
+    /// every headline and matched-accuracy verdict of A holds in B and how far its ratio moved.
     Compare {
         /// Baseline run folder (or its results.json).
         a: PathBuf,
@@ -75,6 +85,17 @@ struct BenchArgs {
     /// Only list the configurations.
     #[arg(long)]
     list: bool,
+    /// Run only shard K of N (1 <= K <= N): a deterministic partition of the configurations
+    /// keeping each scene's in one shard. Combine the shard folders with `marchmesh merge`.
+    #[arg(long, value_name = "K/N")]
+    shard: Option<marchmesh_harness::bench::Shard>,
+    /// Seed of the shuffled rotation order (default: from the clock; recorded in the results).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// The built geometries held at once while one scene's configurations are timed in
+    /// rotation stay within this many MiB (by their reported memory); also each build's limit.
+    #[arg(long, default_value_t = marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES >> 20)]
+    memory_limit_mib: u64,
 }
 
 #[derive(clap::Args)]
@@ -150,6 +171,7 @@ fn main() {
         }
         Command::Bench(args) => bench::bench(args),
         Command::Report { dir } => bench::report(&dir),
+        Command::Merge { runs, out } => bench::merge(&runs, &out),
         Command::Compare { a, b } => bench::compare(&a, &b),
         Command::Stability(args) => bench::stability(args),
     };
@@ -404,9 +426,7 @@ fn render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// Most worker threads `render` accepts (`--threads`): far more than any machine's cores,
-/// few enough that a typo cannot start a million threads.
-const MAX_THREADS: usize = 1024;
+use marchmesh_core::MAX_THREADS;
 
 /// Whether `--out` asks for JPEG (`.jpg`/`.jpeg`) rather than PNG (`.png`); other extensions
 /// are refused rather than written as PNG bytes under a misleading name.

@@ -263,16 +263,19 @@ fn render_works_with_every_backend_and_rejects_unknown_options() {
 fn ctrl_c_keeps_the_finished_configurations() {
     let dir = tmp("ctrlc");
     let scene = repo().join("scenes/seed-spheres.json");
+    let second = repo().join("scenes/csg.json");
     let suite = dir.join("slow.json");
     // Every configuration repeats for at least 30 s: only an interrupt ends the run early.
+    // Two scenes: two rotation blocks, the second never starts.
     std::fs::write(
         &suite,
         format!(
             r#"{{"repeats": {{"min_count": 1, "min_time_s": 30, "max_count": 100000}}, "images": false,
-                "groups": [{{"name": "g", "scenes": ["{}"], "resolutions": [{{"max_side": 16}}], "spp": 1,
+                "groups": [{{"name": "g", "scenes": ["{}", "{}"], "resolutions": [{{"max_side": 16}}], "spp": 1,
                 "threads": [1], "reference": false,
                 "backends": [{{"backend": "sdf"}}, {{"backend": "mesh"}}, {{"backend": "sdf", "label": "b"}}]}}]}}"#,
-            scene.display()
+            scene.display(),
+            second.display()
         ),
     )
     .unwrap();
@@ -303,7 +306,9 @@ fn ctrl_c_keeps_the_finished_configurations() {
     assert!(killed.success());
     let output = child.wait_with_output().unwrap();
     let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
+    // An interrupted run is not a success: scripts must not take it for a full run.
+    assert!(!output.status.success(), "{stderr}");
+    assert!(stderr.contains("interrupted: "), "{stderr}");
     assert!(
         start.elapsed().as_secs() < 30,
         "the interrupt did not stop the repeats"
@@ -311,21 +316,26 @@ fn ctrl_c_keeps_the_finished_configurations() {
     let run = only_run(&out);
     let res = Results::read_json(&run.join("results.json")).unwrap();
     assert!(res.interrupted);
-    assert_eq!(
-        res.rows.len(),
-        1,
-        "the configuration in progress finishes, no other starts"
-    );
-    assert!(res.rows[0].render_repeats >= 1);
-    assert_eq!(
-        results::read_csv(&run.join("results.csv")).unwrap().len(),
-        1
+    // The configurations of the first block built before the interrupt finish their round
+    // in progress (one repeat each); the second block never starts and is listed as missing.
+    assert!(!res.rows.is_empty());
+    assert_eq!(res.rows.len() + res.missing.len(), 6, "{:?}", res.missing);
+    assert!(
+        res.rows
+            .iter()
+            .all(|r| r.render_repeats >= 1 && r.scene == "seed-spheres")
     );
     assert!(
-        std::fs::read_to_string(run.join("summary.md"))
-            .unwrap()
-            .contains("interrupted")
+        res.missing.iter().filter(|m| m.contains("/csg/")).count() == 3,
+        "{:?}",
+        res.missing
     );
+    assert_eq!(
+        results::read_csv(&run.join("results.csv")).unwrap().len(),
+        res.rows.len()
+    );
+    let summary = std::fs::read_to_string(run.join("summary.md")).unwrap();
+    assert!(summary.contains("interrupted") && summary.contains("missing (not measured"));
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -222,7 +222,11 @@ pub struct GeometryReport {
     pub memory_bytes: u64,
     /// Build phases in order with their wall time in milliseconds (e.g. `("bvh_build", 3.2)`).
     pub build_phases_ms: Vec<(String, f64)>,
-    /// Named counts (e.g. `("triangles", 3674.0)`, `("grid_cells", 262144.0)`).
+    /// Triangles stored by the representation (each instanced triangle once), for backends
+    /// that trace triangles; `None` for the others. The harness's `triangles` column.
+    pub triangles: Option<u64>,
+    /// Named counts for diagnostics (e.g. `("grid_cells", 262144.0)`); columns read typed
+    /// fields such as [`GeometryReport::triangles`], never these names.
     pub counters: Vec<(String, f64)>,
     /// Human-readable notes on conversions and approximations made (e.g. "plane clipped to
     /// a 2000-unit quad", "mesh is open: sign from generalized winding number").

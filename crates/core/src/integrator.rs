@@ -35,6 +35,10 @@ use crate::geometry::{
 use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key, unit_from_key};
 use crate::stats::RenderStats;
 
+/// Most worker threads a render, benchmark or suite may ask for: far more than any machine's
+/// cores, few enough that a typo cannot start a million threads. Front ends refuse above it.
+pub const MAX_THREADS: usize = 1024;
+
 /// Default limit on the memory a render may allocate for its buffers: 4 GiB.
 pub const DEFAULT_MEMORY_LIMIT_BYTES: u64 = 4 << 30;
 

@@ -26,6 +26,6 @@ pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{
-    DEFAULT_MEMORY_LIMIT_BYTES, RenderError, RenderOptions, RenderOutput, render,
+    DEFAULT_MEMORY_LIMIT_BYTES, MAX_THREADS, RenderError, RenderOptions, RenderOutput, render,
 };
 pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};

@@ -1,19 +1,25 @@
 //! Runs a suite: every configuration is built, rendered once untimed (heap, RSS, accuracy,
-//! work and images come from this render), then rendered repeatedly for timing.
+//! work and images come from this render), then the configurations of one scene and resolution
+//! are timed together in shuffled rotation rounds (see [`run`]).
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use marchmesh_core::{BackgroundSampler, Framebuffer, RenderOptions, compare, image_io, render};
+use marchmesh_core::{
+    BackgroundSampler, DEFAULT_MEMORY_LIMIT_BYTES, Framebuffer, Geometry, RenderOptions, compare,
+    image_io, render,
+};
 use marchmesh_scene::{RenderOverrides, Scene};
 
 use crate::alloc::HeapPhase;
 use crate::backend::{self, BackendKind, BackendSpec};
 use crate::images;
-use crate::results::{Failure, ReferenceInfo, Row};
+use crate::results::{Failure, ReferenceInfo, Row, TimingSample};
 use crate::rss::RssPhase;
+use crate::schedule;
 use crate::stats::{RepeatPolicy, Summary};
 use crate::suite::BackendConfig;
 use crate::suite::{Resolution, Suite, glob_match};
@@ -48,7 +54,7 @@ pub struct Config {
 }
 
 /// How to run a suite.
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 pub struct BenchOptions {
     /// Use the suite's quick repeats.
     pub quick: bool,
@@ -59,6 +65,27 @@ pub struct BenchOptions {
     pub filter: Option<String>,
     /// Folder for PNGs and heatmaps (`None` = no images).
     pub images_dir: Option<PathBuf>,
+    /// Seed of the shuffled rotation orders (recorded in the results).
+    pub seed: u64,
+    /// The built representations of one rotation block held at once stay within this many
+    /// bytes (by their reported memory); a block over it is timed in parts.
+    pub hold_memory_bytes: u64,
+    /// Host name written into every row.
+    pub machine: String,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        Self {
+            quick: false,
+            threads: None,
+            filter: None,
+            images_dir: None,
+            seed: 0,
+            hold_memory_bytes: DEFAULT_MEMORY_LIMIT_BYTES,
+            machine: String::new(),
+        }
+    }
 }
 
 /// Progress callbacks.
@@ -73,6 +100,9 @@ pub trait Progress {
     fn done(&mut self, index: usize);
     /// A message for the user.
     fn note(&mut self, message: &str);
+    /// Everything measured so far, after each rotation block: the CLI writes it to disk so a
+    /// crash or kill loses at most one block.
+    fn checkpoint(&mut self, _so_far: &Outcome) {}
 }
 
 /// A progress sink that ignores everything.
@@ -100,6 +130,12 @@ pub struct Outcome {
     pub steps_histograms: BTreeMap<String, Vec<u64>>,
     /// Stopped early.
     pub interrupted: bool,
+    /// Every timed render by configuration id.
+    pub timings: BTreeMap<String, Vec<TimingSample>>,
+    /// Seed of the rotation orders.
+    pub rotation_seed: u64,
+    /// Configurations neither measured nor failed (the run stopped before them).
+    pub missing: Vec<String>,
 }
 
 fn resolve_threads(t: usize) -> usize {
@@ -251,74 +287,230 @@ fn load_scene(path: &Path, res: Resolution, render: &RenderOverrides) -> Result<
     Ok(Loaded { scene, background })
 }
 
-/// Runs `configs`. `stop` is checked between configurations (and between repeats): once set,
-/// the run ends with the rows finished so far and `interrupted = true`.
+/// Consecutive runs of `configs` measured in one rotation: same suite group, scene file,
+/// resolution and render settings (they differ in backend, quality and threads).
+pub fn rotation_blocks(configs: &[Config]) -> Vec<std::ops::Range<usize>> {
+    let key = |c: &Config| {
+        (
+            c.group.clone(),
+            c.scene_path.clone(),
+            resolution_tag(c.resolution),
+        )
+    };
+    let mut blocks: Vec<std::ops::Range<usize>> = Vec::new();
+    for (i, c) in configs.iter().enumerate() {
+        match blocks.last_mut() {
+            Some(b) if key(&configs[b.start]) == key(c) => b.end = i + 1,
+            _ => blocks.push(i..i + 1),
+        }
+    }
+    blocks
+}
+
+/// A configuration built, warmed up and compared with the reference, holding its geometry
+/// while it waits for its timed repeats.
+struct Prepared {
+    index: usize,
+    loaded: Rc<Loaded>,
+    geometry: Box<dyn Geometry>,
+    /// Every column but the timing ones.
+    row: Row,
+    histogram: Vec<u64>,
+    samples: Vec<TimingSample>,
+    /// A timed render failed: the configuration becomes a failure.
+    error: Option<String>,
+}
+
+/// Runs `configs`. Configurations of one scene and resolution ([`rotation_blocks`]) are first
+/// built, warmed up and compared with the reference one by one, their geometries held (while
+/// the representations together stay within `options.hold_memory_bytes`; otherwise the block
+/// is measured in smaller parts and a note says so), then timed in rounds: every round renders
+/// each configuration still wanting repeats once, in an order shuffled by
+/// [`schedule::round_order`] with `options.seed`. Slow drifts of the machine's load then fall
+/// on all of them alike, and per-round ratios ([`crate::stats::PairedRatio`]) cancel them.
+///
+/// `stop` is checked between configurations and between rounds: once set, the run ends with
+/// the configurations finished so far (at least one repeat each) and `interrupted = true`.
+/// `progress.checkpoint` sees the outcome after every block.
 pub fn run(
     configs: &[Config],
     options: &BenchOptions,
     progress: &mut dyn Progress,
     stop: &AtomicBool,
 ) -> Outcome {
-    let mut out = Outcome::default();
-    let mut scenes: HashMap<SceneKey, Result<Loaded, String>> = HashMap::new();
+    let mut out = Outcome {
+        rotation_seed: options.seed,
+        missing: configs.iter().map(|c| c.id.clone()).collect(),
+        ..Outcome::default()
+    };
+    let mut scenes: HashMap<SceneKey, Result<Rc<Loaded>, String>> = HashMap::new();
     let mut truths: HashMap<SceneKey, Result<Truth, String>> = HashMap::new();
     progress.start(configs.len());
-    for (index, c) in configs.iter().enumerate() {
-        if stop.load(Ordering::Relaxed) {
-            out.interrupted = true;
-            progress.note("stopped: writing the finished configurations");
+    for block in rotation_blocks(configs) {
+        let mut held: Vec<Prepared> = Vec::new();
+        let mut held_bytes = 0u64;
+        for index in block.clone() {
+            if stop.load(Ordering::Relaxed) {
+                out.interrupted = true;
+                break;
+            }
+            let c = &configs[index];
+            progress.config(index, &c.id);
+            let key = |render: &RenderOverrides| -> SceneKey {
+                format!(
+                    "{}|{}|{render:?}",
+                    c.scene_path.display(),
+                    resolution_tag(c.resolution)
+                )
+            };
+            let (loaded_key, truth_key) = (key(&c.render), key(&c.truth_render));
+            if c.reference && !truths.contains_key(&truth_key) {
+                let truth_scene = scenes.entry(truth_key.clone()).or_insert_with(|| {
+                    load_scene(&c.scene_path, c.resolution, &c.truth_render).map(Rc::new)
+                });
+                let truth = match truth_scene {
+                    Ok(truth_scene) => {
+                        progress.phase("reference");
+                        let (truth, info) = reference_render(c, truth_scene, options);
+                        out.references.push(info);
+                        truth
+                    }
+                    Err(e) => Err(format!("reference scene: {e}")),
+                };
+                if let Err(e) = &truth {
+                    progress.note(&format!("{} reference: {e}", c.scene));
+                }
+                truths.insert(truth_key.clone(), truth);
+            }
+            let loaded = scenes
+                .entry(loaded_key)
+                .or_insert_with(|| load_scene(&c.scene_path, c.resolution, &c.render).map(Rc::new));
+            let truth = if c.reference {
+                truths.get(&truth_key)
+            } else {
+                None
+            };
+            let prepared = match loaded {
+                Ok(l) => prepare(index, c, l.clone(), truth, options, progress),
+                Err(e) => Err(e.clone()),
+            };
+            match prepared {
+                Ok(p) => {
+                    let bytes = p.row.memory_bytes;
+                    if !held.is_empty()
+                        && held_bytes.saturating_add(bytes) > options.hold_memory_bytes
+                    {
+                        progress.note(&format!(
+                            "{}: the block's geometries would hold {} (limit {}): timing the {} configurations held so far in their own rotation",
+                            c.id,
+                            crate::report::bytes(held_bytes.saturating_add(bytes)),
+                            crate::report::bytes(options.hold_memory_bytes),
+                            held.len()
+                        ));
+                        let done = std::mem::take(&mut held);
+                        rotate_and_finish(done, configs, options, progress, stop, &mut out);
+                        held_bytes = 0;
+                    }
+                    held_bytes = held_bytes.saturating_add(bytes);
+                    held.push(p);
+                }
+                Err(e) => {
+                    progress.note(&format!("{}: {e}", c.id));
+                    out.failures.push(Failure {
+                        config_id: c.id.clone(),
+                        error: e,
+                    });
+                    progress.done(index);
+                }
+            }
+        }
+        rotate_and_finish(held, configs, options, progress, stop, &mut out);
+        out.missing = missing(configs, &out);
+        progress.checkpoint(&out);
+        if out.interrupted {
             break;
         }
-        progress.config(index, &c.id);
-        let key = |render: &RenderOverrides| -> SceneKey {
-            format!(
-                "{}|{}|{render:?}",
-                c.scene_path.display(),
-                resolution_tag(c.resolution)
-            )
-        };
-        let (loaded_key, truth_key) = (key(&c.render), key(&c.truth_render));
-        if c.reference && !truths.contains_key(&truth_key) {
-            let truth_scene = scenes
-                .entry(truth_key.clone())
-                .or_insert_with(|| load_scene(&c.scene_path, c.resolution, &c.truth_render));
-            let truth = match truth_scene {
-                Ok(truth_scene) => {
-                    progress.phase("reference");
-                    let (truth, info) = reference_render(c, truth_scene, options);
-                    out.references.push(info);
-                    truth
-                }
-                Err(e) => Err(format!("reference scene: {e}")),
-            };
-            if let Err(e) = &truth {
-                progress.note(&format!("{} reference: {e}", c.scene));
-            }
-            truths.insert(truth_key.clone(), truth);
+    }
+    if stop.load(Ordering::Relaxed) {
+        out.interrupted = true;
+    }
+    if out.interrupted {
+        progress.note("stopped: writing the finished configurations");
+    }
+    out.missing = missing(configs, &out);
+    out
+}
+
+/// The ids of `configs` with neither a row nor a failure in `out`.
+fn missing(configs: &[Config], out: &Outcome) -> Vec<String> {
+    configs
+        .iter()
+        .filter(|c| {
+            !out.rows.iter().any(|r| r.config_id == c.id)
+                && !out.failures.iter().any(|f| f.config_id == c.id)
+        })
+        .map(|c| c.id.clone())
+        .collect()
+}
+
+/// Times the held configurations of one block in shuffled rounds, then turns each into a row
+/// (or a failure) in `out` and drops its geometry.
+fn rotate_and_finish(
+    mut held: Vec<Prepared>,
+    configs: &[Config],
+    options: &BenchOptions,
+    progress: &mut dyn Progress,
+    stop: &AtomicBool,
+    out: &mut Outcome,
+) {
+    let Some(first) = held.first() else {
+        return;
+    };
+    let block_key = {
+        let c = &configs[first.index];
+        format!("{}/{}/{}", c.group, c.scene, resolution_tag(c.resolution))
+    };
+    let mut round = 0u32;
+    loop {
+        let active: Vec<usize> = (0..held.len())
+            .filter(|&i| {
+                let p = &held[i];
+                let total_s: f64 = p.samples.iter().map(|s| s.wall_ms).sum::<f64>() * 1e-3;
+                p.error.is_none()
+                    && configs[p.index]
+                        .repeats
+                        .wants_more(p.samples.len() as u32, total_s)
+            })
+            .collect();
+        if active.is_empty() {
+            break;
         }
-        let loaded = scenes
-            .entry(loaded_key.clone())
-            .or_insert_with(|| load_scene(&c.scene_path, c.resolution, &c.render));
-        let loaded = match loaded {
-            Ok(l) => l,
-            Err(e) => {
-                out.failures.push(Failure {
-                    config_id: c.id.clone(),
-                    error: e.clone(),
-                });
-                progress.note(&format!("{}: {e}", c.id));
-                progress.done(index);
-                continue;
+        // Every configuration has one repeat after round 0: a stop ends the run after it.
+        if round > 0 && stop.load(Ordering::Relaxed) {
+            out.interrupted = true;
+            break;
+        }
+        for i in schedule::round_order(&active, options.seed, &block_key, round) {
+            let p = &mut held[i];
+            let c = &configs[p.index];
+            progress.phase(&format!("round {}: {}", round + 1, c.id));
+            match timed_render(p, c.threads) {
+                Ok((wall_ms, cpu_ms)) => p.samples.push(TimingSample {
+                    round,
+                    wall_ms,
+                    cpu_ms,
+                }),
+                Err(e) => p.error = Some(e),
             }
-        };
-        let truth = if c.reference {
-            truths.get(&truth_key)
-        } else {
-            None
-        };
-        match measure(c, loaded, truth, options, progress, stop) {
-            Ok((row, hist)) => {
-                out.steps_histograms.insert(c.id.clone(), hist);
+        }
+        round += 1;
+    }
+    for p in held.drain(..) {
+        let c = &configs[p.index];
+        match finish_row(p.row, &p.samples, p.error) {
+            Ok(row) => {
+                out.steps_histograms.insert(c.id.clone(), p.histogram);
+                out.timings.insert(c.id.clone(), p.samples);
                 out.rows.push(row);
             }
             Err(e) => {
@@ -329,9 +521,69 @@ pub fn run(
                 });
             }
         }
-        progress.done(index);
+        progress.done(p.index);
     }
-    out
+}
+
+/// Runs `f` and returns its result with the process CPU time it took (user + system, all
+/// threads of the process), ms; `None` where the system cannot tell. Other threads of this
+/// process running meanwhile are counted too: the harness runs nothing else while timing.
+pub fn with_process_cpu_ms<T>(f: impl FnOnce() -> T) -> (T, Option<f64>) {
+    let start = cpu_time::ProcessTime::try_now().ok();
+    let out = f();
+    let cpu_ms = start
+        .and_then(|t| t.try_elapsed().ok())
+        .map(|d| d.as_secs_f64() * 1e3);
+    (out, cpu_ms)
+}
+
+/// One timed render: (wall ms, process CPU ms if the system can tell).
+fn timed_render(p: &Prepared, threads: usize) -> Result<(f64, Option<f64>), String> {
+    let ropts = RenderOptions {
+        threads,
+        ..Default::default()
+    };
+    let (o, cpu_ms) = with_process_cpu_ms(|| {
+        render(
+            &p.loaded.scene,
+            p.geometry.as_ref(),
+            &p.loaded.background,
+            &ropts,
+            &|| {},
+        )
+    });
+    let o = o.map_err(|e| format!("render: {e}"))?;
+    Ok((o.elapsed.as_secs_f64() * 1e3, cpu_ms))
+}
+
+/// Fills the timing columns of `row` from its samples.
+fn finish_row(
+    mut row: Row,
+    samples: &[TimingSample],
+    error: Option<String>,
+) -> Result<Row, String> {
+    if let Some(e) = error {
+        return Err(e);
+    }
+    let wall: Vec<f64> = samples.iter().map(|s| s.wall_ms).collect();
+    let t = Summary::of(&wall).ok_or("no timed repeat")?;
+    let cpu: Option<Vec<f64>> = samples.iter().map(|s| s.cpu_ms).collect();
+    let cpu = cpu.as_deref().and_then(Summary::of);
+    let rays = (row.rays_primary + row.rays_secondary) as f64;
+    row.render_repeats = t.n;
+    row.render_ms_median = t.median;
+    row.render_ms_min = t.min;
+    row.render_ms_max = t.max;
+    row.render_ms_mad = t.mad;
+    row.render_ms_ci_low = t.ci_low;
+    row.render_ms_ci_high = t.ci_high;
+    row.render_ci_coverage = t.ci_coverage;
+    row.mrays_per_s = rays / (t.median * 1e-3).max(1e-12) / 1e6;
+    row.render_cpu_ms_median = cpu.map(|c| c.median);
+    row.render_cpu_ms_ci_low = cpu.map(|c| c.ci_low);
+    row.render_cpu_ms_ci_high = cpu.map(|c| c.ci_high);
+    row.mrays_per_cpu_s = cpu.map(|c| rays / (c.median * 1e-3).max(1e-12) / 1e6);
+    Ok(row)
 }
 
 fn reference_render(
@@ -390,20 +642,23 @@ fn reference_render(
     }
 }
 
-fn measure(
+/// Builds configuration `index`, renders it once untimed (memory, work, accuracy and images
+/// come from this render) and returns it with every column but the timing ones.
+fn prepare(
+    index: usize,
     c: &Config,
-    l: &Loaded,
+    l: Rc<Loaded>,
     truth: Option<&Result<Truth, String>>,
     options: &BenchOptions,
     progress: &mut dyn Progress,
-    stop: &AtomicBool,
-) -> Result<(Row, Vec<u64>), String> {
+) -> Result<Prepared, String> {
     let scene = &l.scene;
     progress.phase("build");
     let heap = HeapPhase::start();
     let rss = RssPhase::start();
     let t0 = Instant::now();
-    let geometry = backend::build(scene, &c.spec).map_err(|e| e.to_string())?;
+    let geometry = backend::build_within(scene, &c.spec, options.hold_memory_bytes)
+        .map_err(|e| e.to_string())?;
     let build_ms_total = t0.elapsed().as_secs_f64() * 1e3;
     let peak_heap_bytes_build = heap.finish();
     let peak_rss_bytes_build = rss.finish();
@@ -420,20 +675,6 @@ fn measure(
         .map_err(|e| format!("render: {e}"))?;
     let peak_heap_bytes_render = heap.finish();
     let peak_rss_bytes_render = rss.finish();
-
-    let mut n = 0;
-    let samples = c.repeats.run(
-        || {
-            n += 1;
-            progress.phase(&format!("repeat {n}"));
-            render(scene, geometry.as_ref(), &l.background, &ropts, &|| {})
-                .map(|o| o.elapsed.as_secs_f64())
-                .map_err(|e| format!("render: {e}"))
-        },
-        || stop.load(Ordering::Relaxed),
-    )?;
-    let samples_ms: Vec<f64> = samples.iter().map(|s| s * 1e3).collect();
-    let t = Summary::of(&samples_ms).ok_or("no timed repeat")?;
 
     let s = &warm.stats;
     let fb = &warm.framebuffer;
@@ -462,15 +703,6 @@ fn measure(
     };
     let rel = |v: f64, size: Option<f64>| size.filter(|s| *s > 0.0).map(|s| v / s);
     let kind = c.spec.kind.map_or("?", BackendKind::name);
-    let counter = |name: &str| {
-        report
-            .counters
-            .iter()
-            .find(|(k, _)| k == name)
-            .map(|(_, v)| *v as u64)
-    };
-    let triangles = (kind == "mesh")
-        .then(|| counter("flat_triangles").unwrap_or(0) + counter("blas_triangles").unwrap_or(0));
     let total_rays = s.total_rays();
     let rates = s.mrays_per_thread_second();
     let row = Row {
@@ -492,6 +724,7 @@ fn measure(
         height: scene.camera.height,
         spp: scene.render.samples_per_pixel,
         threads: c.threads,
+        machine: options.machine.clone(),
         build_ms_total,
         build_phases_ms: report
             .build_phases_ms
@@ -499,23 +732,14 @@ fn measure(
             .map(|(k, v)| format!("{k}={v:.3}"))
             .collect::<Vec<_>>()
             .join(";"),
-        render_repeats: t.n,
-        render_ms_median: t.median,
-        render_ms_min: t.min,
-        render_ms_max: t.max,
-        render_ms_mad: t.mad,
-        render_ms_ci_low: t.ci_low,
-        render_ms_ci_high: t.ci_high,
-        render_ci_coverage: t.ci_coverage,
         rays_primary: s.primary_rays,
         rays_secondary: total_rays - s.primary_rays,
-        mrays_per_s: total_rays as f64 / (t.median * 1e-3).max(1e-12) / 1e6,
         mrays_camera_per_thread_s: rates.camera,
         mrays_shadow_per_thread_s: rates.shadow,
         mrays_ao_per_thread_s: rates.ambient_occlusion,
         mrays_bounce_per_thread_s: rates.bounce,
         memory_bytes: report.memory_bytes,
-        triangles,
+        triangles: report.triangles,
         peak_heap_bytes_build,
         peak_heap_bytes_render,
         peak_rss_bytes_build,
@@ -542,6 +766,186 @@ fn measure(
         node_visits_max: s.max_node_visits_seen,
         non_finite_count: images::non_finite(fb) + s.non_finite_hits + s.non_finite_pixels,
         notes: notes.join("; "),
+        ..Row::default()
     };
-    Ok((row, images::steps_histogram(fb)))
+    let histogram = images::steps_histogram(fb);
+    drop(warm);
+    Ok(Prepared {
+        index,
+        loaded: l.clone(),
+        geometry,
+        row,
+        histogram,
+        samples: Vec::new(),
+        error: None,
+    })
+}
+
+/// Shard `index` of `count` of a suite (`bench --shard K/N`, 1-based `K`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Shard {
+    /// Which shard, 1 ..= `count`.
+    pub index: usize,
+    /// How many shards.
+    pub count: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = String;
+
+    /// Parses `K/N` with 1 <= K <= N.
+    fn from_str(s: &str) -> Result<Self, String> {
+        let bad = || format!("--shard {s:?}: expected K/N with 1 <= K <= N, e.g. 2/8");
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (index, count): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if index == 0 || index > count {
+            return Err(bad());
+        }
+        Ok(Self { index, count })
+    }
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+/// The configurations of shard `shard`: a deterministic partition of `configs` (every
+/// configuration in exactly one shard) in which all configurations of one scene file stay
+/// together, so each scene's reference renders and rotation blocks are made once. Scenes go
+/// to shards greedily, most configurations first, each to the shard with the fewest so far
+/// (ties: lowest shard, then suite order). Suite order is kept within a shard.
+pub fn shard(configs: &[Config], shard: Shard) -> Vec<Config> {
+    let mut scenes: Vec<(&Path, usize)> = Vec::new();
+    for c in configs {
+        match scenes
+            .iter_mut()
+            .find(|(p, _)| *p == c.scene_path.as_path())
+        {
+            Some(s) => s.1 += 1,
+            None => scenes.push((c.scene_path.as_path(), 1)),
+        }
+    }
+    let mut order: Vec<usize> = (0..scenes.len()).collect();
+    order.sort_by(|&a, &b| scenes[b].1.cmp(&scenes[a].1).then(a.cmp(&b)));
+    let mut load = vec![0usize; shard.count];
+    let mut owner = vec![0usize; scenes.len()];
+    for i in order {
+        let (s, _) = load
+            .iter()
+            .enumerate()
+            .min_by_key(|&(k, l)| (*l, k))
+            .unwrap_or((0, &0));
+        owner[i] = s;
+        load[s] += scenes[i].1;
+    }
+    configs
+        .iter()
+        .filter(|c| {
+            scenes
+                .iter()
+                .position(|(p, _)| *p == c.scene_path.as_path())
+                .is_some_and(|i| owner[i] == shard.index - 1)
+        })
+        .cloned()
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(scene: &str, backend: &str) -> Config {
+        Config {
+            id: format!("g/{scene}/{backend}/64x64/t1"),
+            group: "g".into(),
+            scene: scene.into(),
+            scene_path: PathBuf::from(format!("{scene}.json")),
+            label: "q".into(),
+            spec: BackendSpec {
+                kind: None,
+                options: vec![],
+            },
+            resolution: Resolution::Size {
+                width: 64,
+                height: 64,
+            },
+            render: RenderOverrides::default(),
+            truth_render: RenderOverrides::default(),
+            threads: 1,
+            reference: true,
+            repeats: RepeatPolicy::default(),
+        }
+    }
+
+    #[test]
+    fn shards_partition_every_configuration_once_keeping_scenes_together() {
+        let mut configs = Vec::new();
+        for (scene, n) in [("a", 5), ("b", 1), ("c", 3), ("d", 3), ("e", 2), ("f", 7)] {
+            for i in 0..n {
+                configs.push(config(scene, &format!("sdf:{i}")));
+            }
+        }
+        for count in 1..=8 {
+            let shards: Vec<Vec<Config>> = (1..=count)
+                .map(|index| shard(&configs, Shard { index, count }))
+                .collect();
+            let mut seen: Vec<&str> = shards.iter().flatten().map(|c| c.id.as_str()).collect();
+            seen.sort_unstable();
+            let mut all: Vec<&str> = configs.iter().map(|c| c.id.as_str()).collect();
+            all.sort_unstable();
+            assert_eq!(seen, all, "{count} shards");
+            for s in &shards {
+                for c in s {
+                    // A scene lives in exactly one shard.
+                    assert_eq!(
+                        shards
+                            .iter()
+                            .filter(|t| t.iter().any(|d| d.scene == c.scene))
+                            .count(),
+                        1
+                    );
+                }
+                // Suite order kept.
+                let pos: Vec<usize> = s
+                    .iter()
+                    .map(|c| configs.iter().position(|d| d.id == c.id).unwrap_or(0))
+                    .collect();
+                assert!(pos.windows(2).all(|w| w[0] < w[1]));
+            }
+            // Deterministic.
+            assert_eq!(shard(&configs, Shard { index: 1, count }), shards[0]);
+        }
+        // Two shards balance 21 configurations as 11 / 10 (f+b+e... greedily).
+        let two: Vec<usize> = (1..=2)
+            .map(|index| shard(&configs, Shard { index, count: 2 }).len())
+            .collect();
+        assert_eq!(two.iter().sum::<usize>(), 21);
+        assert!(two.iter().all(|&n| (10..=11).contains(&n)), "{two:?}");
+    }
+
+    #[test]
+    fn shard_specs_parse_and_refuse_nonsense() {
+        assert_eq!("2/8".parse::<Shard>(), Ok(Shard { index: 2, count: 8 }));
+        for bad in ["0/3", "4/3", "3", "a/b", "1/0", ""] {
+            assert!(bad.parse::<Shard>().is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn rotation_blocks_group_one_scene_and_resolution() {
+        let mut c = vec![config("a", "sdf"), config("a", "mesh"), config("b", "sdf")];
+        c[1].resolution = Resolution::Size {
+            width: 64,
+            height: 64,
+        };
+        let mut d = config("a", "mesh:2");
+        d.resolution = Resolution::MaxSide { max_side: 32 };
+        c.push(d);
+        assert_eq!(rotation_blocks(&c), vec![0..2, 2..3, 3..4]);
+    }
 }

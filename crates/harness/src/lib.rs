@@ -39,5 +39,7 @@ pub mod images;
 pub mod report;
 pub mod results;
 pub mod rss;
+pub mod schedule;
 pub mod stats;
 pub mod suite;
+pub mod verdicts;

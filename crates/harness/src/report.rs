@@ -7,21 +7,9 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
+use crate::backend::BackendKind;
 use crate::results::{Results, Row};
-
-/// Configurations that differ only in backend and quality: Pareto fronts and verdicts compare
-/// within one setting.
-type SettingKey = (String, String, u32, u32, usize);
-
-fn setting(r: &Row) -> SettingKey {
-    (
-        r.group.clone(),
-        r.scene.clone(),
-        r.width,
-        r.height,
-        r.threads,
-    )
-}
+use crate::verdicts::{Clock, Timing, backends, headlines, matched_accuracy, setting, settings};
 
 /// Bytes with a binary unit (B, KiB, MiB, GiB), 3 significant digits.
 pub fn bytes(b: u64) -> String {
@@ -99,104 +87,107 @@ fn label(r: &Row) -> String {
     format!("{}:{}", r.backend, r.quality)
 }
 
-/// Plain-language verdict of one setting, each claim with its numbers.
-pub fn verdict(rows: &[&Row]) -> Vec<String> {
+/// Plain-language verdict of one setting, each claim with its numbers; times on `timing`'s
+/// clock, speed ratios from [`Timing::contest`].
+pub fn verdict(rows: &[&Row], timing: Timing<'_>) -> Vec<String> {
     let mut out = Vec::new();
-    let by_backend = |b: &str| {
+    let clock = timing.clock;
+    let names = backends(rows.iter().copied());
+    let of = |b: &str| {
         rows.iter()
             .copied()
             .filter(|r| r.backend == b)
             .collect::<Vec<_>>()
     };
-    let (sdf, mesh) = (by_backend("sdf"), by_backend("mesh"));
     let fastest = rows
         .iter()
-        .min_by(|a, b| a.render_ms_median.total_cmp(&b.render_ms_median));
+        .min_by(|a, b| clock.median_ms(a).total_cmp(&clock.median_ms(b)));
     if let Some(f) = fastest {
         out.push(format!(
-            "Fastest configuration: {} at {:.2} ms ({:.2} Mrays/s, PSNR {} dB).",
+            "Fastest configuration: {} at {:.2} ms {} time ({:.2} Mrays/s, PSNR {} dB).",
             label(f),
-            f.render_ms_median,
+            clock.median_ms(f),
+            clock.name(),
             f.mrays_per_s,
             opt(f.psnr_db, 1)
         ));
     }
-    if !sdf.is_empty() && !mesh.is_empty() {
+    if names.len() >= 2 {
         // Speed at matched accuracy: for each PSNR target reached by some row, which backend
         // reaches it fastest; runs of the same winner are merged into ranges.
-        let mut targets: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
-        targets.sort_by(|a, b| a.total_cmp(b));
-        targets.dedup();
-        fn best_time<'a>(set: &[&'a Row], q: f64) -> Option<&'a Row> {
-            set.iter()
-                .filter(|r| r.psnr_db.is_some_and(|p| p >= q))
-                .min_by(|a, b| a.render_ms_median.total_cmp(&b.render_ms_median))
-                .copied()
-        }
-        let mut runs: Vec<(String, f64, f64, Option<f64>)> = Vec::new(); // winner, from, to, ratio at `to`
-        for &q in &targets {
-            let (s, m) = (best_time(&sdf, q), best_time(&mesh, q));
-            let (winner, ratio) = match (s, m) {
-                (Some(s), Some(m)) if s.render_ms_median <= m.render_ms_median => {
-                    ("sdf", Some(m.render_ms_median / s.render_ms_median))
-                }
-                (Some(s), Some(m)) => ("mesh", Some(s.render_ms_median / m.render_ms_median)),
-                (Some(_), None) => ("sdf (only sdf reaches it)", None),
-                (None, Some(_)) => ("mesh (only mesh reaches it)", None),
-                (None, None) => continue,
+        let mut runs: Vec<(String, f64, f64, Option<String>)> = Vec::new(); // winner, from, to, contest at `to`
+        for (q, contest) in matched_accuracy(rows, timing) {
+            let (winner, said) = match contest {
+                Ok(c) if c.decisive => (c.faster.clone(), Some(c.to_string())),
+                Ok(c) => ("no clear winner".to_string(), Some(c.to_string())),
+                Err(only) => (format!("{only} (only {only} reaches it)"), None),
             };
             match runs.last_mut() {
                 Some(last) if last.0 == winner => {
                     last.2 = q;
-                    last.3 = ratio;
+                    last.3 = said;
                 }
-                _ => runs.push((winner.to_string(), q, q, ratio)),
+                _ => runs.push((winner, q, q, said)),
             }
         }
         if !runs.is_empty() {
             let parts: Vec<String> = runs
                 .iter()
-                .map(|(w, from, to, ratio)| {
+                .map(|(w, from, to, said)| {
                     let range = if from == to {
                         format!("PSNR target {from:.1} dB")
                     } else {
                         format!("PSNR targets {from:.1}-{to:.1} dB")
                     };
-                    match ratio {
-                        Some(x) => format!("{w} is faster for {range} ({x:.2}x at {to:.1} dB)"),
+                    match said {
+                        Some(c) if w == "no clear winner" => {
+                            format!("{range}: {c}")
+                        }
+                        Some(c) => format!("{w} is faster for {range} ({c} at {to:.1} dB)"),
                         None => format!("{range}: {w}"),
                     }
                 })
                 .collect();
             out.push(format!("At matched accuracy: {}.", parts.join("; ")));
         }
-        let best_psnr = |set: &[&Row]| {
-            set.iter()
-                .filter_map(|r| r.psnr_db)
-                .fold(f64::NEG_INFINITY, f64::max)
-        };
-        let (bs, bm) = (best_psnr(&sdf), best_psnr(&mesh));
-        if bs.is_finite() && bm.is_finite() {
+        let best_psnr: Vec<String> = names
+            .iter()
+            .filter_map(|b| {
+                let p = of(b)
+                    .iter()
+                    .filter_map(|r| r.psnr_db)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                p.is_finite().then(|| format!("{b} {p:.1} dB"))
+            })
+            .collect();
+        if best_psnr.len() == names.len() {
             out.push(format!(
-                "Best accuracy reached: sdf {bs:.1} dB, mesh {bm:.1} dB PSNR."
+                "Best accuracy reached: {} PSNR.",
+                best_psnr.join(", ")
             ));
         }
-        let median_mem = |set: &[&Row]| {
-            let mut v: Vec<u64> = set.iter().map(|r| r.memory_bytes).collect();
-            v.sort_unstable();
-            v[v.len() / 2]
-        };
-        let (ms, mm) = (median_mem(&sdf), median_mem(&mesh));
-        if ms > 0 && mm > 0 {
-            let (less, more, x) = if mm <= ms {
-                ("mesh", "sdf", ms as f64 / mm as f64)
-            } else {
-                ("sdf", "mesh", mm as f64 / ms as f64)
-            };
+        // Median memory over each backend's quality levels, least first.
+        let mut mem: Vec<(&str, u64)> = names
+            .iter()
+            .map(|b| {
+                let mut v: Vec<u64> = of(b).iter().map(|r| r.memory_bytes).collect();
+                v.sort_unstable();
+                (b.as_str(), v[v.len() / 2])
+            })
+            .collect();
+        mem.sort_by_key(|m| m.1);
+        if let [(less, lo), (more, hi), ..] = mem.as_slice()
+            && *lo > 0
+        {
+            let listed: Vec<String> = names
+                .iter()
+                .filter_map(|b| mem.iter().find(|m| m.0 == b))
+                .map(|(b, m)| format!("{b} {}", bytes(*m)))
+                .collect();
             out.push(format!(
-                "Memory: {less} uses {x:.1}x less than {more} (median over quality levels: sdf {}, mesh {}).",
-                bytes(ms),
-                bytes(mm)
+                "Memory: {less} uses {:.1}x less than {more} (median over quality levels: {}).",
+                *hi as f64 / *lo as f64,
+                listed.join(", ")
             ));
         }
     }
@@ -221,62 +212,8 @@ pub fn verdict(rows: &[&Row]) -> Vec<String> {
     out
 }
 
-/// One line per setting: the fastest sdf and mesh configurations reaching `min_psnr` dB, their
-/// times, memory and the ratio (or which backend does not reach it).
-pub fn headlines(rows: &[Row], min_psnr: f64) -> Vec<String> {
-    let mut settings: Vec<SettingKey> = Vec::new();
-    for r in rows {
-        let k = setting(r);
-        if !settings.contains(&k) {
-            settings.push(k);
-        }
-    }
-    let mut out = Vec::new();
-    for k in settings {
-        let set: Vec<&Row> = rows.iter().filter(|r| setting(r) == k).collect();
-        if set.iter().all(|r| r.psnr_db.is_none()) {
-            continue;
-        }
-        let best = |b: &str| {
-            set.iter()
-                .filter(|r| r.backend == b && r.psnr_db.is_some_and(|p| p >= min_psnr))
-                .min_by(|x, y| x.render_ms_median.total_cmp(&y.render_ms_median))
-                .copied()
-        };
-        let describe = |r: Option<&Row>, b: &str| match r {
-            Some(r) => format!(
-                "{b}:{} {:.1} ms ({:.1} dB, {})",
-                r.quality,
-                r.render_ms_median,
-                r.psnr_db.unwrap_or(f64::NAN),
-                bytes(r.memory_bytes)
-            ),
-            None => format!("{b}: none reaches {min_psnr:.0} dB"),
-        };
-        let (s, m) = (best("sdf"), best("mesh"));
-        let ratio = match (s, m) {
-            (Some(s), Some(m)) if s.render_ms_median <= m.render_ms_median => format!(
-                ": sdf {:.2}x faster",
-                m.render_ms_median / s.render_ms_median
-            ),
-            (Some(s), Some(m)) => format!(
-                ": mesh {:.2}x faster",
-                s.render_ms_median / m.render_ms_median
-            ),
-            _ => String::new(),
-        };
-        out.push(format!(
-            "{}/{} {}x{} t{}: {} vs {}{ratio}",
-            k.0,
-            k.1,
-            k.2,
-            k.3,
-            k.4,
-            describe(s, "sdf"),
-            describe(m, "mesh")
-        ));
-    }
-    out
+fn timing_clock(res: &Results) -> Clock {
+    Clock::for_run(res)
 }
 
 /// The Markdown summary of a run.
@@ -313,6 +250,29 @@ pub fn summary_markdown(res: &Results) -> String {
             }
         );
     }
+    if let Some(l) = p.load_average_1m_end {
+        let _ = writeln!(s, "Load average at the end: {l:.2}.\n");
+    }
+    let _ = writeln!(
+        s,
+        "{}\n",
+        match timing_clock(res) {
+            Clock::Cpu => format!(
+                "Verdicts use **CPU time** (user + system of all threads): the load average exceeded the {} logical cores, so other processes took cores from the renders and wall time would measure the machine's load as much as the representations. Both clocks are in the tables.",
+                p.logical_cores
+            ),
+            Clock::Wall => format!(
+                "Verdicts use **wall time**: the load average stayed within the {} logical cores, so wall time is what a user waits and is not inflated by competition (CPU time would switch on above it). Both clocks are in the tables.",
+                p.logical_cores
+            ),
+        }
+    );
+    if let Some(seed) = res.rotation_seed {
+        let _ = writeln!(
+            s,
+            "The configurations of one scene and resolution were timed in rotation: each round renders every configuration still wanting repeats once, in an order shuffled with seed {seed} (`marchmesh bench --seed {seed}` reproduces it).\n"
+        );
+    }
     let _ = writeln!(
         s,
         "{} configurations measured, {} failed, {} scenes skipped{}.\n",
@@ -332,6 +292,9 @@ pub fn summary_markdown(res: &Results) -> String {
     for f in &res.failures {
         let _ = writeln!(s, "- failed: `{}`: {}", f.config_id, f.error);
     }
+    for m in &res.missing {
+        let _ = writeln!(s, "- missing (not measured before the run stopped): `{m}`");
+    }
     for k in &res.skipped {
         let _ = writeln!(s, "- skipped: {k}");
     }
@@ -346,14 +309,16 @@ pub fn summary_markdown(res: &Results) -> String {
             r.0.scene, r.0.width, r.0.height, r.1
         );
     }
-    if !res.failures.is_empty() || !res.skipped.is_empty() {
+    if !res.failures.is_empty() || !res.skipped.is_empty() || !res.missing.is_empty() {
         s.push('\n');
     }
-    let heads = headlines(&res.rows, 40.0);
+    let timing = Timing::of(res);
+    let heads = headlines(&res.rows, 40.0, timing);
     if !heads.is_empty() {
         let _ = writeln!(
             s,
-            "## Headlines\n\nFastest configuration of each backend reaching PSNR >= 40 dB against the reference, per scene and setting (memory is that configuration's representation):\n"
+            "## Headlines\n\nFastest configuration of each backend reaching PSNR >= 40 dB against the reference, per scene and setting, on {} time (memory is that configuration's representation). A ratio is \"paired\" when both were timed in the same rotation: it is the median of the per-round ratios with its confidence interval, which cancels slow drifts of the machine's load; a claim whose interval includes 1 is reported as no clear winner.\n",
+            timing.clock.name()
         );
         for h in heads {
             let _ = writeln!(s, "- {h}");
@@ -371,16 +336,16 @@ pub fn summary_markdown(res: &Results) -> String {
         let _ = writeln!(s, "## {group} / {scene}\n");
         let _ = writeln!(
             s,
-            "| backend | quality | size | threads | build ms | render ms median [95% CI] | Mrays/s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | depth rel max | tail px depth / normal | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
+            "| backend | quality | size | threads | build ms | render ms median [95% CI] | CPU ms median [95% CI] | Mrays/s | Mrays/CPU-s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | depth rel max | tail px depth / normal | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
         );
         let _ = writeln!(
             s,
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
         );
         for r in &rows {
             let _ = writeln!(
                 s,
-                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
+                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
                 r.backend,
                 r.quality,
                 r.width,
@@ -390,7 +355,16 @@ pub fn summary_markdown(res: &Results) -> String {
                 r.render_ms_median,
                 r.render_ms_ci_low,
                 r.render_ms_ci_high,
+                match (
+                    r.render_cpu_ms_median,
+                    r.render_cpu_ms_ci_low,
+                    r.render_cpu_ms_ci_high
+                ) {
+                    (Some(m), Some(lo), Some(hi)) => format!("{m:.2} [{lo:.2}, {hi:.2}]"),
+                    _ => "n/a".into(),
+                },
                 r.mrays_per_s,
+                opt(r.mrays_per_cpu_s, 2),
                 bytes(r.memory_bytes),
                 opt_bytes(r.peak_heap_bytes_build),
                 opt_bytes(r.peak_heap_bytes_render),
@@ -407,16 +381,12 @@ pub fn summary_markdown(res: &Results) -> String {
             );
         }
         s.push('\n');
-        let mut settings: Vec<SettingKey> = Vec::new();
-        for r in &rows {
-            let k = setting(r);
-            if !settings.contains(&k) {
-                settings.push(k);
-            }
-        }
-        for k in settings {
+        for k in settings(rows.iter().copied()) {
             let set: Vec<&Row> = rows.iter().copied().filter(|r| setting(r) == k).collect();
             let _ = writeln!(s, "### {}x{}, {} threads\n", k.2, k.3, k.4);
+            if res.merged_from.len() > 1 && !k.5.is_empty() {
+                let _ = writeln!(s, "Measured on {}.\n", k.5);
+            }
             if let Some(r) = res
                 .references
                 .iter()
@@ -460,7 +430,7 @@ pub fn summary_markdown(res: &Results) -> String {
                 .map(|(b, (lo, hi))| format!("{b} {} to {}", bytes(*lo), bytes(*hi)))
                 .collect();
             let _ = writeln!(s, "Memory: {}.\n", mem_parts.join(", "));
-            for v in verdict(&set) {
+            for v in verdict(&set, timing) {
                 let _ = writeln!(s, "- {v}");
             }
             s.push('\n');
@@ -484,13 +454,14 @@ const COLORS: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
+/// A backend's plot colour: by its place in [`BackendKind::ALL`], so a backend keeps its
+/// colour in every plot (sdf blue, mesh red as before); unknown names share one other colour.
 fn color_of(backend: &str) -> RGBColor {
-    match backend {
-        "sdf" => COLORS[0],
-        "mesh" => COLORS[1],
-        "reference" => COLORS[2],
-        _ => COLORS[3],
-    }
+    let i = BackendKind::ALL
+        .iter()
+        .position(|k| k.name() == backend)
+        .map_or(COLORS.len() - 2, |i| (i + COLORS.len() - 1) % COLORS.len());
+    COLORS[i]
 }
 
 /// Axis numbers: at most 3 significant digits, k/M/G suffixes for large values.
@@ -876,11 +847,18 @@ mod tests {
         let a = row("sdf", "a", 10.0, Some(45.0), 100);
         let b = row("sdf", "b", 5.0, Some(30.0), 100);
         let c = row("mesh", "c", 30.0, Some(41.0), 2048);
-        let h = headlines(&[a.clone(), b, c], 40.0);
+        let h = headlines(&[a.clone(), b, c], 40.0, Timing::medians_only());
         assert_eq!(h.len(), 1);
-        assert!(h[0].contains("sdf:a 10.0 ms (45.0 dB, 100 B) vs mesh:c 30.0 ms (41.0 dB, 2.00 KiB): sdf 3.00x faster"), "{}", h[0]);
-        let h = headlines(&[a], 40.0);
-        assert!(h[0].contains("mesh: none reaches 40 dB"), "{}", h[0]);
+        let h0 = h[0].to_string();
+        assert!(h0.contains("sdf:a 10.0 ms (45.0 dB, 100 B) vs mesh:c 30.0 ms (41.0 dB, 2.00 KiB): sdf 3.00x faster than mesh, ratio of medians"), "{h0}");
+        let low = row("mesh", "d", 1.0, Some(30.0), 2048);
+        let h = headlines(&[a, low], 40.0, Timing::medians_only());
+        assert!(h[0].contest.is_none());
+        assert!(
+            h[0].to_string().contains("mesh: none reaches 40 dB"),
+            "{}",
+            h[0]
+        );
     }
 
     #[test]
@@ -903,17 +881,17 @@ mod tests {
         let a = row("sdf", "a", 10.0, Some(30.0), 100);
         let c = row("mesh", "c", 5.0, Some(20.0), 1000);
         let d = row("mesh", "d", 30.0, Some(40.0), 1000);
-        let v = verdict(&[&a, &c, &d]).join("\n");
+        let v = verdict(&[&a, &c, &d], Timing::medians_only()).join("\n");
         assert!(
             v.contains("Fastest configuration: mesh:c at 5.00 ms"),
             "{v}"
         );
         assert!(
-            v.contains("mesh is faster for PSNR target 20.0 dB (2.00x at 20.0 dB)"),
+            v.contains("mesh is faster for PSNR target 20.0 dB (mesh 2.00x faster than sdf, ratio of medians at 20.0 dB)"),
             "{v}"
         );
         assert!(
-            v.contains("sdf is faster for PSNR target 30.0 dB (3.00x at 30.0 dB)"),
+            v.contains("sdf is faster for PSNR target 30.0 dB (sdf 3.00x faster than mesh, ratio of medians at 30.0 dB)"),
             "{v}"
         );
         assert!(

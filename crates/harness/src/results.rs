@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 /// One measured configuration. Field order is the CSV column order. `Option` fields are
 /// empty in the CSV (null in JSON) only where they do not apply; see [`Row::why_empty`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Row {
     /// `group/scene/backend:label/WxH/tN`.
     pub config_id: String,
@@ -32,6 +32,10 @@ pub struct Row {
     pub spp: u32,
     /// Render threads.
     pub threads: usize,
+    /// Host name of the machine that measured it (see [`Provenance::machine`]); speed is only
+    /// compared between rows of the same machine.
+    #[serde(default)]
+    pub machine: String,
     /// Wall time of the backend build, ms.
     pub build_ms_total: f64,
     /// The backend's build phases as `name=ms;...`.
@@ -52,12 +56,25 @@ pub struct Row {
     pub render_ms_ci_high: f64,
     /// Coverage of that interval (0.95 or more from 6 repeats on).
     pub render_ci_coverage: f64,
+    /// Median process CPU time (user + system, all threads) of one timed render, ms: unlike
+    /// wall time it hardly grows when other processes compete for the cores.
+    #[serde(default)]
+    pub render_cpu_ms_median: Option<f64>,
+    /// Lower end of the 95% confidence interval of the CPU-time median, ms.
+    #[serde(default)]
+    pub render_cpu_ms_ci_low: Option<f64>,
+    /// Upper end of the 95% confidence interval of the CPU-time median, ms.
+    #[serde(default)]
+    pub render_cpu_ms_ci_high: Option<f64>,
     /// Camera rays per render.
     pub rays_primary: u64,
     /// Shadow, ambient-occlusion, reflection and bounce rays per render.
     pub rays_secondary: u64,
     /// (primary + secondary) rays / median render time, millions per second.
     pub mrays_per_s: f64,
+    /// (primary + secondary) rays / median CPU time of a render, millions per CPU-second.
+    #[serde(default)]
+    pub mrays_per_cpu_s: Option<f64>,
     /// Camera rays per thread-second spent in the geometry, millions (timed per batch).
     #[serde(default)]
     pub mrays_camera_per_thread_s: Option<f64>,
@@ -137,7 +154,7 @@ impl Row {
     /// Why `column` may be empty in this row, `None` if it must be filled.
     pub fn why_empty(&self, column: &str) -> Option<&'static str> {
         match column {
-            "triangles" if self.backend != "mesh" => Some("not a triangle backend"),
+            "triangles" => Some("the backend does not store triangles"),
             "peak_heap_bytes_build" | "peak_heap_bytes_render" => {
                 Some("counting allocator not installed in this binary")
             }
@@ -148,6 +165,10 @@ impl Row {
                 Some("no reference (see notes)")
             }
             "notes" => Some("no remarks"),
+            "render_cpu_ms_median"
+            | "render_cpu_ms_ci_low"
+            | "render_cpu_ms_ci_high"
+            | "mrays_per_cpu_s" => Some("process CPU time unavailable on this system"),
             "mrays_shadow_per_thread_s"
             | "mrays_ao_per_thread_s"
             | "mrays_bounce_per_thread_s"
@@ -203,6 +224,27 @@ pub struct Provenance {
     /// for the cores make times noisier). `None` where unavailable.
     #[serde(default)]
     pub load_average_1m: Option<f64>,
+    /// 1-minute load average when the run ended. With the start value it decides which clock
+    /// verdicts use (see `report::Clock`).
+    #[serde(default)]
+    pub load_average_1m_end: Option<f64>,
+    /// Host name of the machine (`/etc/hostname`, `HOSTNAME`), so merged shards keep apart
+    /// the rows of different machines: speed is only compared within one machine.
+    #[serde(default)]
+    pub machine: String,
+}
+
+/// One timed render of a configuration.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TimingSample {
+    /// Rotation round it was taken in: samples of configurations of one scene and resolution
+    /// with the same round were taken back to back and form the pairs of a paired ratio.
+    pub round: u32,
+    /// Wall-clock time of the render, ms.
+    pub wall_ms: f64,
+    /// Process CPU time (user + system, all threads) of the render, ms; `None` where the
+    /// system cannot tell.
+    pub cpu_ms: Option<f64>,
 }
 
 /// A reference render made for accuracy.
@@ -257,6 +299,36 @@ pub struct Results {
     /// Per configuration: primary-ray SDF step counts in power-of-two bins
     /// (bin 0: 0 steps, bin k: 2^(k-1) ..= 2^k - 1).
     pub steps_histograms: BTreeMap<String, Vec<u64>>,
+    /// Per configuration id: every timed render in order, with its rotation round.
+    #[serde(default)]
+    pub timings: BTreeMap<String, Vec<TimingSample>>,
+    /// Seed of the shuffled round orders (`marchmesh bench --seed` reproduces the order).
+    #[serde(default)]
+    pub rotation_seed: Option<u64>,
+    /// Configurations of the run that have no row and no failure: the run was interrupted
+    /// (or crashed after a checkpoint) before measuring them.
+    #[serde(default)]
+    pub missing: Vec<String>,
+    /// `K/N` when this is shard K of N of a suite (`bench --shard`); merged runs list their
+    /// shards' provenance in `merged_from`.
+    #[serde(default)]
+    pub shard: Option<String>,
+    /// For a run made by `marchmesh merge`: the run id, shard and provenance of each input.
+    #[serde(default)]
+    pub merged_from: Vec<MergedShard>,
+}
+
+/// One input of a merged run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MergedShard {
+    /// Its run id.
+    pub run_id: String,
+    /// Its `K/N`, if it was a shard.
+    pub shard: Option<String>,
+    /// Where and how it was made.
+    pub provenance: Provenance,
+    /// How many rows it contributed.
+    pub rows: usize,
 }
 
 /// Why results could not be read or written.
@@ -278,6 +350,14 @@ pub enum ResultsError {
         /// JSON path.
         path: String,
         /// The error.
+        reason: String,
+    },
+    /// Writing a file failed (the OS error, or the target is not a regular file).
+    #[error("{file}: {reason}")]
+    Write {
+        /// The file.
+        file: String,
+        /// Why.
         reason: String,
     },
     /// CSV writing or reading.
@@ -305,7 +385,14 @@ impl Results {
             path: String::new(),
             reason: e.to_string(),
         })?;
-        std::fs::write(path, text + "\n").map_err(io_err(path))
+        // Atomic (temporary file renamed over it): a checkpoint interrupted mid-write leaves
+        // the previous checkpoint, never half a file.
+        marchmesh_safeio::replace_regular(path, (text + "\n").as_bytes()).map_err(|e| {
+            ResultsError::Write {
+                file: path.display().to_string(),
+                reason: e.to_string(),
+            }
+        })
     }
 
     /// Reads a `results.json`; errors name the file and the JSON path.
@@ -340,7 +427,7 @@ impl Results {
 pub fn csv_header() -> Vec<String> {
     // Serialize an example row into a CSV header through the same path as the data.
     let mut w = csv::Writer::from_writer(Vec::new());
-    let _ = w.serialize(example_row());
+    let _ = w.serialize(Row::default());
     let bytes = w.into_inner().unwrap_or_default();
     let text = String::from_utf8_lossy(&bytes);
     text.lines()
@@ -349,67 +436,6 @@ pub fn csv_header() -> Vec<String> {
         .split(',')
         .map(str::to_string)
         .collect()
-}
-
-fn example_row() -> Row {
-    Row {
-        config_id: String::new(),
-        group: String::new(),
-        scene: String::new(),
-        scene_file: String::new(),
-        backend: String::new(),
-        quality: String::new(),
-        options: String::new(),
-        width: 0,
-        height: 0,
-        spp: 0,
-        threads: 0,
-        build_ms_total: 0.0,
-        build_phases_ms: String::new(),
-        render_repeats: 0,
-        render_ms_median: 0.0,
-        render_ms_min: 0.0,
-        render_ms_max: 0.0,
-        render_ms_mad: 0.0,
-        render_ms_ci_low: 0.0,
-        render_ms_ci_high: 0.0,
-        render_ci_coverage: 0.0,
-        rays_primary: 0,
-        rays_secondary: 0,
-        mrays_per_s: 0.0,
-        mrays_camera_per_thread_s: None,
-        mrays_shadow_per_thread_s: None,
-        mrays_ao_per_thread_s: None,
-        mrays_bounce_per_thread_s: None,
-        memory_bytes: 0,
-        triangles: None,
-        peak_heap_bytes_build: None,
-        peak_heap_bytes_render: None,
-        peak_rss_bytes_build: None,
-        peak_rss_bytes_render: None,
-        silhouette_mismatch_pct: None,
-        depth_err_mean: None,
-        depth_err_p95: None,
-        depth_err_max: None,
-        depth_err_p95_rel_scene: None,
-        depth_err_max_rel_scene: None,
-        scene_size_world: None,
-        normal_err_deg_mean: None,
-        normal_err_deg_p95: None,
-        depth_err_rel_max: None,
-        depth_err_rel_tail_px: None,
-        normal_err_deg_max: None,
-        normal_err_deg_tail_px: None,
-        psnr_db: None,
-        ssim: None,
-        steps_mean: 0.0,
-        steps_max: 0,
-        step_exhaustion_pct: 0.0,
-        node_visits_per_ray: 0.0,
-        node_visits_max: 0,
-        non_finite_count: 0,
-        notes: String::new(),
-    }
 }
 
 /// Reads the rows of a `results.csv` back.
@@ -460,6 +486,178 @@ fn git(args: &[&str]) -> Option<String> {
         .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
+/// Why shard runs cannot be merged.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum MergeError {
+    /// Nothing to merge.
+    #[error("merge needs at least one run")]
+    Empty,
+    /// Two inputs ran different suites.
+    #[error(
+        "{first} ran suite {first_suite:?} but {other} ran {other_suite:?}: only shards of one suite merge"
+    )]
+    SuiteMismatch {
+        /// First input.
+        first: String,
+        /// Its suite.
+        first_suite: String,
+        /// The mismatching input.
+        other: String,
+        /// Its suite.
+        other_suite: String,
+    },
+    /// Two inputs were built from different commits (or one from a dirty tree).
+    #[error(
+        "{first} was measured at commit {first_commit} but {other} at {other_commit}: only runs of one commit merge (rebuild the shards from the same commit)"
+    )]
+    CommitMismatch {
+        /// First input.
+        first: String,
+        /// Its commit (`+dirty` when the work tree had changes).
+        first_commit: String,
+        /// The mismatching input.
+        other: String,
+        /// Its commit.
+        other_commit: String,
+    },
+    /// A configuration was measured (or failed) in two inputs.
+    #[error("configuration {config_id} is in both {first} and {other}: shards must not overlap")]
+    Overlap {
+        /// The configuration.
+        config_id: String,
+        /// One input.
+        first: String,
+        /// The other.
+        other: String,
+    },
+}
+
+impl Results {
+    /// Combines shard runs (`(name, results)`, name used in errors) into one run called
+    /// `run_id`: rows, failures, references, histograms and timings concatenated; each row
+    /// keeps its machine in [`Row::machine`] and each input's provenance is listed in
+    /// [`Results::merged_from`]; the merged provenance is the first input's with `command`.
+    ///
+    /// Errors: no input, inputs of different suites or commits (a dirty tree counts as a
+    /// different commit), or a configuration present in two inputs.
+    pub fn merge(
+        inputs: Vec<(String, Results)>,
+        run_id: String,
+        command: String,
+    ) -> Result<Results, MergeError> {
+        let commit = |r: &Results| {
+            format!(
+                "{}{}",
+                r.provenance.git_commit,
+                if r.provenance.git_dirty { "+dirty" } else { "" }
+            )
+        };
+        let Some((first_name, first)) = inputs.first() else {
+            return Err(MergeError::Empty);
+        };
+        for (name, r) in &inputs[1..] {
+            if r.suite != first.suite {
+                return Err(MergeError::SuiteMismatch {
+                    first: first_name.clone(),
+                    first_suite: first.suite.clone(),
+                    other: name.clone(),
+                    other_suite: r.suite.clone(),
+                });
+            }
+            if commit(r) != commit(first) {
+                return Err(MergeError::CommitMismatch {
+                    first: first_name.clone(),
+                    first_commit: commit(first),
+                    other: name.clone(),
+                    other_commit: commit(r),
+                });
+            }
+        }
+        let mut owner: BTreeMap<String, String> = BTreeMap::new();
+        for (name, r) in &inputs {
+            let ids = r
+                .rows
+                .iter()
+                .map(|x| &x.config_id)
+                .chain(r.failures.iter().map(|f| &f.config_id));
+            for id in ids {
+                if let Some(prev) = owner.insert(id.clone(), name.clone()) {
+                    return Err(MergeError::Overlap {
+                        config_id: id.clone(),
+                        first: prev,
+                        other: name.clone(),
+                    });
+                }
+            }
+        }
+        let mut out = Results {
+            run_id,
+            suite: first.suite.clone(),
+            suite_file: first.suite_file.clone(),
+            description: first.description.clone(),
+            provenance: Provenance {
+                command,
+                ..first.provenance.clone()
+            },
+            interrupted: false,
+            rows: Vec::new(),
+            failures: Vec::new(),
+            skipped: Vec::new(),
+            references: Vec::new(),
+            steps_histograms: BTreeMap::new(),
+            timings: BTreeMap::new(),
+            rotation_seed: first.rotation_seed,
+            missing: Vec::new(),
+            shard: None,
+            merged_from: Vec::new(),
+        };
+        for (_, r) in inputs {
+            out.merged_from.push(MergedShard {
+                run_id: r.run_id.clone(),
+                shard: r.shard.clone(),
+                provenance: r.provenance.clone(),
+                rows: r.rows.len(),
+            });
+            out.interrupted |= r.interrupted;
+            let machine = r.provenance.machine.clone();
+            out.rows.extend(r.rows.into_iter().map(|mut x| {
+                if x.machine.is_empty() {
+                    x.machine = machine.clone();
+                }
+                x
+            }));
+            out.failures.extend(r.failures);
+            for s in r.skipped {
+                if !out.skipped.contains(&s) {
+                    out.skipped.push(s);
+                }
+            }
+            out.references.extend(r.references);
+            out.steps_histograms.extend(r.steps_histograms);
+            out.timings.extend(r.timings);
+            out.missing.extend(r.missing);
+        }
+        Ok(out)
+    }
+}
+
+/// The 1-minute load average (`/proc/loadavg`), `None` where unavailable.
+pub fn load_average_1m() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg")
+        .ok()
+        .and_then(|t| t.split_whitespace().next()?.parse().ok())
+}
+
+/// This machine's host name, `unknown` if it cannot be found.
+pub fn hostname() -> String {
+    std::fs::read_to_string("/etc/hostname")
+        .ok()
+        .map(|s| s.trim().to_string())
+        .filter(|s| !s.is_empty())
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .unwrap_or_else(|| "unknown".into())
+}
+
 impl Provenance {
     /// Collects provenance now; `command` is the command line.
     pub fn collect(command: String) -> Self {
@@ -492,9 +690,9 @@ impl Provenance {
             git_dirty: dirty,
             version: env!("CARGO_PKG_VERSION").to_string(),
             command,
-            load_average_1m: std::fs::read_to_string("/proc/loadavg")
-                .ok()
-                .and_then(|t| t.split_whitespace().next()?.parse().ok()),
+            load_average_1m: load_average_1m(),
+            load_average_1m_end: None,
+            machine: hostname(),
         }
     }
 }
@@ -513,9 +711,36 @@ pub(crate) mod tests_support {
             backend: backend.into(),
             quality: quality.into(),
             render_ms_median: ms,
+            render_ms_ci_low: ms,
+            render_ms_ci_high: ms,
             psnr_db: psnr,
             memory_bytes: memory,
-            ..example_row()
+            ..Row::default()
+        }
+    }
+
+    /// A quiet-machine run holding `rows`.
+    pub fn results(rows: Vec<Row>) -> Results {
+        let mut provenance = Provenance::collect(String::new());
+        provenance.load_average_1m = Some(0.0);
+        provenance.load_average_1m_end = Some(0.0);
+        Results {
+            run_id: "run".into(),
+            suite: "suite".into(),
+            suite_file: String::new(),
+            description: String::new(),
+            provenance,
+            interrupted: false,
+            rows,
+            failures: vec![],
+            skipped: vec![],
+            references: vec![],
+            steps_histograms: BTreeMap::new(),
+            timings: BTreeMap::new(),
+            rotation_seed: None,
+            missing: vec![],
+            shard: None,
+            merged_from: vec![],
         }
     }
 }
@@ -532,11 +757,85 @@ mod tests {
     }
 
     #[test]
+    fn merge_combines_shards_and_refuses_mismatches() {
+        use tests_support::{results, row};
+        let mut a = results(vec![row("sdf", "a", 1.0, None, 1)]);
+        a.provenance.machine = "alpha".into();
+        a.shard = Some("1/2".into());
+        let mut b = results(vec![row("mesh", "b", 2.0, None, 1)]);
+        b.provenance.machine = "beta".into();
+        b.shard = Some("2/2".into());
+        let m = Results::merge(
+            vec![("A".into(), a.clone()), ("B".into(), b.clone())],
+            "merged".into(),
+            "marchmesh merge A B".into(),
+        )
+        .unwrap();
+        assert_eq!(m.rows.len(), 2);
+        assert_eq!(m.rows[0].machine, "alpha");
+        assert_eq!(m.rows[1].machine, "beta");
+        assert_eq!(m.merged_from.len(), 2);
+        assert_eq!(m.merged_from[1].shard.as_deref(), Some("2/2"));
+        assert_eq!(m.provenance.command, "marchmesh merge A B");
+
+        let mut other_suite = b.clone();
+        other_suite.suite = "scaling".into();
+        let e = Results::merge(
+            vec![("A".into(), a.clone()), ("B".into(), other_suite)],
+            String::new(),
+            String::new(),
+        )
+        .unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("A ran suite \"suite\" but B ran \"scaling\""),
+            "{e}"
+        );
+
+        let mut other_commit = b.clone();
+        other_commit.provenance.git_commit = "0123abc".into();
+        let e = Results::merge(
+            vec![("A".into(), a.clone()), ("B".into(), other_commit)],
+            String::new(),
+            String::new(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, MergeError::CommitMismatch { .. }), "{e}");
+        assert!(e.to_string().contains("0123abc"), "{e}");
+
+        let mut dirty = b.clone();
+        dirty.provenance.git_dirty = !a.provenance.git_dirty;
+        assert!(matches!(
+            Results::merge(
+                vec![("A".into(), a.clone()), ("B".into(), dirty)],
+                String::new(),
+                String::new()
+            ),
+            Err(MergeError::CommitMismatch { .. })
+        ));
+
+        let e = Results::merge(
+            vec![("A".into(), a.clone()), ("A again".into(), a)],
+            String::new(),
+            String::new(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, MergeError::Overlap { .. }), "{e}");
+        assert_eq!(
+            Results::merge(vec![], String::new(), String::new()),
+            Err(MergeError::Empty)
+        );
+    }
+
+    #[test]
     fn header_has_units_and_every_field() {
         let h = csv_header();
-        assert_eq!(h.len(), 56);
+        assert_eq!(h.len(), 61);
         for c in [
             "render_ms_median",
+            "render_cpu_ms_median",
+            "mrays_per_cpu_s",
+            "machine",
             "peak_heap_bytes_render",
             "depth_err_p95",
             "mrays_per_s",

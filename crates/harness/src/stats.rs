@@ -87,6 +87,52 @@ impl Summary {
     }
 }
 
+/// The paired ratio `b / a` of two configurations measured in the same rotation rounds: the
+/// per-round ratios `b_r / a_r` over the rounds both took part in, summarised like any sample
+/// (median with its order-statistic confidence interval). A slow drift of the machine's load
+/// scales both renders of a round alike and cancels in the ratio, which a ratio of two medians
+/// taken at different times does not.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct PairedRatio {
+    /// Rounds in which both were measured.
+    pub rounds: usize,
+    /// Median of the per-round ratios.
+    pub median: f64,
+    /// Lower end of its confidence interval.
+    pub ci_low: f64,
+    /// Upper end.
+    pub ci_high: f64,
+    /// Coverage of `[ci_low, ci_high]`.
+    pub ci_coverage: f64,
+}
+
+impl PairedRatio {
+    /// Pairs the samples of `a` and `b` by round (`(round, value)` pairs; a round missing in
+    /// either is skipped; non-positive or non-finite values are skipped). `None` when no round
+    /// pairs up.
+    pub fn of(a: &[(u32, f64)], b: &[(u32, f64)]) -> Option<Self> {
+        let ok = |v: f64| v.is_finite() && v > 0.0;
+        let ratios: Vec<f64> = b
+            .iter()
+            .filter(|(_, y)| ok(*y))
+            .filter_map(|(r, y)| a.iter().find(|(q, x)| q == r && ok(*x)).map(|(_, x)| y / x))
+            .collect();
+        let s = Summary::of(&ratios)?;
+        Some(Self {
+            rounds: s.n,
+            median: s.median,
+            ci_low: s.ci_low,
+            ci_high: s.ci_high,
+            ci_coverage: s.ci_coverage,
+        })
+    }
+
+    /// Whether the confidence interval excludes 1 (one side is faster beyond the noise).
+    pub fn decisive(&self) -> bool {
+        self.ci_low > 1.0 || self.ci_high < 1.0
+    }
+}
+
 /// How many timed repeats to run after the untimed warm-up.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -200,6 +246,40 @@ mod tests {
         assert_eq!(j, 6);
         assert_eq!((s.ci_low, s.ci_high), (6.0, 16.0));
         assert!(s.ci_coverage >= 0.95);
+    }
+
+    #[test]
+    fn paired_ratios_cancel_a_drift_that_unpaired_medians_do_not() {
+        // The machine slows down 4x over 11 rounds; b is always exactly 2.5x slower than a
+        // within a round, with +-1% jitter alternating in sign.
+        let drift = |r: u32| 1.0 + 0.3 * f64::from(r);
+        let jitter = |r: u32| if r.is_multiple_of(2) { 1.01 } else { 0.99 };
+        let a: Vec<(u32, f64)> = (0..11).map(|r| (r, 10.0 * drift(r))).collect();
+        let b: Vec<(u32, f64)> = (0..11).map(|r| (r, 25.0 * drift(r) * jitter(r))).collect();
+        let p = PairedRatio::of(&a, &b).unwrap();
+        assert_eq!(p.rounds, 11);
+        // Per-round ratios are 2.525 (6 rounds) and 2.475 (5 rounds): median 2.525.
+        assert!((p.median - 2.525).abs() < 1e-12, "{}", p.median);
+        assert!(p.ci_low >= 2.475 - 1e-12 && p.ci_high <= 2.525 + 1e-12);
+        assert!(p.decisive());
+        // If b's rounds were taken later (the last 6 rounds) and a's earlier (first 5), the
+        // unpaired ratio of medians would be far off.
+        let ma = Summary::of(&a[..5].iter().map(|x| x.1).collect::<Vec<_>>()).unwrap();
+        let mb = Summary::of(&b[5..].iter().map(|x| x.1).collect::<Vec<_>>()).unwrap();
+        assert!(mb.median / ma.median > 3.5);
+    }
+
+    #[test]
+    fn paired_ratio_skips_unpaired_rounds_and_spans_one_when_undecided() {
+        let a = [(0, 10.0), (1, 10.0), (2, 10.0), (3, 10.0), (5, 1.0)];
+        let b = [(0, 9.0), (1, 11.0), (2, 9.5), (3, 10.5), (4, 3.0)];
+        let p = PairedRatio::of(&a, &b).unwrap();
+        assert_eq!(p.rounds, 4);
+        assert!((p.median - 1.0).abs() < 1e-12);
+        assert_eq!((p.ci_low, p.ci_high), (0.9, 1.1));
+        assert!(!p.decisive());
+        assert!(PairedRatio::of(&a, &[(9, 1.0)]).is_none());
+        assert!(PairedRatio::of(&[(0, 0.0)], &[(0, 1.0)]).is_none());
     }
 
     #[test]

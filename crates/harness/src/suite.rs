@@ -404,6 +404,20 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                 "resolutions, threads and backends must not be empty".into(),
             ));
         }
+        if let Some((ti, t)) = g
+            .threads
+            .iter()
+            .enumerate()
+            .find(|(_, t)| **t > marchmesh_core::MAX_THREADS)
+        {
+            return Err(fmt_err(
+                format!("{gp}.threads[{ti}]"),
+                format!(
+                    "{t} threads is over the limit of {} (0 = all cores)",
+                    marchmesh_core::MAX_THREADS
+                ),
+            ));
+        }
         for (ri, r) in g.resolutions.iter().enumerate() {
             let ok = match *r {
                 Resolution::Size { width, height } => width > 0 && height > 0,

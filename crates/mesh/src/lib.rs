@@ -504,6 +504,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         + instance_bytes
         + tlas.as_ref().map_or(0, Tree::memory_bytes);
     report.memory_bytes = memory;
+    report.triangles = Some((flat_triangles + blas_triangles) as u64);
     let rendered_triangles: u64 = flat_triangles as u64
         + instances
             .iter()

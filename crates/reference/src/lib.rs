@@ -134,6 +134,7 @@ pub fn build(
     let node_bytes = count_nodes(&scene.objects) * std::mem::size_of::<RNode>() as u64;
     let report = GeometryReport {
         backend: "reference".into(),
+        triangles: None,
         memory_bytes: node_bytes + compiler.mesh_bytes,
         build_phases_ms: vec![("reference_build".into(), build_ms)],
         counters: vec![

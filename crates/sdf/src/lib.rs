@@ -214,6 +214,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     phases.push(("other".into(), (total_ms - accounted).max(0.0)));
     let report = GeometryReport {
         backend: "sdf".into(),
+        triangles: None,
         memory_bytes: field.memory_bytes() + inside.as_ref().map_or(0, Inside::memory_bytes),
         build_phases_ms: phases,
         counters,

@@ -1,0 +1,635 @@
+//! Which backend is faster, said once: the clock verdicts read ([`Clock`]), speed ratios of
+//! two rows with their uncertainty ([`Contest`], paired by rotation round when the rows were
+//! timed together), the per-setting headline ([`Headline`]), the "faster at matched accuracy"
+//! claims ([`matched_accuracy`]), and how two runs' verdicts agree ([`compare_runs`]). The
+//! summary and `marchmesh compare` both read these, so a verdict is computed in one place.
+
+use std::collections::BTreeMap;
+use std::fmt;
+
+use crate::results::{Results, Row, TimingSample};
+use crate::stats::{PairedRatio, Summary};
+
+/// The time a verdict compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Clock {
+    /// Wall-clock time of a render: what a user waits, but inflated unevenly by other
+    /// processes when the machine is oversubscribed.
+    Wall,
+    /// Process CPU time (user + system, all threads): hardly changed by competing processes,
+    /// blind to idle waiting (none in a CPU-bound render).
+    Cpu,
+}
+
+impl Clock {
+    /// The clock for `res`: CPU time when the 1-minute load average at the start or the end of
+    /// the run exceeded the logical core count (other processes then took cores from the
+    /// renders, so wall time measured the machine's load as much as the renders) and every row
+    /// has CPU time; wall time otherwise.
+    pub fn for_run(res: &Results) -> Self {
+        let p = &res.provenance;
+        let load = p
+            .load_average_1m
+            .into_iter()
+            .chain(p.load_average_1m_end)
+            .fold(f64::NEG_INFINITY, f64::max);
+        let busy = load > p.logical_cores as f64;
+        let merged_busy = res.merged_from.iter().any(|m| {
+            m.provenance
+                .load_average_1m
+                .into_iter()
+                .chain(m.provenance.load_average_1m_end)
+                .any(|l| l > m.provenance.logical_cores as f64)
+        });
+        let all_cpu = res.rows.iter().all(|r| r.render_cpu_ms_median.is_some());
+        if (busy || merged_busy) && all_cpu {
+            Self::Cpu
+        } else {
+            Self::Wall
+        }
+    }
+
+    /// `wall` or `CPU`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Wall => "wall",
+            Self::Cpu => "CPU",
+        }
+    }
+
+    /// The row's median render time on this clock, ms (wall time if the row has no CPU time).
+    pub fn median_ms(self, r: &Row) -> f64 {
+        match self {
+            Self::Cpu => r.render_cpu_ms_median.unwrap_or(r.render_ms_median),
+            Self::Wall => r.render_ms_median,
+        }
+    }
+
+    /// The 95% confidence interval of that median, ms.
+    fn ci_ms(self, r: &Row) -> (f64, f64) {
+        match (self, r.render_cpu_ms_ci_low, r.render_cpu_ms_ci_high) {
+            (Self::Cpu, Some(lo), Some(hi)) => (lo, hi),
+            _ => (r.render_ms_ci_low, r.render_ms_ci_high),
+        }
+    }
+
+    fn sample(self, s: &TimingSample) -> Option<f64> {
+        match self {
+            Self::Wall => Some(s.wall_ms),
+            Self::Cpu => s.cpu_ms,
+        }
+    }
+}
+
+/// What verdicts read from a run: the clock and the per-round samples.
+#[derive(Debug, Clone, Copy)]
+pub struct Timing<'a> {
+    /// The clock.
+    pub clock: Clock,
+    /// Per configuration id, every timed render.
+    pub samples: Option<&'a BTreeMap<String, Vec<TimingSample>>>,
+}
+
+impl<'a> Timing<'a> {
+    /// The clock of [`Clock::for_run`] and the run's samples.
+    pub fn of(res: &'a Results) -> Self {
+        Self {
+            clock: Clock::for_run(res),
+            samples: Some(&res.timings),
+        }
+    }
+
+    /// Wall time and no samples (ratios of medians): for rows without a run.
+    pub fn medians_only() -> Self {
+        Self {
+            clock: Clock::Wall,
+            samples: None,
+        }
+    }
+
+    fn rounds(&self, r: &Row) -> Option<Vec<(u32, f64)>> {
+        let s = self.samples?.get(&r.config_id)?;
+        s.iter()
+            .map(|x| self.clock.sample(x).map(|v| (x.round, v)))
+            .collect()
+    }
+
+    /// The speed contest of `a` against `b`: which is faster and by how much, with the
+    /// uncertainty of the ratio. Paired (median of per-round ratios with its CI) when both
+    /// rows were timed in the same rotation, else the ratio of the medians, called decisive
+    /// when the two medians' confidence intervals do not overlap.
+    pub fn contest(&self, a: &Row, b: &Row) -> Contest {
+        let (ta, tb) = (self.clock.median_ms(a), self.clock.median_ms(b));
+        let a_faster = ta <= tb;
+        let (fast, slow) = if a_faster { (a, b) } else { (b, a) };
+        let paired = match (self.rounds(fast), self.rounds(slow)) {
+            (Some(f), Some(s)) => PairedRatio::of(&f, &s),
+            _ => None,
+        };
+        match paired {
+            Some(p) => Contest {
+                faster: fast.backend.clone(),
+                slower: slow.backend.clone(),
+                faster_label: format!("{}:{}", fast.backend, fast.quality),
+                ratio: p.median,
+                ci: Some((p.ci_low, p.ci_high, p.ci_coverage)),
+                rounds: p.rounds,
+                // The paired median can fall below 1 although the medians say otherwise
+                // (skewed samples): then the direction itself is uncertain.
+                decisive: p.ci_low > 1.0,
+            },
+            None => {
+                let (f, s) = (self.clock.ci_ms(fast), self.clock.ci_ms(slow));
+                Contest {
+                    faster: fast.backend.clone(),
+                    slower: slow.backend.clone(),
+                    faster_label: format!("{}:{}", fast.backend, fast.quality),
+                    ratio: self.clock.median_ms(slow) / self.clock.median_ms(fast).max(1e-12),
+                    ci: None,
+                    rounds: 0,
+                    decisive: f.1 < s.0,
+                }
+            }
+        }
+    }
+}
+
+/// Which of two rows is faster, by how much, and how sure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Contest {
+    /// Backend of the faster row.
+    pub faster: String,
+    /// Backend of the slower row.
+    pub slower: String,
+    /// `backend:quality` of the faster row.
+    pub faster_label: String,
+    /// Slower time / faster time (>= 1 by the medians; the paired median may dip below 1).
+    pub ratio: f64,
+    /// Confidence interval of the paired ratio and its coverage, when paired.
+    pub ci: Option<(f64, f64, f64)>,
+    /// Rotation rounds the paired ratio is over (0 when not paired).
+    pub rounds: usize,
+    /// The faster row is faster beyond the noise (paired: CI above 1; unpaired: the two
+    /// medians' intervals do not overlap).
+    pub decisive: bool,
+}
+
+impl Contest {
+    /// The ratio oriented as `backend`'s time over the other's (< 1: `backend` is faster);
+    /// `None` if `backend` is not one of the two.
+    pub fn time_ratio_of(&self, backend: &str) -> Option<f64> {
+        if self.faster == backend {
+            Some(1.0 / self.ratio)
+        } else if self.slower == backend {
+            Some(self.ratio)
+        } else {
+            None
+        }
+    }
+}
+
+impl fmt::Display for Contest {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let ci = match self.ci {
+            Some((lo, hi, cov)) => format!(
+                ", paired over {} rounds, {:.0}% CI {lo:.2}-{hi:.2}",
+                self.rounds,
+                cov * 100.0
+            ),
+            None => ", ratio of medians".into(),
+        };
+        if self.decisive {
+            write!(
+                f,
+                "{} {:.2}x faster than {}{ci}",
+                self.faster, self.ratio, self.slower
+            )
+        } else {
+            write!(
+                f,
+                "no clear winner ({} {:.2}x faster than {} by the medians{ci}: within the noise)",
+                self.faster, self.ratio, self.slower
+            )
+        }
+    }
+}
+
+/// Rows that differ only in backend and quality: speed is compared within one setting
+/// (group, scene, image size, threads, machine).
+pub type SettingKey = (String, String, u32, u32, usize, String);
+
+/// The setting of a row.
+pub fn setting(r: &Row) -> SettingKey {
+    (
+        r.group.clone(),
+        r.scene.clone(),
+        r.width,
+        r.height,
+        r.threads,
+        r.machine.clone(),
+    )
+}
+
+/// The distinct settings of `rows` in first-appearance order.
+pub fn settings<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Vec<SettingKey> {
+    let mut out: Vec<SettingKey> = Vec::new();
+    for r in rows {
+        let k = setting(r);
+        if !out.contains(&k) {
+            out.push(k);
+        }
+    }
+    out
+}
+
+/// `group/scene WxH tN` (with ` on machine` when `with_machine`).
+pub fn setting_name(k: &SettingKey, with_machine: bool) -> String {
+    let machine = if with_machine && !k.5.is_empty() {
+        format!(" on {}", k.5)
+    } else {
+        String::new()
+    };
+    format!("{}/{} {}x{} t{}{machine}", k.0, k.1, k.2, k.3, k.4)
+}
+
+/// The backends of `rows` in first-appearance order.
+pub fn backends<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for r in rows {
+        if !out.contains(&r.backend) {
+            out.push(r.backend.clone());
+        }
+    }
+    out
+}
+
+/// Per backend of `rows` (first-appearance order), its fastest row on `timing`'s clock among
+/// those reaching `min_psnr` dB (`None` when none does).
+fn fastest_per_backend<'a>(
+    rows: &[&'a Row],
+    min_psnr: f64,
+    timing: Timing<'_>,
+) -> Vec<(String, Option<&'a Row>)> {
+    backends(rows.iter().copied())
+        .into_iter()
+        .map(|b| {
+            let best = rows
+                .iter()
+                .filter(|r| r.backend == b && r.psnr_db.is_some_and(|p| p >= min_psnr))
+                .min_by(|x, y| {
+                    timing
+                        .clock
+                        .median_ms(x)
+                        .total_cmp(&timing.clock.median_ms(y))
+                })
+                .copied();
+            (b, best)
+        })
+        .collect()
+}
+
+/// The contest of the fastest backend's row against the runner-up backend's, when at least
+/// two backends have a row.
+fn winner_and_runner_up(best: &[(String, Option<&Row>)], timing: Timing<'_>) -> Option<Contest> {
+    let mut ranked: Vec<&Row> = best.iter().filter_map(|(_, r)| *r).collect();
+    ranked.sort_by(|x, y| {
+        timing
+            .clock
+            .median_ms(x)
+            .total_cmp(&timing.clock.median_ms(y))
+    });
+    match ranked.as_slice() {
+        [first, second, ..] => Some(timing.contest(first, second)),
+        _ => None,
+    }
+}
+
+/// The headline of one setting: per backend its fastest row reaching a PSNR threshold, and
+/// the contest of the fastest backend with the runner-up.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Headline {
+    /// The setting.
+    pub setting: SettingKey,
+    /// `group/scene WxH tN`.
+    pub name: String,
+    /// Per backend of the setting (first-appearance order): its fastest row reaching the
+    /// threshold, described as `sdf:quality 12.3 ms (45.0 dB, 1.2 MiB)`, or `None`.
+    pub best: Vec<(String, Option<String>)>,
+    /// Fastest backend against the runner-up, when two backends reach the threshold.
+    pub contest: Option<Contest>,
+    /// The PSNR threshold, dB.
+    pub min_psnr: f64,
+}
+
+impl fmt::Display for Headline {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let sides: Vec<String> = self
+            .best
+            .iter()
+            .map(|(b, d)| {
+                d.clone()
+                    .unwrap_or_else(|| format!("{b}: none reaches {:.0} dB", self.min_psnr))
+            })
+            .collect();
+        write!(f, "{}: {}", self.name, sides.join(" vs "))?;
+        if let Some(c) = &self.contest {
+            write!(f, ": {c}")?;
+        }
+        Ok(())
+    }
+}
+
+/// One headline per setting with accuracy: each backend's fastest row reaching `min_psnr`
+/// dB, the fastest backend compared with the runner-up on `timing`'s clock.
+pub fn headlines(rows: &[Row], min_psnr: f64, timing: Timing<'_>) -> Vec<Headline> {
+    let machines: std::collections::BTreeSet<&str> =
+        rows.iter().map(|r| r.machine.as_str()).collect();
+    let mut out = Vec::new();
+    for k in settings(rows) {
+        let set: Vec<&Row> = rows.iter().filter(|r| setting(r) == k).collect();
+        if set.iter().all(|r| r.psnr_db.is_none()) {
+            continue;
+        }
+        let best = fastest_per_backend(&set, min_psnr, timing);
+        let describe = |r: &Row| {
+            format!(
+                "{}:{} {:.1} ms ({:.1} dB, {})",
+                r.backend,
+                r.quality,
+                timing.clock.median_ms(r),
+                r.psnr_db.unwrap_or(f64::NAN),
+                crate::report::bytes(r.memory_bytes)
+            )
+        };
+        out.push(Headline {
+            name: setting_name(&k, machines.len() > 1),
+            setting: k,
+            best: best
+                .iter()
+                .map(|(b, r)| (b.clone(), r.map(describe)))
+                .collect(),
+            contest: winner_and_runner_up(&best, timing),
+            min_psnr,
+        });
+    }
+    out
+}
+
+/// For every PSNR target reached in `rows` (one setting): the fastest backend reaching it
+/// against the runner-up, or `Err(backend)` when only one backend reaches it.
+pub fn matched_accuracy(rows: &[&Row], timing: Timing<'_>) -> Vec<(f64, Result<Contest, String>)> {
+    let mut targets: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
+    targets.sort_by(f64::total_cmp);
+    targets.dedup();
+    targets
+        .into_iter()
+        .filter_map(|q| {
+            let best = fastest_per_backend(rows, q, timing);
+            match winner_and_runner_up(&best, timing) {
+                Some(c) => Some((q, Ok(c))),
+                None => best
+                    .into_iter()
+                    .find(|(_, r)| r.is_some())
+                    .map(|(b, _)| (q, Err(b))),
+            }
+        })
+        .collect()
+}
+
+/// How one verdict of run A fares in run B.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VerdictAgreement {
+    /// `headline group/scene WxH tN` or `matched group/scene WxH tN @ 40.0 dB`.
+    pub claim: String,
+    /// Winner in A and B (`undecided` when within the noise).
+    pub winners: (String, String),
+    /// Both runs name the same winner, or both are undecided.
+    pub agree: bool,
+    /// |ratio B / ratio A - 1| in percent, the ratio taken as A's winner's time over A's
+    /// runner-up's; `None` when B's contest is between other backends.
+    pub moved_pct: Option<f64>,
+}
+
+fn winner(c: &Contest) -> String {
+    if c.decisive {
+        c.faster.clone()
+    } else {
+        "undecided".into()
+    }
+}
+
+fn agreement(claim: String, a: &Contest, b: &Contest) -> VerdictAgreement {
+    let ra = 1.0 / a.ratio;
+    let rb = b
+        .time_ratio_of(&a.faster)
+        .filter(|_| b.time_ratio_of(&a.slower).is_some());
+    let (wa, wb) = (winner(a), winner(b));
+    VerdictAgreement {
+        claim,
+        agree: wa == wb,
+        winners: (wa, wb),
+        moved_pct: rb.map(|rb| (rb / ra - 1.0).abs() * 100.0),
+    }
+}
+
+/// Every headline and every matched-accuracy claim present in both runs (same setting,
+/// machine ignored: the point is to compare machines and moments), each run read on its own
+/// clock ([`Clock::for_run`]).
+pub fn compare_runs(a: &Results, b: &Results, min_psnr: f64) -> Vec<VerdictAgreement> {
+    let (ta, tb) = (Timing::of(a), Timing::of(b));
+    let strip = |k: &SettingKey| (k.0.clone(), k.1.clone(), k.2, k.3, k.4);
+    let mut out = Vec::new();
+    let hb = headlines(&b.rows, min_psnr, tb);
+    for x in headlines(&a.rows, min_psnr, ta) {
+        let Some(y) = hb.iter().find(|y| strip(&y.setting) == strip(&x.setting)) else {
+            continue;
+        };
+        if let (Some(ca), Some(cb)) = (&x.contest, &y.contest) {
+            out.push(agreement(
+                format!("headline {}", setting_name(&x.setting, false)),
+                ca,
+                cb,
+            ));
+        }
+    }
+    for ka in settings(&a.rows) {
+        let Some(kb) = settings(&b.rows)
+            .into_iter()
+            .find(|k| strip(k) == strip(&ka))
+        else {
+            continue;
+        };
+        let set = |res: &'_ Results, k: &SettingKey| -> Vec<Row> {
+            res.rows
+                .iter()
+                .filter(|r| &setting(r) == k)
+                .cloned()
+                .collect()
+        };
+        let (sa, sb) = (set(a, &ka), set(b, &kb));
+        let ma = matched_accuracy(&sa.iter().collect::<Vec<_>>(), ta);
+        let mb = matched_accuracy(&sb.iter().collect::<Vec<_>>(), tb);
+        for (q, ca) in &ma {
+            let Some((_, cb)) = mb.iter().find(|(p, _)| (p - q).abs() < 1e-9) else {
+                continue;
+            };
+            if let (Ok(ca), Ok(cb)) = (ca, cb) {
+                out.push(agreement(
+                    format!("matched {} @ {q:.1} dB", setting_name(&ka, false)),
+                    ca,
+                    cb,
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// A [`Summary`] of the claims' movements (median and max moved percent) and how many claims
+/// disagree.
+pub fn movement_summary(v: &[VerdictAgreement]) -> Option<(Summary, usize)> {
+    let moved: Vec<f64> = v.iter().filter_map(|x| x.moved_pct).collect();
+    Summary::of(&moved).map(|s| (s, v.iter().filter(|x| !x.agree).count()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::tests_support::{results, row};
+
+    fn samples(values: &[f64]) -> Vec<TimingSample> {
+        values
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| TimingSample {
+                round: i as u32,
+                wall_ms: v,
+                cpu_ms: Some(v * 2.0),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn contests_pair_by_round_and_say_when_they_cannot_tell() {
+        let a = row("sdf", "a", 10.0, Some(45.0), 100);
+        let b = row("mesh", "b", 20.0, Some(45.0), 100);
+        let mut t = BTreeMap::new();
+        // The machine slows down over the rounds; mesh is always 2x sdf.
+        t.insert(
+            a.config_id.clone(),
+            samples(&[10.0, 20.0, 40.0, 80.0, 160.0]),
+        );
+        t.insert(
+            b.config_id.clone(),
+            samples(&[20.0, 40.0, 80.0, 160.0, 320.0]),
+        );
+        let timing = Timing {
+            clock: Clock::Wall,
+            samples: Some(&t),
+        };
+        let c = timing.contest(&a, &b);
+        assert_eq!((c.faster.as_str(), c.ratio, c.rounds), ("sdf", 2.0, 5));
+        assert!(c.decisive);
+        assert!(
+            c.to_string()
+                .starts_with("sdf 2.00x faster than mesh, paired over 5 rounds")
+        );
+        assert_eq!(c.time_ratio_of("sdf"), Some(0.5));
+        assert_eq!(c.time_ratio_of("mesh"), Some(2.0));
+        assert_eq!(c.time_ratio_of("voxels"), None);
+        // Per-round ratios straddling 1: no winner.
+        t.insert(
+            b.config_id.clone(),
+            samples(&[9.0, 21.0, 39.0, 82.0, 150.0]),
+        );
+        let timing = Timing {
+            clock: Clock::Wall,
+            samples: Some(&t),
+        };
+        let c = timing.contest(&a, &b);
+        assert!(!c.decisive, "{c}");
+        assert!(c.to_string().starts_with("no clear winner"), "{c}");
+        // Without samples: ratio of medians, decisive only when the CIs are apart.
+        let c = Timing::medians_only().contest(&a, &b);
+        assert_eq!((c.ratio, c.ci), (2.0, None));
+        assert!(c.decisive);
+    }
+
+    #[test]
+    fn a_busy_run_is_judged_on_cpu_time() {
+        let mut r = row("sdf", "a", 10.0, Some(45.0), 100);
+        r.render_cpu_ms_median = Some(7.0);
+        let mut res = results(vec![r.clone()]);
+        res.provenance.logical_cores = 2;
+        res.provenance.load_average_1m = Some(0.3);
+        res.provenance.load_average_1m_end = Some(1.9);
+        assert_eq!(Clock::for_run(&res), Clock::Wall);
+        res.provenance.load_average_1m_end = Some(4.5);
+        assert_eq!(Clock::for_run(&res), Clock::Cpu);
+        assert_eq!(Clock::Cpu.median_ms(&r), 7.0);
+        // A row without CPU time keeps the run on wall time.
+        res.rows.push(row("mesh", "b", 1.0, None, 1));
+        assert_eq!(Clock::for_run(&res), Clock::Wall);
+    }
+
+    #[test]
+    fn verdicts_of_two_runs_agree_or_say_how_they_moved() {
+        let rows = |mesh_ms: f64| {
+            vec![
+                row("sdf", "a", 10.0, Some(45.0), 100),
+                row("mesh", "b", mesh_ms, Some(45.0), 100),
+            ]
+        };
+        let mut a = results(rows(20.0));
+        let b = results(rows(22.0));
+        let v = compare_runs(&a, &b, 40.0);
+        // One headline and one matched-accuracy claim (45 dB).
+        assert_eq!(v.len(), 2, "{v:?}");
+        assert!(v.iter().all(|x| x.agree));
+        let moved = v[0].moved_pct.unwrap();
+        assert!(
+            (moved - (1.0 - 20.0 / 22.0) * 100.0).abs() < 1e-9,
+            "{moved}"
+        );
+        let faster = row("mesh", "b", 5.0, Some(45.0), 100);
+        a.rows[1] = faster;
+        let v = compare_runs(&a, &b, 40.0);
+        assert!(!v[0].agree);
+        assert_eq!(v[0].winners, ("mesh".to_string(), "sdf".to_string()));
+    }
+
+    #[test]
+    fn headlines_rank_any_number_of_backends() {
+        let rows = vec![
+            row("sdf", "a", 10.0, Some(45.0), 100),
+            row("mesh", "b", 20.0, Some(45.0), 100),
+            row("voxels", "c", 4.0, Some(41.0), 100),
+            row("voxels", "d", 1.0, Some(20.0), 100),
+        ];
+        let h = headlines(&rows, 40.0, Timing::medians_only());
+        assert_eq!(h.len(), 1);
+        let c = h[0].contest.as_ref().unwrap();
+        assert_eq!(
+            (c.faster.as_str(), c.slower.as_str(), c.ratio),
+            ("voxels", "sdf", 2.5)
+        );
+        assert_eq!(h[0].best.len(), 3);
+        let m = matched_accuracy(&rows.iter().collect::<Vec<_>>(), Timing::medians_only());
+        // 20 dB: voxels:d vs sdf; 41: voxels:c vs sdf; 45: sdf vs mesh.
+        let winners: Vec<(f64, &str, &str)> = m
+            .iter()
+            .map(|(q, c)| {
+                let c = c.as_ref().unwrap();
+                (*q, c.faster.as_str(), c.slower.as_str())
+            })
+            .collect();
+        assert_eq!(
+            winners,
+            [
+                (20.0, "voxels", "sdf"),
+                (41.0, "voxels", "sdf"),
+                (45.0, "sdf", "mesh")
+            ]
+        );
+    }
+}
