@@ -103,6 +103,7 @@ fn results_of(template: Results, outcome: bench::Outcome) -> Results {
         timings: outcome.timings,
         rotation_seed: Some(outcome.rotation_seed),
         missing: outcome.missing,
+        write_errors: outcome.write_errors,
         ..template
     }
 }
@@ -138,15 +139,6 @@ impl Progress for Bars {
     }
 }
 
-fn repo_root() -> PathBuf {
-    // Suites are looked up under the current folder, then next to the executable's repo.
-    let cwd = std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."));
-    if cwd.join("scenes/suites").is_dir() {
-        return cwd;
-    }
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
-}
-
 /// Appends a formatted line to a `String`.
 macro_rules! outln {
     ($out:expr, $($arg:tt)*) => {{
@@ -165,7 +157,7 @@ fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
 }
 
 pub fn bench(args: BenchArgs) -> Result<()> {
-    let suite_path = suite::locate(&args.suite, &repo_root());
+    let suite_path = suite::locate(&args.suite, &crate::assets::root()?);
     let suite = suite::load(&suite_path)?;
     if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
         bail!(
@@ -241,6 +233,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         missing: configs.iter().map(|c| c.id.clone()).collect(),
         shard: args.shard.map(|s| s.to_string()),
         merged_from: Vec::new(),
+        write_errors: Vec::new(),
     };
     // The folder says from the start what is still missing.
     template
@@ -287,12 +280,22 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     for m in &results.missing {
         eprintln!("missing: {m}");
     }
+    for e in &results.write_errors {
+        eprintln!("not written: {e}");
+    }
     if results.interrupted {
         bail!(
             "interrupted: {} of {} configurations missing (listed in {})",
             results.missing.len(),
             configs.len(),
             dir.join("results.json").display()
+        );
+    }
+    if !results.write_errors.is_empty() {
+        bail!(
+            "{} files of the run could not be written (listed above and in {})",
+            results.write_errors.len(),
+            dir.join("summary.md").display()
         );
     }
     if !results.failures.is_empty() {
@@ -497,16 +500,17 @@ fn verdict_view(out: &mut String, ra: &Results, rb: &Results) {
 }
 
 pub fn stability(args: StabilityArgs) -> Result<()> {
-    let root = repo_root();
+    let root = crate::assets::root()?;
     let out = match args.out {
         Some(o) => o,
-        None => root.join("bench-results").join(format!(
+        None => PathBuf::from("bench-results").join(format!(
             "stability-{}",
             utc_strings(marchmesh_harness::results::now_secs()).1
         )),
     };
     // --out is the run folder itself: it must be new or empty, so no file is ever replaced.
     refuse_non_empty(&out, "--out")?;
+    let out_existed = out.exists();
     if let Some(dir) = &args.write_scenes {
         refuse_non_empty(dir, "--write-scenes")?;
     }
@@ -544,6 +548,23 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
             bar.set_message(id.to_string());
         });
     bar.finish_and_clear();
+    if rows.is_empty() && errors.is_empty() {
+        // Leave nothing behind for a run that measured nothing (the folder was new or empty).
+        if out_existed {
+            if let Ok(entries) = std::fs::read_dir(&out) {
+                for e in entries.flatten() {
+                    let _ = std::fs::remove_dir_all(e.path())
+                        .or_else(|_| std::fs::remove_file(e.path()));
+                }
+            }
+        } else {
+            let _ = std::fs::remove_dir_all(&out);
+        }
+        bail!(
+            "no stability case matches the filter {:?}",
+            args.filter.as_deref().unwrap_or("")
+        );
+    }
     marchmesh_stability::report::write(&out, &rows, &errors, args.side, &command_line())
         .with_context(|| format!("writing the report into {}", out.display()))?;
     let counts = marchmesh_stability::report::verdict_counts(&rows);
@@ -560,12 +581,6 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     );
     for e in &errors {
         eprintln!("case error: {e}");
-    }
-    if rows.is_empty() && errors.is_empty() {
-        bail!(
-            "no stability case matches the filter {:?}",
-            args.filter.as_deref().unwrap_or("")
-        );
     }
     if rows.is_empty() {
         bail!(

@@ -11,6 +11,7 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
 use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
 
+mod assets;
 mod bench;
 
 #[derive(Parser)]

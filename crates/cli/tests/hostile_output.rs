@@ -246,4 +246,92 @@ fn item11_stability_fails_when_the_filter_matches_nothing() {
         "{}",
         stderr(&o)
     );
+    assert!(
+        !dir.join("run").exists(),
+        "a run that measured nothing leaves no folder"
+    );
+}
+
+#[test]
+fn item5_bench_thread_counts_are_capped_on_the_command_line_and_in_suites() {
+    let dir = tmp("bench-threads");
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["bench", "--suite", "smoke", "--threads", "5000", "--list"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .env(
+            "MARCHMESH_ROOT",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../.."),
+        )
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("--threads 5000 is over the limit of 1024"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../scenes/csg.json"),
+        dir.join("csg.json"),
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("suite.json"),
+        r#"{"groups": [{"name": "g", "scenes": ["csg.json"], "threads": [1, 100000], "backends": [{"backend": "sdf"}]}]}"#,
+    )
+    .unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["bench", "--suite", "suite.json", "--out", "out"])
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("groups[0].threads[1]") && stderr(&o).contains("over the limit"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.join("out").exists());
+}
+
+#[test]
+fn item12_an_installed_binary_finds_its_suites_and_writes_under_the_current_folder() {
+    // An empty folder, no checkout, a private cache: the embedded suites and scenes are used.
+    let dir = tmp("installed");
+    let cache = dir.join("cache");
+    let work = dir.join("work");
+    std::fs::create_dir_all(&work).unwrap();
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+            .args(args)
+            .current_dir(&work)
+            .env("XDG_CACHE_HOME", &cache)
+            .env_remove("MARCHMESH_ROOT")
+            .output()
+            .unwrap()
+    };
+    let o = run(&["bench", "--suite", "smoke", "--list"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("smoke/csg/sdf"));
+    let o = run(&[
+        "bench", "--suite", "smoke", "--filter", "*/csg/*", "--quick",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let runs: Vec<_> = std::fs::read_dir(work.join("bench-results"))
+        .unwrap()
+        .collect();
+    assert_eq!(runs.len(), 1, "results go under the current folder");
+    // The scenes came from the extracted copy in the cache, not from the build tree.
+    let extracted: Vec<_> = std::fs::read_dir(cache.join("marchmesh"))
+        .unwrap()
+        .flatten()
+        .collect();
+    assert_eq!(extracted.len(), 1);
+    assert!(
+        extracted[0]
+            .path()
+            .join("scenes/suites/default.json")
+            .is_file()
+    );
+    std::fs::remove_dir_all(&dir).ok();
 }

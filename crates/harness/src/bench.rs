@@ -136,6 +136,8 @@ pub struct Outcome {
     pub rotation_seed: u64,
     /// Configurations neither measured nor failed (the run stopped before them).
     pub missing: Vec<String>,
+    /// Files (images) that could not be written, with the reason.
+    pub write_errors: Vec<String>,
 }
 
 fn resolve_threads(t: usize) -> usize {
@@ -319,6 +321,8 @@ struct Prepared {
     samples: Vec<TimingSample>,
     /// A timed render failed: the configuration becomes a failure.
     error: Option<String>,
+    /// Images that could not be written.
+    write_errors: Vec<String>,
 }
 
 /// Runs `configs`. Configurations of one scene and resolution ([`rotation_blocks`]) are first
@@ -371,7 +375,8 @@ pub fn run(
                 let truth = match truth_scene {
                     Ok(truth_scene) => {
                         progress.phase("reference");
-                        let (truth, info) = reference_render(c, truth_scene, options);
+                        let (truth, info) =
+                            reference_render(c, truth_scene, options, &mut out.write_errors);
                         out.references.push(info);
                         truth
                     }
@@ -507,6 +512,7 @@ fn rotate_and_finish(
     }
     for p in held.drain(..) {
         let c = &configs[p.index];
+        out.write_errors.extend(p.write_errors);
         match finish_row(p.row, &p.samples, p.error) {
             Ok(row) => {
                 out.steps_histograms.insert(c.id.clone(), p.histogram);
@@ -586,10 +592,23 @@ fn finish_row(
     Ok(row)
 }
 
+/// Notes a failed image write in `errors` (the run goes on; the CLI reports them and exits
+/// nonzero).
+fn image_written(
+    result: Result<(), impl std::fmt::Display>,
+    path: &Path,
+    errors: &mut Vec<String>,
+) {
+    if let Err(e) = result {
+        errors.push(format!("{}: {e}", path.display()));
+    }
+}
+
 fn reference_render(
     c: &Config,
     l: &Loaded,
     options: &BenchOptions,
+    write_errors: &mut Vec<String>,
 ) -> (Result<Truth, String>, ReferenceInfo) {
     let (w, h) = (l.scene.camera.width, l.scene.camera.height);
     let mut info = ReferenceInfo {
@@ -623,7 +642,7 @@ fn reference_render(
             info.render_ms = Some(o.elapsed.as_secs_f64() * 1e3);
             if let Some(dir) = &options.images_dir {
                 let p = dir.join(format!("{}_{w}x{h}_reference.png", slug(&c.scene)));
-                let _ = image_io::write_png(&o.framebuffer, &p);
+                image_written(image_io::write_png(&o.framebuffer, &p), &p, write_errors);
             }
             let size = images::visible_scene_size(&l.scene, &o.framebuffer);
             (
@@ -680,15 +699,21 @@ fn prepare(
     let fb = &warm.framebuffer;
     let mut notes = Vec::new();
     let slug_id = slug(&c.id);
+    let mut write_errors = Vec::new();
     if let Some(dir) = &options.images_dir {
-        let _ = image_io::write_png(fb, &dir.join(format!("{slug_id}.png")));
+        let p = dir.join(format!("{slug_id}.png"));
+        image_written(image_io::write_png(fb, &p), &p, &mut write_errors);
     }
     let acc = match truth {
         Some(Ok(truth)) => {
             let a = compare(fb, &truth.fb).map_err(|e| e.to_string())?;
             if let Some(dir) = &options.images_dir {
-                let _ =
-                    images::write_diff_png(fb, &truth.fb, &dir.join(format!("{slug_id}.diff.png")));
+                let p = dir.join(format!("{slug_id}.diff.png"));
+                image_written(
+                    images::write_diff_png(fb, &truth.fb, &p),
+                    &p,
+                    &mut write_errors,
+                );
             }
             Some((a, truth.size, images::ssim(fb, &truth.fb)))
         }
@@ -778,6 +803,7 @@ fn prepare(
         histogram,
         samples: Vec::new(),
         error: None,
+        write_errors,
     })
 }
 

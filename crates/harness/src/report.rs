@@ -295,6 +295,9 @@ pub fn summary_markdown(res: &Results) -> String {
     for m in &res.missing {
         let _ = writeln!(s, "- missing (not measured before the run stopped): `{m}`");
     }
+    for e in &res.write_errors {
+        let _ = writeln!(s, "- not written: {e}");
+    }
     for k in &res.skipped {
         let _ = writeln!(s, "- skipped: {k}");
     }
@@ -309,7 +312,11 @@ pub fn summary_markdown(res: &Results) -> String {
             r.0.scene, r.0.width, r.0.height, r.1
         );
     }
-    if !res.failures.is_empty() || !res.skipped.is_empty() || !res.missing.is_empty() {
+    if !res.failures.is_empty()
+        || !res.skipped.is_empty()
+        || !res.missing.is_empty()
+        || !res.write_errors.is_empty()
+    {
         s.push('\n');
     }
     let timing = Timing::of(res);
@@ -766,8 +773,8 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
 /// Writes `summary.md` and `plots/` into `dir` from `res`.
 pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let summary = dir.join("summary.md");
-    std::fs::write(&summary, summary_markdown(res))
-        .map_err(|e| format!("{}: {e}", summary.display()))?;
+    marchmesh_safeio::replace_regular(&summary, summary_markdown(res).as_bytes())
+        .map_err(|e| e.to_string())?;
     write_plots(res, &dir.join("plots"))
 }
 

@@ -316,6 +316,9 @@ pub struct Results {
     /// For a run made by `marchmesh merge`: the run id, shard and provenance of each input.
     #[serde(default)]
     pub merged_from: Vec<MergedShard>,
+    /// Files of the run (images) that could not be written, with the reason.
+    #[serde(default)]
+    pub write_errors: Vec<String>,
 }
 
 /// One input of a merged run.
@@ -412,14 +415,22 @@ impl Results {
             file: path.display().to_string(),
             reason: e.to_string(),
         };
-        let mut w = csv::Writer::from_path(path).map_err(err)?;
+        let mut w = csv::Writer::from_writer(Vec::new());
         if self.rows.is_empty() {
             w.write_record(csv_header()).map_err(err)?;
         }
         for r in &self.rows {
             w.serialize(r).map_err(err)?;
         }
-        w.flush().map_err(io_err(path))
+        let bytes = w.into_inner().map_err(|e| ResultsError::Csv {
+            file: path.display().to_string(),
+            reason: e.to_string(),
+        })?;
+        // Atomic, like results.json: a failed write leaves the previous file, never half of it.
+        marchmesh_safeio::replace_regular(path, &bytes).map_err(|e| ResultsError::Write {
+            file: path.display().to_string(),
+            reason: e.to_string(),
+        })
     }
 }
 
@@ -610,6 +621,7 @@ impl Results {
             missing: Vec::new(),
             shard: None,
             merged_from: Vec::new(),
+            write_errors: Vec::new(),
         };
         for (_, r) in inputs {
             out.merged_from.push(MergedShard {
@@ -636,6 +648,7 @@ impl Results {
             out.steps_histograms.extend(r.steps_histograms);
             out.timings.extend(r.timings);
             out.missing.extend(r.missing);
+            out.write_errors.extend(r.write_errors);
         }
         Ok(out)
     }
@@ -741,6 +754,7 @@ pub(crate) mod tests_support {
             missing: vec![],
             shard: None,
             merged_from: vec![],
+            write_errors: vec![],
         }
     }
 }
