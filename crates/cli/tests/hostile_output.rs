@@ -161,15 +161,25 @@ fn item16_out_jpg_writes_jpeg_and_unknown_extensions_are_refused() {
 }
 
 #[test]
-fn item14_schema_and_validate_on_a_closed_stdout_do_not_panic() {
+fn item14_schema_validate_and_bench_list_on_a_closed_stdout_do_not_panic() {
     let dir = tmp("pipe");
     let s = scene(&dir);
     for args in [
         vec!["schema".to_string()],
         vec!["validate".into(), s.display().to_string()],
+        vec![
+            "bench".into(),
+            "--suite".into(),
+            "default".into(),
+            "--list".into(),
+        ],
     ] {
         let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
             .args(&args)
+            .env(
+                "MARCHMESH_ROOT",
+                concat!(env!("CARGO_MANIFEST_DIR"), "/../.."),
+            )
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped())
             .spawn()
