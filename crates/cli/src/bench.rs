@@ -309,6 +309,58 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// `marchmesh findings RUN... --out FILE [--force]`.
+pub fn findings(runs: &[PathBuf], out: &Path, force: bool) -> Result<()> {
+    let stem = out
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .filter(|s| !s.is_empty())
+        .with_context(|| format!("--out {}: needs a file name", out.display()))?;
+    let plots_link = format!("{stem}-plots");
+    let plots_dir = out
+        .parent()
+        .map_or_else(|| PathBuf::from(&plots_link), |p| p.join(&plots_link));
+    if !force {
+        if out.exists() || std::fs::symlink_metadata(out).is_ok() {
+            bail!(
+                "--out {}: exists; pass --force to replace it and {} (nothing was overwritten)",
+                out.display(),
+                plots_dir.display()
+            );
+        }
+        refuse_non_empty(&plots_dir, "plots folder")?;
+    }
+    let inputs = runs
+        .iter()
+        .map(|r| {
+            let json = results_path(r);
+            let results = Results::read_json(&json)?;
+            let name = json.parent().and_then(Path::file_name).map_or_else(
+                || results.run_id.clone(),
+                |n| n.to_string_lossy().into_owned(),
+            );
+            Ok(marchmesh_harness::findings::Run { name, results })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let text = marchmesh_harness::findings::write_findings(&inputs, &plots_dir, &plots_link)
+        .map_err(anyhow::Error::msg)
+        .context("writing the findings plots")?;
+    let write = if force {
+        marchmesh_safeio::replace_regular(out, text.as_bytes())
+    } else {
+        marchmesh_safeio::publish_new(out, text.as_bytes())
+    };
+    write.with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "{}: findings from {} runs ({} plots in {})",
+        out.display(),
+        inputs.len(),
+        std::fs::read_dir(&plots_dir).map_or(0, Iterator::count),
+        plots_dir.display()
+    );
+    Ok(())
+}
+
 /// `marchmesh merge RUN... --out DIR`.
 pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
     refuse_non_empty(out, "--out")?;

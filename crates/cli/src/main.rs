@@ -39,6 +39,21 @@ enum Command {
     Schema,
     /// Run a benchmark suite and write bench-results/RUN_ID/ (CSV, JSON, summary, plots, images).
     Bench(BenchArgs),
+    /// Write the findings across runs: per axis (scene size, image size, threads, accuracy
+    /// target, memory) who is faster where and where the winner changes, with plots.
+    Findings {
+        /// Run folders (or their results.json); the newest run counts for a configuration
+        /// measured twice.
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// The Markdown file to write; plots go to `<FILE stem>-plots/` beside it. Links point
+        /// to `RUN/summary.md`, so write it in the folder holding the runs.
+        #[arg(long)]
+        out: PathBuf,
+        /// Replace an existing FILE and its plots.
+        #[arg(long)]
+        force: bool,
+    },
     /// Regenerate summary.md and plots/ of a run folder from its results.json.
     Report {
         /// The run folder (holding results.json).
@@ -173,6 +188,7 @@ fn main() {
         Command::Bench(args) => bench::bench(args),
         Command::Report { dir } => bench::report(&dir),
         Command::Merge { runs, out } => bench::merge(&runs, &out),
+        Command::Findings { runs, out, force } => bench::findings(&runs, &out, force),
         Command::Compare { a, b } => bench::compare(&a, &b),
         Command::Stability(args) => bench::stability(args),
     };

@@ -594,9 +594,23 @@ fn lines(
     y_desc: &str,
     series: &[(String, Vec<(f64, f64)>)],
 ) -> Result<(), String> {
+    line_plot(path, title, x_desc, y_desc, series, false)
+}
+
+/// A line plot of named series (points and lines, one colour each) from zero up on the y axis;
+/// a log x axis when `log_x` (non-positive x values are left out there).
+///
+/// Errors: the SVG cannot be written.
+pub(crate) fn line_plot(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    y_desc: &str,
+    series: &[(String, Vec<(f64, f64)>)],
+    log_x: bool,
+) -> Result<(), String> {
     let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
-    let (x0, x1) = lin_range(series.iter().flat_map(|s| s.1.iter().map(|p| p.0)));
     let y1 = series
         .iter()
         .flat_map(|s| s.1.iter().map(|p| p.1))
@@ -604,37 +618,65 @@ fn lines(
         .fold(0.0f64, f64::max)
         .max(1e-9)
         * 1.1;
-    let mut chart = ChartBuilder::on(&root)
+    let mut builder = ChartBuilder::on(&root);
+    builder
         .caption(title, ("sans-serif", 18))
         .margin(12)
         .x_label_area_size(40)
-        .y_label_area_size(70)
-        .build_cartesian_2d(x0.max(0.0)..x1, 0.0..y1)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc(x_desc)
-        .y_desc(y_desc)
-        .draw()
-        .map_err(plot_err)?;
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let c = COLORS[i % COLORS.len()];
-        let style = ShapeStyle::from(&c).stroke_width(2);
-        chart
-            .draw_series(LineSeries::new(pts.iter().copied(), style))
-            .map_err(plot_err)?
-            .label(name.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
-        chart
-            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
-            .map_err(plot_err)?;
+        .y_label_area_size(70);
+    macro_rules! draw {
+        ($chart:expr, $keep:expr) => {{
+            let mut chart = $chart;
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_desc(y_desc)
+                .x_label_formatter(&|v| short_num(*v))
+                .draw()
+                .map_err(plot_err)?;
+            for (i, (name, pts)) in series.iter().enumerate() {
+                let c = COLORS[i % COLORS.len()];
+                let pts: Vec<(f64, f64)> = pts
+                    .iter()
+                    .copied()
+                    .filter(|p| p.1.is_finite() && $keep(p.0))
+                    .collect();
+                let style = ShapeStyle::from(&c).stroke_width(2);
+                chart
+                    .draw_series(LineSeries::new(pts.iter().copied(), style))
+                    .map_err(plot_err)?
+                    .label(name.clone())
+                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c));
+                chart
+                    .draw_series(pts.iter().map(|&p| Circle::new(p, 3, c.filled())))
+                    .map_err(plot_err)?;
+            }
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(plot_err)?;
+        }};
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()
-        .map_err(plot_err)?;
+    let xs = || series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
+    if log_x {
+        let (x0, x1) = log_range(xs());
+        draw!(
+            builder
+                .build_cartesian_2d((x0..x1).log_scale(), 0.0..y1)
+                .map_err(plot_err)?,
+            |x: f64| x > 0.0
+        );
+    } else {
+        let (x0, x1) = lin_range(xs());
+        draw!(
+            builder
+                .build_cartesian_2d(x0.max(0.0)..x1, 0.0..y1)
+                .map_err(plot_err)?,
+            |_: f64| true
+        );
+    }
     root.present().map_err(plot_err)
 }
 
