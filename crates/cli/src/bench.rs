@@ -492,11 +492,13 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
     print_ignoring_broken_pipe(&out)
 }
 
-/// Whether every verdict of A (headlines at PSNR >= 40 dB and matched-accuracy claims) holds
+/// Whether every verdict of A (headlines at `HEADLINE_MIN_PSNR_DB` and matched-accuracy claims) holds
 /// in B, each run read on its own clock, and how far each speed ratio moved.
 fn verdict_view(out: &mut String, ra: &Results, rb: &Results) {
-    use marchmesh_harness::verdicts::{Clock, compare_runs, movement_summary};
-    let claims = compare_runs(ra, rb, 40.0);
+    use marchmesh_harness::verdicts::{
+        Clock, HEADLINE_MIN_PSNR_DB, compare_runs, movement_summary,
+    };
+    let claims = compare_runs(ra, rb, HEADLINE_MIN_PSNR_DB);
     outln!(
         out,
         "\nverdicts (A on {} time, B on {} time; moved = change of A's winner / runner-up time ratio):",

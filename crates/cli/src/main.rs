@@ -339,10 +339,7 @@ fn render(args: RenderArgs) -> Result<()> {
         .with_context(|| format!("scene {}", args.scene.display()))?;
 
     let t0 = Instant::now();
-    let spec = BackendSpec {
-        kind: Some(kind),
-        options,
-    };
+    let spec = BackendSpec { kind, options };
     let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
     let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
         .with_context(|| format!("building scene {}", args.scene.display()))?;

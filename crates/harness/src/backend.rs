@@ -60,10 +60,10 @@ impl FromStr for BackendKind {
 }
 
 /// A backend and its options.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct BackendSpec {
     /// Which backend.
-    pub kind: Option<BackendKind>,
+    pub kind: BackendKind,
     /// `key=value` options in the order given; later keys override earlier ones.
     pub options: Vec<(String, String)>,
 }
@@ -74,9 +74,6 @@ pub enum BackendError {
     /// The name is not a backend.
     #[error("unknown backend `{0}` (expected one of: reference, sdf, mesh)")]
     UnknownBackend(String),
-    /// No backend was named.
-    #[error("no backend given")]
-    Missing,
     /// An option key the backend does not have, or a value it cannot parse.
     #[error("backend `{backend}`: option `{key}`: {reason}")]
     BadOption {
@@ -316,7 +313,7 @@ fn bad(kind: BackendKind, key: &str, reason: String) -> BackendError {
 /// Checks `spec`'s options without building anything (for validating suite files early):
 /// unknown keys, unparsable values and inconsistent settings are errors.
 pub fn check_options(spec: &BackendSpec) -> Result<(), BackendError> {
-    let kind = spec.kind.ok_or(BackendError::Missing)?;
+    let kind = spec.kind;
     let build_err = |e: &dyn fmt::Display| BackendError::BadOption {
         backend: kind,
         key: "options".into(),
@@ -346,7 +343,7 @@ pub fn build_within(
     spec: &BackendSpec,
     memory_limit_bytes: u64,
 ) -> Result<Box<dyn Geometry>, BackendError> {
-    let kind = spec.kind.ok_or(BackendError::Missing)?;
+    let kind = spec.kind;
     match kind {
         BackendKind::Reference => {
             build_as::<ReferenceBackend>(kind, scene, &spec.options, memory_limit_bytes)
@@ -434,7 +431,7 @@ mod tests {
                     (default, _) => default.to_string(),
                 };
                 let spec = BackendSpec {
-                    kind: Some(kind),
+                    kind,
                     options: opts(&[(&d.key, &example)]),
                 };
                 check_options(&spec).unwrap_or_else(|e| panic!("{kind} {}: {e}", d.key));
@@ -494,7 +491,7 @@ mod tests {
         let e = mesh(&[("tess", "1")]).unwrap_err();
         assert!(e.contains("`mesh`") && e.contains("`tess`") && e.contains("tess_level"));
         let e = check_options(&BackendSpec {
-            kind: Some(BackendKind::Reference),
+            kind: BackendKind::Reference,
             options: opts(&[("x", "1")]),
         })
         .unwrap_err()
@@ -515,7 +512,7 @@ mod tests {
             (BackendKind::Mesh, "preset", "best"),
         ] {
             let e = check_options(&BackendSpec {
-                kind: Some(kind),
+                kind,
                 options: opts(&[(k, v)]),
             })
             .unwrap_err()

@@ -188,7 +188,7 @@ pub fn configurations(suite: &Suite, options: &BenchOptions) -> Vec<Config> {
                 } in &g.backends
                 {
                     for &t in &threads {
-                        let kind = spec.kind.map_or("?", BackendKind::name);
+                        let kind = spec.kind.name();
                         let id = format!(
                             "{}/{scene}/{kind}:{label}/{}/t{t}",
                             g.name,
@@ -620,7 +620,7 @@ fn reference_render(
         error: None,
     };
     let spec = BackendSpec {
-        kind: Some(BackendKind::Reference),
+        kind: BackendKind::Reference,
         options: Vec::new(),
     };
     let t0 = Instant::now();
@@ -727,7 +727,7 @@ fn prepare(
         }
     };
     let rel = |v: f64, size: Option<f64>| size.filter(|s| *s > 0.0).map(|s| v / s);
-    let kind = c.spec.kind.map_or("?", BackendKind::name);
+    let kind = c.spec.kind.name();
     let total_rays = s.total_rays();
     let rates = s.mrays_per_thread_second();
     let row = Row {
@@ -893,7 +893,7 @@ mod tests {
             scene_path: PathBuf::from(format!("{scene}.json")),
             label: "q".into(),
             spec: BackendSpec {
-                kind: None,
+                kind: BackendKind::Sdf,
                 options: vec![],
             },
             resolution: Resolution::Size {

@@ -19,7 +19,7 @@ use std::path::Path;
 
 use crate::report::bytes;
 use crate::results::{Results, Row};
-use crate::verdicts::{Clock, Timing, matched_accuracy};
+use crate::verdicts::{Clock, HEADLINE_MIN_PSNR_DB, Timing, matched_accuracy};
 
 /// One run given to `findings`: its folder name (links are `NAME/summary.md`, relative to the
 /// folder holding the runs, where `FINDINGS.md` belongs) and its results.
@@ -656,7 +656,8 @@ fn quality_axes(
             )
         })
         .collect();
-    // Memory budget: the least memory with which each backend reaches 40 dB.
+    // Memory budget: the least memory with which each backend reaches the headline PSNR.
+    let min_psnr = HEADLINE_MIN_PSNR_DB;
     let backends = distinct(points, |p| p.row.backend.clone());
     let least: Vec<(String, Option<&Point<'_>>)> = backends
         .iter()
@@ -665,7 +666,7 @@ fn quality_axes(
                 b.clone(),
                 points
                     .iter()
-                    .filter(|p| &p.row.backend == b && p.row.psnr_db.is_some_and(|q| q >= 40.0))
+                    .filter(|p| &p.row.backend == b && p.row.psnr_db.is_some_and(|q| q >= min_psnr))
                     .min_by_key(|p| p.row.memory_bytes),
             )
         })
@@ -673,7 +674,7 @@ fn quality_axes(
     let mem: Vec<String> = least
         .iter()
         .map(|(b, p)| {
-            p.map_or(format!("{b} never reaches 40 dB"), |p| {
+            p.map_or(format!("{b} never reaches {min_psnr:.0} dB"), |p| {
                 format!(
                     "{b} needs {} (`{}`)",
                     bytes(p.row.memory_bytes),
@@ -682,7 +683,11 @@ fn quality_axes(
             })
         })
         .collect();
-    let _ = writeln!(body, "Memory budget for 40 dB: {}.\n", mem.join("; "));
+    let _ = writeln!(
+        body,
+        "Memory budget for {min_psnr:.0} dB: {}.\n",
+        mem.join("; ")
+    );
     let brief = if machines_differ(runs, points) {
         format!("{group}/{scene}: rows from different machines; no speed claim.")
     } else {

@@ -17,7 +17,7 @@
 //! )?;
 //! let background = marchmesh_core::BackgroundSampler::load(&scene.background)?;
 //! for kind in BackendKind::ALL {
-//!     let spec = BackendSpec { kind: Some(kind), options: vec![] };
+//!     let spec = BackendSpec { kind, options: vec![] };
 //!     let geometry = backend::build(&scene, &spec)?;
 //!     let options = marchmesh_core::RenderOptions { threads: 1, ..Default::default() };
 //!     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &options, &|| {})?;

@@ -9,7 +9,53 @@ use plotters::prelude::*;
 
 use crate::backend::BackendKind;
 use crate::results::{Results, Row};
-use crate::verdicts::{Clock, Timing, backends, headlines, matched_accuracy, setting, settings};
+use crate::verdicts::{
+    Clock, HEADLINE_MIN_PSNR_DB, Timing, backends, headlines, matched_accuracy, setting, settings,
+};
+
+/// A column of the summary table: its header and the cell text of a row.
+pub type SummaryColumn = (&'static str, fn(&Row) -> String);
+
+/// The per-configuration table of the summary: each column once, its header beside the
+/// value it shows, so the two cannot drift apart.
+pub const SUMMARY_COLUMNS: &[SummaryColumn] = &[
+    ("backend", |r| r.backend.clone()),
+    ("quality", |r| r.quality.clone()),
+    ("size", |r| format!("{}x{}", r.width, r.height)),
+    ("threads", |r| r.threads.to_string()),
+    ("build ms", |r| format!("{:.2}", r.build_ms_total)),
+    ("render ms median [95% CI]", |r| {
+        format!(
+            "{:.2} [{:.2}, {:.2}]",
+            r.render_ms_median, r.render_ms_ci_low, r.render_ms_ci_high
+        )
+    }),
+    ("CPU ms median [95% CI]", |r| {
+        match (
+            r.render_cpu_ms_median,
+            r.render_cpu_ms_ci_low,
+            r.render_cpu_ms_ci_high,
+        ) {
+            (Some(m), Some(lo), Some(hi)) => format!("{m:.2} [{lo:.2}, {hi:.2}]"),
+            _ => "n/a".into(),
+        }
+    }),
+    ("Mrays/s", |r| format!("{:.2}", r.mrays_per_s)),
+    ("Mrays/CPU-s", |r| opt(r.mrays_per_cpu_s, 2)),
+    ("memory", |r| bytes(r.memory_bytes)),
+    ("heap build", |r| opt_bytes(r.peak_heap_bytes_build)),
+    ("heap render", |r| opt_bytes(r.peak_heap_bytes_render)),
+    ("silhouette %", |r| opt(r.silhouette_mismatch_pct, 3)),
+    ("depth p95 / scene", |r| opt(r.depth_err_p95_rel_scene, 5)),
+    ("normal mean deg", |r| opt(r.normal_err_deg_mean, 2)),
+    ("depth rel max", |r| opt(r.depth_err_rel_max, 4)),
+    ("tail px depth / normal", tail_px),
+    ("PSNR dB", |r| opt(r.psnr_db, 1)),
+    ("SSIM", |r| opt(r.ssim, 4)),
+    ("steps mean", |r| format!("{:.1}", r.steps_mean)),
+    ("exhausted %", |r| format!("{:.3}", r.step_exhaustion_pct)),
+    ("nodes/ray", |r| format!("{:.1}", r.node_visits_per_ray)),
+];
 
 /// Bytes with a binary unit (B, KiB, MiB, GiB), 3 significant digits.
 pub fn bytes(b: u64) -> String {
@@ -320,11 +366,12 @@ pub fn summary_markdown(res: &Results) -> String {
         s.push('\n');
     }
     let timing = Timing::of(res);
-    let heads = headlines(&res.rows, 40.0, timing);
+    let heads = headlines(&res.rows, HEADLINE_MIN_PSNR_DB, timing);
     if !heads.is_empty() {
         let _ = writeln!(
             s,
-            "## Headlines\n\nFastest configuration of each backend reaching PSNR >= 40 dB against the reference, per scene and setting, on {} time (memory is that configuration's representation). A ratio is \"paired\" when both were timed in the same rotation: it is the median of the per-round ratios with its confidence interval, which cancels slow drifts of the machine's load; a claim whose interval includes 1 is reported as no clear winner.\n",
+            "## Headlines\n\nFastest configuration of each backend reaching PSNR >= {:.0} dB against the reference, per scene and setting, on {} time (memory is that configuration's representation). A ratio is \"paired\" when both were timed in the same rotation: it is the median of the per-round ratios with its confidence interval, which cancels slow drifts of the machine's load; a claim whose interval includes 1 is reported as no clear winner.\n",
+            HEADLINE_MIN_PSNR_DB,
             timing.clock.name()
         );
         for h in heads {
@@ -343,49 +390,17 @@ pub fn summary_markdown(res: &Results) -> String {
         let _ = writeln!(s, "## {group} / {scene}\n");
         let _ = writeln!(
             s,
-            "| backend | quality | size | threads | build ms | render ms median [95% CI] | CPU ms median [95% CI] | Mrays/s | Mrays/CPU-s | memory | heap build | heap render | silhouette % | depth p95 / scene | normal mean deg | depth rel max | tail px depth / normal | PSNR dB | SSIM | steps mean | exhausted % | nodes/ray |"
-        );
-        let _ = writeln!(
-            s,
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+            "| {} |\n|{}",
+            SUMMARY_COLUMNS
+                .iter()
+                .map(|c| c.0)
+                .collect::<Vec<_>>()
+                .join(" | "),
+            "---|".repeat(SUMMARY_COLUMNS.len())
         );
         for r in &rows {
-            let _ = writeln!(
-                s,
-                "| {} | {} | {}x{} | {} | {:.2} | {:.2} [{:.2}, {:.2}] | {} | {:.2} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {:.3} | {:.1} |",
-                r.backend,
-                r.quality,
-                r.width,
-                r.height,
-                r.threads,
-                r.build_ms_total,
-                r.render_ms_median,
-                r.render_ms_ci_low,
-                r.render_ms_ci_high,
-                match (
-                    r.render_cpu_ms_median,
-                    r.render_cpu_ms_ci_low,
-                    r.render_cpu_ms_ci_high
-                ) {
-                    (Some(m), Some(lo), Some(hi)) => format!("{m:.2} [{lo:.2}, {hi:.2}]"),
-                    _ => "n/a".into(),
-                },
-                r.mrays_per_s,
-                opt(r.mrays_per_cpu_s, 2),
-                bytes(r.memory_bytes),
-                opt_bytes(r.peak_heap_bytes_build),
-                opt_bytes(r.peak_heap_bytes_render),
-                opt(r.silhouette_mismatch_pct, 3),
-                opt(r.depth_err_p95_rel_scene, 5),
-                opt(r.normal_err_deg_mean, 2),
-                opt(r.depth_err_rel_max, 4),
-                tail_px(r),
-                opt(r.psnr_db, 1),
-                opt(r.ssim, 4),
-                r.steps_mean,
-                r.step_exhaustion_pct,
-                r.node_visits_per_ray
-            );
+            let cells: Vec<String> = SUMMARY_COLUMNS.iter().map(|c| (c.1)(r)).collect();
+            let _ = writeln!(s, "| {} |", cells.join(" | "));
         }
         s.push('\n');
         for k in settings(rows.iter().copied()) {

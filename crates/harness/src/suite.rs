@@ -448,10 +448,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                         .map_err(|e| fmt_err(format!("{bp}.options[{oi}]"), e))?,
                 );
             }
-            let spec = BackendSpec {
-                kind: Some(kind),
-                options,
-            };
+            let spec = BackendSpec { kind, options };
             backend::check_options(&spec)
                 .map_err(|e| fmt_err(format!("{bp}.options"), e.to_string()))?;
             let label = b.label.clone().unwrap_or_else(|| default_label(&b.options));

@@ -12,7 +12,7 @@ fn scene(text: &str) -> marchmesh_scene::Scene {
 
 fn spec(kind: BackendKind, options: &[&str]) -> BackendSpec {
     BackendSpec {
-        kind: Some(kind),
+        kind,
         options: options
             .iter()
             .map(|o| backend::parse_option(o).expect("option"))

@@ -440,7 +440,6 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             (_, Some(l)) => SourceMesh::Local(l),
             _ => continue,
         };
-        let composite = matches!(key, ShapeKey::Composite(_));
         if options.instancing && placements.len() > 1 {
             let input = source.blas_input();
             if input.triangles.is_empty() {
@@ -459,7 +458,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             }
         } else {
             for p in placements {
-                flat.append(&source, &p.to_render, p.material, composite);
+                flat.append(&source, &p.to_render, p.material);
             }
         }
     }
@@ -729,13 +728,7 @@ struct FlatBuilder {
 }
 
 impl FlatBuilder {
-    fn append(
-        &mut self,
-        source: &SourceMesh,
-        to_render: &DAffine3,
-        material: MaterialId,
-        _composite: bool,
-    ) {
+    fn append(&mut self, source: &SourceMesh, to_render: &DAffine3, material: MaterialId) {
         let base = self.positions.len() as u32;
         let normal_matrix = to_render.matrix3.inverse().transpose();
         let mirrored = to_render.matrix3.determinant() < 0.0;

@@ -239,7 +239,7 @@ fn build_and_render(
     options: &RunOptions,
 ) -> Result<Rendered, String> {
     let spec = BackendSpec {
-        kind: Some(variant.backend),
+        kind: variant.backend,
         options: variant.options.clone(),
     };
     let t0 = Instant::now();

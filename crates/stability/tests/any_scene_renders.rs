@@ -129,7 +129,7 @@ fn render_everywhere(json: &str, base: &Path) {
             eprintln!("{kind}: {json}");
         }
         let spec = BackendSpec {
-            kind: Some(kind),
+            kind,
             options: Vec::new(),
         };
         match backend::build(&scene, &spec) {
@@ -195,7 +195,7 @@ fn missing_and_corrupt_meshes_are_named_by_every_backend() {
             .expect("paths are not checked at parse time");
         for kind in BackendKind::ALL {
             let spec = BackendSpec {
-                kind: Some(kind),
+                kind,
                 options: Vec::new(),
             };
             match backend::build(&scene, &spec) {
