@@ -28,34 +28,9 @@ use marchmesh_scene::Scene;
 /// Image side of every conformance render, pixels.
 pub const SIDE: u32 = 64;
 
-/// What a backend must meet on one case.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Tolerance {
-    /// Largest share of pixels hit by exactly one of the backend and the reference, %.
-    pub silhouette_mismatch_pct: f64,
-    /// Largest 95th-percentile depth error relative to the reference depth.
-    pub depth_rel_p95: f64,
-    /// Largest mean normal angle error, degrees.
-    pub normal_deg_mean: f64,
-    /// Largest share of pixels (hit by both) showing a different material, %.
-    pub material_mismatch_pct: f64,
-    /// Largest share of rays that may end by step exhaustion, %.
-    pub step_exhaustion_pct: f64,
-}
-
-impl Default for Tolerance {
-    /// Tight defaults meant for an accurate backend: 1.5% silhouette pixels, 0.2% relative
-    /// depth, 1 degree mean normal error, 1% material, no step exhaustion.
-    fn default() -> Self {
-        Self {
-            silhouette_mismatch_pct: 1.5,
-            depth_rel_p95: 2e-3,
-            normal_deg_mean: 1.0,
-            material_mismatch_pct: 1.0,
-            step_exhaustion_pct: 0.0,
-        }
-    }
-}
+/// What a backend must meet on one case: the core's [`Tolerance`], shared with the
+/// stability study's verdicts.
+pub use marchmesh_core::Tolerance;
 
 /// A conformance scene: its id, its name and its JSON (camera size is forced to 64x64).
 pub struct Case {
@@ -312,44 +287,13 @@ pub fn check(id: CaseId, r: &CaseResult, tol: &Tolerance) {
             a.silhouette_mismatch
         ));
     }
-    let material_pct = 100.0 * a.material_mismatch as f64 / a.both_hit.max(1) as f64;
-    let exhaustion_pct = 100.0 * r.stats.step_exhaustion_rate();
     if a.non_finite > 0 || r.stats.non_finite_hits > 0 || r.stats.non_finite_pixels > 0 {
         failures.push(format!(
             "non-finite values: {} pixels, {} hits",
             a.non_finite, r.stats.non_finite_hits
         ));
     }
-    if a.silhouette_mismatch_pct > tol.silhouette_mismatch_pct {
-        failures.push(format!(
-            "silhouette mismatch {:.2}% > {:.2}%",
-            a.silhouette_mismatch_pct, tol.silhouette_mismatch_pct
-        ));
-    }
-    if a.depth_rel_p95 > tol.depth_rel_p95 {
-        failures.push(format!(
-            "relative depth error p95 {:.2e} > {:.2e}",
-            a.depth_rel_p95, tol.depth_rel_p95
-        ));
-    }
-    if a.normal_deg_mean > tol.normal_deg_mean {
-        failures.push(format!(
-            "mean normal error {:.3} deg > {:.3} deg",
-            a.normal_deg_mean, tol.normal_deg_mean
-        ));
-    }
-    if material_pct > tol.material_mismatch_pct {
-        failures.push(format!(
-            "material mismatch {material_pct:.2}% > {:.2}%",
-            tol.material_mismatch_pct
-        ));
-    }
-    if exhaustion_pct > tol.step_exhaustion_pct {
-        failures.push(format!(
-            "step exhaustion {exhaustion_pct:.3}% > {:.3}%",
-            tol.step_exhaustion_pct
-        ));
-    }
+    failures.extend(tol.violations(&marchmesh_core::Measured::of(a, &r.stats)));
     assert!(
         failures.is_empty(),
         "conformance case `{name}` failed:\n  {}\naccuracy: {a:#?}",

@@ -18,6 +18,7 @@ pub mod integrator;
 pub mod path;
 pub mod sampling;
 pub mod stats;
+pub mod tolerance;
 
 pub use backend::Backend;
 pub use background::{BackgroundError, BackgroundSampler};
@@ -29,3 +30,4 @@ pub use integrator::{
     DEFAULT_MEMORY_LIMIT_BYTES, MAX_THREADS, RenderError, RenderOptions, RenderOutput, render,
 };
 pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};
+pub use tolerance::{INVISIBLE_PSNR_DB, Measured, Tolerance};

@@ -11,9 +11,10 @@ use crate::results::{Results, Row, TimingSample};
 use crate::stats::{PairedRatio, Summary};
 
 /// PSNR against the reference (dB) a configuration must reach to count in a headline, the
-/// findings' memory budget and `compare`'s verdict view: beyond it the remaining differences
-/// from the reference are hard to see at the default image sizes.
-pub const HEADLINE_MIN_PSNR_DB: f64 = 40.0;
+/// findings' memory budget and `compare`'s verdict view: [`marchmesh_core::INVISIBLE_PSNR_DB`],
+/// beyond which the remaining differences are hard to see (the stability study's "exact" for
+/// image-judged cases too).
+pub const HEADLINE_MIN_PSNR_DB: f64 = marchmesh_core::INVISIBLE_PSNR_DB;
 
 /// The time a verdict compares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -4,7 +4,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use marchmesh_core::{
-    Accuracy, BackgroundSampler, Framebuffer, RenderOptions, RenderOutput, compare, render,
+    Accuracy, BackgroundSampler, Framebuffer, Measured, RenderOptions, RenderOutput, Tolerance,
+    compare, render,
 };
 use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
 use marchmesh_scene::{Scene, parse_scene};
@@ -120,7 +121,7 @@ impl Metrics {
             return Verdict::Broken;
         }
         if judge_by_image {
-            return if self.psnr_db >= 40.0 {
+            return if self.psnr_db >= marchmesh_core::INVISIBLE_PSNR_DB {
                 Verdict::Exact
             } else if self.psnr_db >= 25.0 {
                 Verdict::Degraded
@@ -128,17 +129,17 @@ impl Metrics {
                 Verdict::Broken
             };
         }
-        // Depth and normal errors are NaN when no pixel is hit by both; the silhouette
-        // check decides those cases alone.
-        let within = |sil: f64, depth: f64, normal: f64, exhaust: f64| {
-            self.silhouette_mismatch_pct <= sil
-                && (self.depth_rel_p95.is_nan() || self.depth_rel_p95 <= depth)
-                && (self.normal_deg_mean.is_nan() || self.normal_deg_mean <= normal)
-                && self.step_exhaustion_pct <= exhaust
+        // The same bounds type as the conformance suite (materials are not judged here).
+        let m = Measured {
+            silhouette_mismatch_pct: self.silhouette_mismatch_pct,
+            depth_rel_p95: self.depth_rel_p95,
+            normal_deg_mean: self.normal_deg_mean,
+            material_mismatch_pct: 0.0,
+            step_exhaustion_pct: self.step_exhaustion_pct,
         };
-        if within(0.5, 1e-3, 1.0, 0.1) {
+        if Tolerance::STABILITY_EXACT.admits(&m) {
             Verdict::Exact
-        } else if within(5.0, 1e-2, 5.0, 5.0) {
+        } else if Tolerance::STABILITY_DEGRADED.admits(&m) {
             Verdict::Degraded
         } else {
             Verdict::Broken
