@@ -362,7 +362,7 @@ pub fn report(dir: &Path) -> Result<()> {
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the report into {}", out.display()))?;
     println!(
-        "{}: summary.md and {} plots regenerated from {} rows",
+        "{}: summary.md, report.html and {} plots regenerated from {} rows",
         out.display(),
         plots.len(),
         res.rows.len()

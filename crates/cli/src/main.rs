@@ -39,7 +39,7 @@ enum Command {
     Schema,
     /// Run a benchmark suite and write bench-results/RUN_ID/ (CSV, JSON, summary, plots, images).
     Bench(BenchArgs),
-    /// Regenerate summary.md and plots/ of a run folder from its results.json.
+    /// Regenerate summary.md, plots/ and report.html of a run folder from its results.json.
     Report {
         /// The run folder (holding results.json).
         dir: PathBuf,

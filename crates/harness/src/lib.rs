@@ -35,6 +35,7 @@
 pub mod alloc;
 pub mod backend;
 pub mod bench;
+pub mod html;
 pub mod images;
 pub mod report;
 pub mod results;
