@@ -5,7 +5,8 @@
 //! referenced by relative path, so the page works wherever the run folder is copied.
 //!
 //! The viewer honours a URL fragment at load: `#flip=reference|render|diff`, `config=ID` (a
-//! configuration id or its index) and `zoom=1..16`, e.g. `report.html#flip=diff&zoom=4`.
+//! configuration id or its index), `zoom=1..16` and `solo=1` (only the viewer, full window),
+//! e.g. `report.html#flip=diff&zoom=4`.
 
 use std::fmt::Write as _;
 use std::path::Path;
@@ -35,11 +36,11 @@ pub fn escape(s: &str) -> String {
     out
 }
 
-/// A relative file path as a URL path: bytes outside `A-Za-z0-9-._~/` percent-encoded.
+/// A relative file path as a URL path: bytes outside `A-Za-z0-9-._~/=,` percent-encoded.
 fn url_path(p: &str) -> String {
     let mut out = String::with_capacity(p.len());
     for b in p.bytes() {
-        if b.is_ascii_alphanumeric() || b"-._~/".contains(&b) {
+        if b.is_ascii_alphanumeric() || b"-._~/=,".contains(&b) {
             out.push(b as char);
         } else {
             let _ = write!(out, "%{b:02X}");
@@ -438,218 +439,14 @@ fn script_json(v: &impl Serialize) -> String {
         .replace('&', "\\u0026")
 }
 
-const STYLE: &str = r#"
-:root { --fg: #1d1f23; --muted: #5b616b; --line: #d8dbe0; --head: #f2f4f7; --accent: #2463c4; }
-* { box-sizing: border-box; }
-body { margin: 0; font: 14px/1.45 system-ui, -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif; color: var(--fg); background: #fff; }
-header, main { max-width: 1500px; margin: 0 auto; padding: 0 20px; }
-header { padding-top: 12px; border-bottom: 1px solid var(--line); }
-nav ul { list-style: none; padding: 0; margin: 6px 0 12px; display: flex; flex-wrap: wrap; gap: 4px 14px; }
-nav a, a { color: var(--accent); text-decoration: none; }
-nav a:hover, a:hover { text-decoration: underline; }
-h1 { font-size: 22px; margin: 8px 0; }
-h2 { font-size: 18px; margin: 28px 0 8px; padding-top: 8px; border-top: 1px solid var(--line); }
-h3 { font-size: 15px; margin: 18px 0 6px; }
-code { font: 12.5px/1.3 ui-monospace, SFMono-Regular, Menlo, Consolas, monospace; background: #f3f4f6; padding: 1px 4px; border-radius: 3px; }
-.table-wrap { overflow-x: auto; margin: 8px 0 12px; border: 1px solid var(--line); border-radius: 4px; }
-table { border-collapse: collapse; font-size: 12.5px; white-space: nowrap; }
-th, td { padding: 3px 8px; border-bottom: 1px solid var(--line); text-align: left; }
-th { background: var(--head); position: sticky; top: 0; font-weight: 600; white-space: normal; min-width: 5em; vertical-align: bottom; }
-td.num { text-align: right; font-variant-numeric: tabular-nums; }
-tbody tr:hover { background: #f7f9fc; }
-.plots { display: flex; flex-wrap: wrap; gap: 16px; }
-figure { margin: 0; border: 1px solid var(--line); border-radius: 4px; padding: 6px; max-width: 100%; }
-figure svg, figure img { display: block; max-width: 100%; height: auto; }
-figcaption { color: var(--muted); font-size: 12px; }
-.viewer .controls { display: flex; flex-wrap: wrap; align-items: center; gap: 6px 10px; margin: 8px 0; }
-.viewer select { max-width: 100%; font: inherit; padding: 2px; }
-.viewer button { font: inherit; padding: 3px 10px; border: 1px solid var(--line); border-radius: 4px; background: #fff; cursor: pointer; }
-.viewer button[aria-pressed="true"] { background: var(--accent); border-color: var(--accent); color: #fff; }
-.viewer button:disabled { opacity: 0.4; cursor: default; }
-.viewer .group { display: inline-flex; gap: 3px; align-items: center; }
-#zoom-label { min-width: 3em; text-align: center; font-variant-numeric: tabular-nums; }
-.stage { overflow: auto; max-height: 78vh; border: 1px solid var(--line); background: #808080 repeating-conic-gradient(#777 0 25%, #8a8a8a 0 50%) 0 0 / 16px 16px; }
-.stage img { display: block; image-rendering: pixelated; image-rendering: crisp-edges; }
-.stage img[hidden] { display: none; }
-.status, .hint, .pixel { color: var(--muted); font-size: 12.5px; margin: 4px 0; }
-.status.warn { color: #a33; }
-.legend { display: inline-flex; align-items: center; gap: 6px; font-size: 12px; color: var(--muted); }
-.ramp { display: inline-block; width: 120px; height: 10px; border: 1px solid var(--line); background: linear-gradient(to right, #0d0840, #265999, #26a673, #f2e626); }
-.swatch { display: inline-block; width: 10px; height: 10px; border: 1px solid var(--line); }
-footer { max-width: 1500px; margin: 24px auto; padding: 8px 20px; color: var(--muted); font-size: 12px; border-top: 1px solid var(--line); }
-"#;
+/// The page's style sheet (inlined).
+const STYLE: &str = include_str!("html/style.css");
 
 /// Records script errors on `<html data-errors>` (tests read it from the dumped DOM).
-const ERROR_HOOK: &str = r#"
-(function () {
-  var root = document.documentElement;
-  function note(msg) {
-    root.setAttribute("data-errors", (root.getAttribute("data-errors") || "") + msg + "\n");
-  }
-  window.onerror = function (msg, src, line, col) { note(msg + " at " + line + ":" + col); };
-  window.addEventListener("unhandledrejection", function (e) { note("unhandled rejection: " + e.reason); });
-})();
-"#;
+const ERROR_HOOK: &str = include_str!("html/error_hook.js");
 
-const VIEWER_JS: &str = r#"
-(function () {
-  "use strict";
-  var data = JSON.parse(document.getElementById("viewer-data").textContent);
-  var root = document.documentElement;
-  var KINDS = ["reference", "render", "diff"];
-  var NAMES = { reference: "reference", render: "render", diff: "difference" };
-  var ZOOMS = [1, 2, 4, 8, 16];
-  var sel = document.getElementById("cfg");
-  var img = document.getElementById("view");
-  var stage = document.getElementById("stage");
-  var status = document.getElementById("status");
-  var pixel = document.getElementById("pixel");
-  var zoomLabel = document.getElementById("zoom-label");
-  var kindButtons = {};
-  KINDS.forEach(function (k) { kindButtons[k] = document.getElementById("show-" + k); });
-  var state = { i: 0, kind: "render", zoom: 1 };
-
-  function parseHash() {
-    var h = (location.hash || "").replace(/^#/, "");
-    h.split("&").forEach(function (part) {
-      var eq = part.indexOf("=");
-      if (eq < 0) return;
-      var key = part.slice(0, eq), value;
-      try { value = decodeURIComponent(part.slice(eq + 1)); } catch (e) { return; }
-      if (key === "flip" || key === "view") {
-        if (value === "difference") value = "diff";
-        if (KINDS.indexOf(value) >= 0) state.kind = value;
-      } else if (key === "config") {
-        for (var j = 0; j < data.length; j++) {
-          if (data[j].id === value) { state.i = j; return; }
-        }
-        var n = parseInt(value, 10);
-        if (String(n) === value && n >= 0 && n < data.length) state.i = n;
-      } else if (key === "zoom") {
-        var z = parseInt(value, 10);
-        if (ZOOMS.indexOf(z) >= 0) state.zoom = z;
-      }
-    });
-  }
-
-  function writeHash() {
-    var h = "#flip=" + state.kind + "&zoom=" + state.zoom + "&config=" + encodeURIComponent(data[state.i].id);
-    try { history.replaceState(null, "", h); } catch (e) { /* file:// may refuse; the view still works */ }
-  }
-
-  function show() {
-    var e = data[state.i];
-    var path = e[state.kind];
-    KINDS.forEach(function (k) {
-      var b = kindButtons[k];
-      b.setAttribute("aria-pressed", k === state.kind ? "true" : "false");
-      b.disabled = !e[k];
-      b.title = e[k] ? e[k] : "no " + NAMES[k] + " image for this configuration";
-    });
-    sel.value = String(state.i);
-    zoomLabel.textContent = state.zoom + "x";
-    document.getElementById("zoom-out").disabled = state.zoom === ZOOMS[0];
-    document.getElementById("zoom-in").disabled = state.zoom === ZOOMS[ZOOMS.length - 1];
-    root.setAttribute("data-view", state.kind);
-    root.setAttribute("data-zoom", String(state.zoom));
-    if (!path) {
-      img.hidden = true;
-      img.removeAttribute("src");
-      img.setAttribute("data-kind", "none");
-      status.className = "status warn";
-      status.textContent = "No " + NAMES[state.kind] + " image for " + e.id +
-        (state.kind === "render" ? "." : " (no reference render for its scene and size, or it was not written).");
-      return;
-    }
-    img.hidden = false;
-    if (img.getAttribute("src") !== path) img.setAttribute("src", path);
-    img.setAttribute("data-kind", state.kind);
-    img.alt = NAMES[state.kind] + " of " + e.id;
-    img.style.width = (e.width * state.zoom) + "px";
-    img.style.height = (e.height * state.zoom) + "px";
-    status.className = "status";
-    status.textContent = NAMES[state.kind] + ": " + path + " (" + e.width + "x" + e.height + ", zoom " + state.zoom + "x)";
-  }
-
-  function update() { show(); writeHash(); }
-
-  function flip(kind) {
-    if (!data[state.i][kind]) return;
-    state.kind = kind;
-    update();
-  }
-
-  // Zooms to `z`, keeping the image point under (cx, cy) of the stage where it was.
-  function zoomTo(z, cx, cy) {
-    if (z === state.zoom) return;
-    if (cx === undefined) { cx = stage.clientWidth / 2; cy = stage.clientHeight / 2; }
-    var fx = (stage.scrollLeft + cx) / state.zoom, fy = (stage.scrollTop + cy) / state.zoom;
-    state.zoom = z;
-    update();
-    stage.scrollLeft = fx * z - cx;
-    stage.scrollTop = fy * z - cy;
-  }
-
-  function step(dir, cx, cy) {
-    var k = ZOOMS.indexOf(state.zoom) + dir;
-    if (k >= 0 && k < ZOOMS.length) zoomTo(ZOOMS[k], cx, cy);
-  }
-
-  function select(i) {
-    if (i < 0 || i >= data.length) return;
-    state.i = i;
-    // Keep the kind when the new configuration has it; else fall back to its render.
-    if (!data[i][state.kind]) state.kind = data[i].render ? "render" : (data[i].reference ? "reference" : state.kind);
-    update();
-  }
-
-  parseHash();
-  if (!data[state.i][state.kind]) {
-    root.setAttribute("data-missing", state.kind);
-  }
-  KINDS.forEach(function (k) {
-    kindButtons[k].addEventListener("click", function () { flip(k); });
-  });
-  sel.addEventListener("change", function () { select(parseInt(sel.value, 10)); });
-  document.getElementById("zoom-in").addEventListener("click", function () { step(1); });
-  document.getElementById("zoom-out").addEventListener("click", function () { step(-1); });
-  stage.addEventListener("wheel", function (ev) {
-    ev.preventDefault();
-    var r = stage.getBoundingClientRect();
-    step(ev.deltaY < 0 ? 1 : -1, ev.clientX - r.left, ev.clientY - r.top);
-  }, { passive: false });
-  img.addEventListener("mousemove", function (ev) {
-    var x = Math.floor(ev.offsetX / state.zoom), y = Math.floor(ev.offsetY / state.zoom);
-    pixel.textContent = "pixel (" + x + ", " + y + ")";
-  });
-  img.addEventListener("mouseleave", function () { pixel.textContent = ""; });
-  img.addEventListener("load", function () { img.setAttribute("data-loaded", img.getAttribute("src")); });
-  img.addEventListener("error", function () {
-    status.className = "status warn";
-    status.textContent = "Could not load " + img.getAttribute("src") + " (file missing from the run folder?).";
-    root.setAttribute("data-broken-image", img.getAttribute("src") || "");
-  });
-  document.addEventListener("keydown", function (ev) {
-    if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
-    var t = ev.target && ev.target.tagName;
-    if (t === "INPUT" || t === "TEXTAREA") return;
-    var handled = true;
-    switch (ev.key) {
-      case "1": flip("reference"); break;
-      case "2": flip("render"); break;
-      case "3": flip("diff"); break;
-      case "+": case "=": step(1); break;
-      case "-": case "_": step(-1); break;
-      case "[": select(state.i - 1); break;
-      case "]": select(state.i + 1); break;
-      default: handled = false;
-    }
-    if (handled) ev.preventDefault();
-  });
-  show();
-  root.setAttribute("data-ready", "1");
-})();
-"#;
+/// The image viewer (inlined after its JSON data block).
+const VIEWER_JS: &str = include_str!("html/viewer.js");
 
 /// The `report.html` of the run in `dir` (the run folder): summary tables, the plots of
 /// `dir/plots/` inlined, and the image viewer over the files present in `dir/images/`.
@@ -765,6 +562,7 @@ fn write_viewer(h: &mut String, entries: &[ViewerEntry]) {
          <button type=\"button\" id=\"zoom-out\" title=\"zoom out (-)\">&minus;</button>\
          <span id=\"zoom-label\">1x</span>\
          <button type=\"button\" id=\"zoom-in\" title=\"zoom in (+)\">+</button></span>\n\
+         <button type=\"button\" id=\"solo\" aria-pressed=\"false\" title=\"show only the viewer (f)\">full window</button>\n\
          <span class=\"legend\" title=\"difference heatmap colours\">difference: \
          <span class=\"ramp\"></span> 0 to 64+ levels; <span class=\"swatch\" style=\"background:#f0f\"></span> \
          silhouette; <span class=\"swatch\" style=\"background:#000\"></span> both miss</span>\n</div>\n",
@@ -783,8 +581,8 @@ fn write_viewer(h: &mut String, entries: &[ViewerEntry]) {
          <p class=\"hint\">Keys: <code>1</code> reference, <code>2</code> render, <code>3</code> \
          difference, <code>+</code>/<code>-</code> zoom (1x to 16x, pixels stay sharp; the mouse \
          wheel over the image zooms around the pointer), <code>[</code>/<code>]</code> previous / \
-         next configuration. The zoom and scroll position stay when flipping, so the same pixels \
-         are compared. The address keeps the view (<code>#flip=diff&amp;zoom=4&amp;config=ID</code>).</p>\n\
+         next configuration, <code>f</code> full window. The zoom and scroll position stay when flipping, so the same pixels \
+         are compared. The address keeps the view (<code>#flip=diff&amp;zoom=4&amp;config=ID&amp;solo=1</code>).</p>\n\
          <noscript><p class=\"status warn\">The viewer needs JavaScript; the images are in \
          <code>images/</code>.</p></noscript>\n</div>",
         src.map_or(String::new(), |p| format!(" src=\"{}\"", escape(p))),
@@ -796,4 +594,255 @@ fn write_viewer(h: &mut String, entries: &[ViewerEntry]) {
         "<script type=\"application/json\" id=\"viewer-data\">{}</script>\n<script>{VIEWER_JS}</script>",
         script_json(&entries)
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::tests_support::{results, row};
+
+    fn tmp(name: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("marchmesh-html-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(d.join("images")).unwrap();
+        d
+    }
+
+    /// `html` with the contents of `<script>` elements and inlined `<svg>` removed, so the
+    /// rest can be checked for markup that user text must not produce.
+    fn outside_scripts(html: &str) -> String {
+        let mut out = String::new();
+        let mut rest = html;
+        while let Some(i) = rest.find("<script") {
+            out.push_str(&rest[..i]);
+            let end = rest[i..].find("</script>").unwrap();
+            rest = &rest[i + end + "</script>".len()..];
+        }
+        out.push_str(rest);
+        out
+    }
+
+    #[test]
+    fn escaping_covers_markup_and_quotes() {
+        assert_eq!(
+            escape(r#"<a href="x" title='y'>&</a>"#),
+            "&lt;a href=&quot;x&quot; title=&#39;y&#39;&gt;&amp;&lt;/a&gt;"
+        );
+        assert_eq!(url_path("images/a b#?.png"), "images/a%20b%23%3F.png");
+    }
+
+    #[test]
+    fn markdown_subset_converts() {
+        let (h, toc) = markdown_to_html(
+            "# Title `x<y>`\n\nOne **bold** line\nand `a*b`.\n\n- item `<i>`\n- two\n\n## A / B\n\n| h1 | h2 |\n|---|---|\n| 1.5 | <b> |\n\nLone ** star and ` tick.\n",
+        );
+        assert!(h.contains("<h1>Title <code>x&lt;y&gt;</code></h1>"), "{h}");
+        assert!(
+            h.contains("<p>One <strong>bold</strong> line\nand <code>a*b</code>.</p>"),
+            "{h}"
+        );
+        assert!(
+            h.contains("<ul>\n<li>item <code>&lt;i&gt;</code></li>\n<li>two</li>\n</ul>"),
+            "{h}"
+        );
+        assert!(h.contains("<h2 id=\"section-1\">A / B</h2>"), "{h}");
+        assert_eq!(toc, [("section-1".to_string(), "A / B".to_string())]);
+        assert!(
+            h.contains("<thead><tr><th>h1</th><th>h2</th></tr></thead><tbody>\n<tr><td class=\"num\">1.5</td><td>&lt;b&gt;</td></tr>\n</tbody></table></div>"),
+            "{h}"
+        );
+        assert!(h.contains("<p>Lone ** star and ` tick.</p>"), "{h}");
+        assert!(!h.contains("<b>"), "{h}");
+    }
+
+    #[test]
+    fn hostile_config_ids_and_notes_are_escaped() {
+        let mut r = row("sdf", "<script>alert(1)</script>", 1.0, Some(40.0), 10);
+        r.config_id = "g/s/sdf:<script>alert(1)</script>/x1/t1".into();
+        r.scene = "s\"><img src=x onerror=alert(2)>".into();
+        r.notes = "</script><script>alert(3)</script>".into();
+        let mut res = results(vec![r.clone()]);
+        res.description = "<iframe src=//evil>".into();
+        res.failures.push(crate::results::Failure {
+            config_id: "</script>&'\"".into(),
+            error: "<b>boom</b> `</code><script>`".into(),
+        });
+        let dir = tmp("hostile");
+        std::fs::write(
+            dir.join("images")
+                .join(format!("{}.png", slug(&r.config_id))),
+            b"png",
+        )
+        .unwrap();
+        let html = report_html(&res, &dir);
+        let outside = outside_scripts(&html);
+        for bad in [
+            "<script>alert",
+            "<img src=x",
+            "<iframe",
+            "<b>boom",
+            "onerror=alert(2)>",
+        ] {
+            assert!(!outside.contains(bad), "{bad} unescaped in\n{outside}");
+        }
+        assert!(outside.contains("&lt;script&gt;alert(1)&lt;/script&gt;"));
+        // Inside the JSON data block nothing can close the element.
+        let data_start = html.find("id=\"viewer-data\">").unwrap();
+        let data = &html[data_start..];
+        let data = &data[..data.find("</script>").unwrap()];
+        assert!(!data[1..].contains('<'), "{data}");
+        assert!(data.contains("\\u003cscript\\u003e"), "{data}");
+        // Exactly the page's own two scripts plus the JSON block.
+        assert_eq!(html.matches("<script").count(), 3, "{html}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn every_row_is_in_the_tables_and_the_viewer() {
+        let mut rows = vec![
+            row("sdf", "coarse", 2.0, Some(30.0), 10),
+            row("sdf", "fine", 4.0, Some(45.0), 10),
+            row("mesh", "default", 3.0, Some(50.0), 100),
+        ];
+        let mut other = row("mesh", "default", 5.0, None, 100);
+        other.scene = "t".into();
+        other.config_id = "g/t/mesh:default/x1/t1".into();
+        rows.push(other);
+        for r in &mut rows {
+            r.width = 8;
+            r.height = 4;
+        }
+        let res = results(rows.clone());
+        let dir = tmp("rows");
+        for r in &rows {
+            let png = dir.join(format!("images/{}.png", slug(&r.config_id)));
+            std::fs::write(png, b"png").unwrap();
+        }
+        let html = report_html(&res, &dir);
+        for r in &rows {
+            assert!(
+                html.contains(&format!("title=\"{}\"", escape(&r.config_id))),
+                "{}",
+                r.config_id
+            );
+            assert!(
+                html.contains(&format!("<td>{}</td><td>{}</td>", r.backend, r.quality)),
+                "{}",
+                r.config_id
+            );
+        }
+        assert_eq!(html.matches("<option ").count(), rows.len());
+        assert!(html.contains("<optgroup label=\"g / s\">"));
+        assert!(html.contains("<optgroup label=\"g / t\">"));
+        assert!(html.contains("<a href=\"#section-2\">g / s</a>"), "{html}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn plots_are_inlined_and_unsafe_svg_is_only_linked() {
+        let res = results(vec![
+            row("sdf", "a", 2.0, Some(30.0), 10),
+            row("mesh", "b", 3.0, Some(50.0), 100),
+        ]);
+        let dir = tmp("plots");
+        let names = crate::report::write_plots(&res, &dir.join("plots")).unwrap();
+        assert!(!names.is_empty());
+        std::fs::write(
+            dir.join("plots").join("zz evil.svg"),
+            "<svg xmlns=\"http://www.w3.org/2000/svg\"><script>alert(1)</script></svg>",
+        )
+        .unwrap();
+        std::fs::write(
+            dir.join("plots").join("zz handler.svg"),
+            "<svg onload=\"alert(1)\"></svg>",
+        )
+        .unwrap();
+        let html = report_html(&res, &dir);
+        for n in &names {
+            assert!(
+                html.contains(&format!("<figcaption>plots/{n}</figcaption>")),
+                "{n}"
+            );
+            let svg = std::fs::read_to_string(dir.join("plots").join(n)).unwrap();
+            assert!(svg_is_plain(&svg), "{n} is not recognised as plain SVG");
+            assert!(html.contains(svg.trim()), "{n} not inlined");
+        }
+        assert!(html.contains("<img src=\"plots/zz%20evil.svg\" alt=\"zz evil.svg\">"));
+        assert!(html.contains("<img src=\"plots/zz%20handler.svg\""));
+        assert!(!html.contains("alert(1)"));
+        assert_eq!(html.matches("<svg").count(), names.len());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn svg_check_rejects_active_content() {
+        assert!(svg_is_plain(
+            "<?xml version=\"1.0\"?>\n<svg width=\"2\" height=\"2\" xmlns=\"http://www.w3.org/2000/svg\">\n<rect x=\"0\" y=\"0\" fill=\"#FFF\"/>\n<text x=\"1\">a &lt; b</text>\n</svg>\n"
+        ));
+        for bad in [
+            "<svg><foreignObject></foreignObject></svg>",
+            "<svg><a href=\"javascript:x\"></a></svg>",
+            "<svg><rect style=\"fill:url(http://x)\"/></svg>",
+            "<svg><rect fill=\"url(#x)\"/></svg>",
+            "<svg><rect/></svg><script>x</script>",
+            "<svg><rect ONLOAD=\"x\"/></svg>",
+            "<svg><rect x=1/></svg>",
+            "<svg><!-- x --></svg>",
+            "<svg>",
+            "text",
+        ] {
+            assert!(!svg_is_plain(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn images_present_are_referenced_and_missing_ones_are_not() {
+        let mut a = row("sdf", "a", 2.0, Some(30.0), 10);
+        let mut b = row("mesh", "b", 3.0, Some(50.0), 100);
+        for r in [&mut a, &mut b] {
+            r.width = 8;
+            r.height = 4;
+        }
+        let res = results(vec![a.clone(), b.clone()]);
+        let dir = tmp("images");
+        let img = dir.join("images");
+        std::fs::write(img.join("s_8x4_reference.png"), b"png").unwrap();
+        std::fs::write(img.join(format!("{}.png", slug(&a.config_id))), b"png").unwrap();
+        std::fs::write(img.join(format!("{}.diff.png", slug(&a.config_id))), b"png").unwrap();
+        std::fs::write(img.join(format!("{}.png", slug(&b.config_id))), b"png").unwrap();
+        let entries = viewer_entries(&res, &dir);
+        assert_eq!(
+            entries[0].reference.as_deref(),
+            Some("images/s_8x4_reference.png")
+        );
+        assert_eq!(
+            entries[0].diff.as_deref(),
+            Some(format!("images/{}.diff.png", slug(&a.config_id)).as_str())
+        );
+        assert!(entries[1].render.is_some());
+        assert!(entries[1].diff.is_none(), "b has no difference image");
+        let html = report_html(&res, &dir);
+        assert!(html.contains(&format!(
+            "<img id=\"view\" data-kind=\"render\" src=\"images/{}.png\"",
+            slug(&a.config_id)
+        )));
+        assert!(!html.contains(&format!("{}.diff.png", slug(&b.config_id))));
+        assert!(!html.contains("no-images"));
+
+        // A run without images says so instead of showing broken images.
+        for f in std::fs::read_dir(&img).unwrap() {
+            std::fs::remove_file(f.unwrap().path()).unwrap();
+        }
+        let html = report_html(&res, &dir);
+        assert!(html.contains("No images in this run"), "{html}");
+        assert!(!html.contains("<img id=\"view\""));
+        assert!(
+            !html.contains("src=\"images/"),
+            "no image paths without images"
+        );
+        // ...and so does a folder without images/ at all.
+        std::fs::remove_dir(&img).unwrap();
+        assert!(report_html(&res, &dir).contains("No images in this run"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
