@@ -32,6 +32,35 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
+/// Drives `report.html` in a frame (same folder; needs `--allow-file-access-from-files`):
+/// keys and a button, then writes each step's view, zoom, image and width into `<pre>`.
+const DRIVER: &str = r##"<!DOCTYPE html><html><body>
+<iframe id="f" src="report.html" width="1000" height="700"></iframe><pre id="out"></pre>
+<script>
+document.getElementById("f").onload = function () {
+  var log = [];
+  try {
+    var w = this.contentWindow, d = w.document, root = d.documentElement;
+    var state = function (name) {
+      var img = d.getElementById("view");
+      log.push([name, root.getAttribute("data-view"), root.getAttribute("data-zoom"),
+        img.getAttribute("src"), img.style.width].join(" "));
+    };
+    var key = function (k) { d.dispatchEvent(new w.KeyboardEvent("keydown", { key: k, bubbles: true })); };
+    state("start");
+    key("3"); state("3");
+    key("+"); key("+"); state("++");
+    key("1"); state("1");
+    key("2"); state("2");
+    d.getElementById("zoom-out").click(); state("zoom-out");
+    log.push("errors " + root.getAttribute("data-errors"));
+  } catch (e) {
+    log.push("exception " + e);
+  }
+  document.getElementById("out").textContent = log.join("\n");
+};
+</script></body></html>"##;
+
 /// The first of `chromium`, `chromium-browser` found on `PATH`.
 fn chromium() -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
@@ -251,6 +280,40 @@ fn report_html_is_self_contained_and_its_viewer_flips_images_in_a_browser() {
         )),
         "{src}"
     );
+
+    // Keys flip the image and keep the zoom: a page beside the report drives it in a frame.
+    std::fs::write(run.join("drive.html"), DRIVER).unwrap();
+    let (dom, log) = headless(
+        &browser,
+        &profile,
+        &["--allow-file-access-from-files", "--dump-dom"],
+        &format!("file://{}", run.join("drive.html").display()),
+    );
+    let steps: Vec<&str> = dom
+        .split("<pre id=\"out\">")
+        .nth(1)
+        .and_then(|s| s.split("</pre>").next())
+        .unwrap_or_else(|| panic!("driver did not run:\n{dom}\n{log}"))
+        .lines()
+        .collect();
+    let slug = marchmesh_harness::bench::slug(&first.config_id);
+    let reference = format!(
+        "images/{}_{}x{}_reference.png",
+        marchmesh_harness::bench::slug(&first.scene),
+        first.width,
+        first.height
+    );
+    let w = |z: u32| format!("{}px", z * first.width);
+    let expected = [
+        format!("start render 1 images/{slug}.png {}", w(1)),
+        format!("3 diff 1 images/{slug}.diff.png {}", w(1)),
+        format!("++ diff 4 images/{slug}.diff.png {}", w(4)),
+        format!("1 reference 4 {reference} {}", w(4)),
+        format!("2 render 4 images/{slug}.png {}", w(4)),
+        format!("zoom-out render 2 images/{slug}.png {}", w(2)),
+        "errors null".to_string(),
+    ];
+    assert_eq!(steps, expected, "{log}");
 
     // A screenshot of the viewer alone.
     let shot = out.join("viewer.png");

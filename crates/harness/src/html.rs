@@ -379,6 +379,7 @@ struct ViewerEntry {
     id: String,
     group: String,
     scene: String,
+    #[serde(skip)]
     label: String,
     width: u32,
     height: u32,
@@ -464,7 +465,7 @@ pub fn report_html(res: &Results, dir: &Path) -> String {
         h,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src 'self' data:; style-src 'unsafe-inline'; script-src 'unsafe-inline'\">\n\
+         <meta http-equiv=\"Content-Security-Policy\" content=\"default-src 'none'; img-src 'self' file: data:; style-src 'unsafe-inline'; script-src 'unsafe-inline'\">\n\
          <title>marchmesh {} run {}</title>\n<style>{STYLE}</style>\n<script>{ERROR_HOOK}</script>\n</head>\n<body>\n",
         escape(&res.suite),
         escape(&res.run_id)
@@ -507,7 +508,8 @@ pub fn report_html(res: &Results, dir: &Path) -> String {
     if !any_image {
         h.push_str(
             "<p class=\"status\" id=\"no-images\">No images in this run: the suite turned them off \
-             (<code>images: false</code>) or none were written, so there is nothing to view.</p>\n",
+             (<code>images: false</code>), none were written, or this is a merged run whose images \
+             stay in its shards' folders.</p>\n",
         );
     } else {
         write_viewer(&mut h, &entries);
@@ -523,7 +525,11 @@ pub fn report_html(res: &Results, dir: &Path) -> String {
     h
 }
 
+/// Appends the image viewer over `entries` (nothing when there are none).
 fn write_viewer(h: &mut String, entries: &[ViewerEntry]) {
+    let Some(first) = entries.first() else {
+        return;
+    };
     h.push_str(
         "<div class=\"viewer\" id=\"viewer\">\n<div class=\"controls\">\n\
          <label>Configuration <select id=\"cfg\">\n",
@@ -567,7 +573,6 @@ fn write_viewer(h: &mut String, entries: &[ViewerEntry]) {
          <span class=\"ramp\"></span> 0 to 64+ levels; <span class=\"swatch\" style=\"background:#f0f\"></span> \
          silhouette; <span class=\"swatch\" style=\"background:#000\"></span> both miss</span>\n</div>\n",
     );
-    let first = &entries[0];
     let (src, kind) = match (&first.render, &first.reference) {
         (Some(p), _) => (Some(p), "render"),
         (None, Some(p)) => (Some(p), "reference"),
@@ -772,6 +777,14 @@ mod tests {
         assert!(!html.contains("alert(1)"));
         assert_eq!(html.matches("<svg").count(), names.len());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn inlined_assets_cannot_close_their_elements() {
+        for asset in [STYLE, ERROR_HOOK, VIEWER_JS] {
+            let lower = asset.to_ascii_lowercase();
+            assert!(!lower.contains("</script") && !lower.contains("</style"));
+        }
     }
 
     #[test]

@@ -16,7 +16,9 @@
   var soloButton = document.getElementById("solo");
   var state = { i: 0, kind: "render", zoom: 1, solo: false };
 
+  // Reads the view from the address fragment; returns whether it named an image kind.
   function parseHash() {
+    var asked = false;
     var h = (location.hash || "").replace(/^#/, "");
     h.split("&").forEach(function (part) {
       var eq = part.indexOf("=");
@@ -25,7 +27,7 @@
       try { value = decodeURIComponent(part.slice(eq + 1)); } catch (e) { return; }
       if (key === "flip" || key === "view") {
         if (value === "difference") value = "diff";
-        if (KINDS.indexOf(value) >= 0) state.kind = value;
+        if (KINDS.indexOf(value) >= 0) { state.kind = value; asked = true; }
       } else if (key === "config") {
         for (var j = 0; j < data.length; j++) {
           if (data[j].id === value) { state.i = j; return; }
@@ -39,10 +41,12 @@
         if (ZOOMS.indexOf(z) >= 0) state.zoom = z;
       }
     });
+    return asked;
   }
 
   function writeHash() {
-    var h = "#flip=" + state.kind + "&zoom=" + state.zoom + "&config=" + encodeURIComponent(data[state.i].id) +
+    var h = "#flip=" + state.kind + "&zoom=" + state.zoom + "&config=" +
+      encodeURIComponent(data[state.i].id).replace(/%2F/g, "/").replace(/%3A/g, ":") +
       (state.solo ? "&solo=1" : "");
     try { history.replaceState(null, "", h); } catch (e) { /* file:// may refuse; the view still works */ }
   }
@@ -115,9 +119,10 @@
     update();
   }
 
-  parseHash();
-  if (!data[state.i][state.kind]) {
-    root.setAttribute("data-missing", state.kind);
+  var askedKind = parseHash();
+  // Without a kind in the address, start on one the first configuration has.
+  if (!askedKind && !data[state.i][state.kind]) {
+    state.kind = data[state.i].reference ? "reference" : (data[state.i].diff ? "diff" : state.kind);
   }
   KINDS.forEach(function (k) {
     kindButtons[k].addEventListener("click", function () { flip(k); });
