@@ -261,7 +261,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing results into {}", dir.display()))?;
     println!(
-        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots",
+        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
         dir.display(),
         results.rows.len(),
         results.failures.len(),
@@ -382,7 +382,7 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
     let machines: std::collections::BTreeSet<&str> =
         merged.rows.iter().map(|r| r.machine.as_str()).collect();
     println!(
-        "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots",
+        "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots and report.html",
         out.display(),
         merged.merged_from.len(),
         merged.rows.len(),
@@ -414,7 +414,7 @@ pub fn report(dir: &Path) -> Result<()> {
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the report into {}", out.display()))?;
     println!(
-        "{}: summary.md and {} plots regenerated from {} rows",
+        "{}: summary.md, report.html and {} plots regenerated from {} rows",
         out.display(),
         plots.len(),
         res.rows.len()

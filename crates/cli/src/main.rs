@@ -54,7 +54,7 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
-    /// Regenerate summary.md and plots/ of a run folder from its results.json.
+    /// Regenerate summary.md, plots/ and report.html of a run folder from its results.json.
     Report {
         /// The run folder (holding results.json).
         dir: PathBuf,

@@ -125,7 +125,7 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
     assert!(run.join("images").read_dir().unwrap().count() >= 3 * res.rows.len() / 2);
     assert!(run.join("plots").read_dir().unwrap().count() >= scenes);
 
-    // report regenerates identical tables and plots.
+    // report regenerates identical tables, plots and report.html.
     let summary = std::fs::read_to_string(run.join("summary.md")).unwrap();
     assert!(summary.contains("Pareto front") && summary.contains("render ms median"));
     let plot = std::fs::read_dir(run.join("plots"))
@@ -135,6 +135,9 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
         .unwrap()
         .path();
     let plot_before = std::fs::read(&plot).unwrap();
+    let html = std::fs::read_to_string(run.join("report.html")).unwrap();
+    assert!(html.contains("render ms median") && html.contains("<svg"));
+    std::fs::remove_file(run.join("report.html")).unwrap();
     std::fs::remove_file(run.join("summary.md")).unwrap();
     std::fs::remove_dir_all(run.join("plots")).unwrap();
     let (ok, stdout, stderr) = marchmesh(&["report", run.to_str().unwrap()], &repo());
@@ -144,6 +147,10 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
         summary
     );
     assert_eq!(std::fs::read(&plot).unwrap(), plot_before);
+    assert_eq!(
+        std::fs::read_to_string(run.join("report.html")).unwrap(),
+        html
+    );
 
     // compare a run with itself: every configuration matched at ratio 1.
     let (ok, stdout, stderr) = marchmesh(

@@ -36,6 +36,7 @@ pub mod alloc;
 pub mod backend;
 pub mod bench;
 pub mod findings;
+pub mod html;
 pub mod images;
 pub mod report;
 pub mod results;

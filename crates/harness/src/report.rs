@@ -1,5 +1,6 @@
-//! `summary.md` and `plots/*.svg` from [`Results`]; `marchmesh report` regenerates both from
-//! `results.json` alone, so the tables only depend on what the JSON holds.
+//! `summary.md`, `plots/*.svg` and `report.html` from [`Results`]; `marchmesh report`
+//! regenerates them from `results.json` alone, so the tables only depend on what the JSON
+//! holds.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -827,12 +828,18 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     Ok(written)
 }
 
-/// Writes `summary.md` and `plots/` into `dir` from `res`.
+/// Writes `summary.md`, `plots/` and `report.html` (which inlines the plots and shows the
+/// images of `images/`, see [`crate::html`]) into `dir` from `res`. Returns the plot file
+/// names.
 pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let summary = dir.join("summary.md");
     marchmesh_safeio::replace_regular(&summary, summary_markdown(res).as_bytes())
         .map_err(|e| e.to_string())?;
-    write_plots(res, &dir.join("plots"))
+    let plots = write_plots(res, &dir.join("plots"))?;
+    let html = dir.join("report.html");
+    marchmesh_safeio::replace_regular(&html, crate::html::report_html(res, dir).as_bytes())
+        .map_err(|e| e.to_string())?;
+    Ok(plots)
 }
 
 /// Creates a fresh run folder `<out>/<UTC timestamp>-<suite>` (suffix `-2`, `-3`, ... if the
@@ -861,8 +868,8 @@ pub fn create_run_dir(out: &Path, suite: &str) -> std::io::Result<(String, std::
     Err(std::io::Error::other(format!("too many runs named {base}")))
 }
 
-/// Writes `results.json`, then reads it back and writes `results.csv`, `summary.md` and
-/// `plots/` from what was read, so `marchmesh report` on the folder reproduces them exactly.
+/// Writes `results.json`, then reads it back and writes `results.csv`, `summary.md`,
+/// `plots/` and `report.html` from what was read, so `marchmesh report` on the folder reproduces them exactly.
 /// Returns the plot file names.
 pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let json = dir.join("results.json");
