@@ -1,7 +1,7 @@
 //! Primary ray generation and the Halton sample sequence.
 
 use glam::{DVec2, DVec3};
-use marchmesh_scene::Camera;
+use marchmesh_scene::{Camera, ImagePlane};
 
 use crate::geometry::Ray;
 
@@ -41,7 +41,13 @@ pub fn primary_direction(camera: &Camera, column: u32, row: u32, offset: DVec2) 
 /// space (camera at the origin): [`primary_direction`] rounded to f32. `t_max` is the scene's
 /// maximum distance.
 pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max: f64) -> Ray {
-    let d = primary_direction(camera, column, row, offset);
+    primary_ray_on(&camera.image_plane(), column, row, offset, t_max)
+}
+
+/// [`primary_ray`] on a camera's precomputed [`ImagePlane`] (`Camera::image_plane`), for
+/// loops over many pixels: the same ray, without a tangent per ray.
+pub fn primary_ray_on(plane: &ImagePlane, column: u32, row: u32, offset: DVec2, t_max: f64) -> Ray {
+    let d = plane.direction(column as f64 + offset.x, row as f64 + offset.y);
     Ray {
         origin: glam::Vec3::ZERO,
         dir: d.as_vec3().normalize(),
@@ -59,6 +65,7 @@ pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max:
 #[derive(Debug, Clone, Copy)]
 pub struct PrimarySamples<'a> {
     camera: &'a Camera,
+    plane: ImagePlane,
     row: u32,
     first_sample: u32,
 }
@@ -68,6 +75,7 @@ impl<'a> PrimarySamples<'a> {
     pub fn row(camera: &'a Camera, row: u32) -> Self {
         Self {
             camera,
+            plane: camera.image_plane(),
             row,
             first_sample: 0,
         }
@@ -89,11 +97,10 @@ impl<'a> PrimarySamples<'a> {
         let sample = u32::try_from(index / width)
             .unwrap_or(u32::MAX)
             .saturating_add(self.first_sample);
-        primary_direction(
-            self.camera,
-            (index % width) as u32,
-            self.row,
-            sample_offset(sample),
+        let offset = sample_offset(sample);
+        self.plane.direction(
+            (index % width) as f64 + offset.x,
+            self.row as f64 + offset.y,
         )
     }
 }

@@ -24,7 +24,7 @@ use marchmesh_scene::{Integrator, Light, Material, Scene};
 use rayon::prelude::*;
 
 use crate::background::BackgroundSampler;
-use crate::camera::{PrimarySamples, primary_ray, sample_offset};
+use crate::camera::{PrimarySamples, primary_ray_on, sample_offset};
 use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::RenderSpace;
@@ -440,13 +440,14 @@ fn trace_row(
     let mut out = RowOutput::new(w);
     let mut sum = vec![Vec3::ZERO; w];
     let mut paths: Vec<Path> = Vec::with_capacity(w * sh.spp as usize);
+    let plane = scene.camera.image_plane();
     for s in 0..sh.spp {
         let off = sample_offset(s);
         for col in 0..w as u32 {
             paths.push(Path {
                 pixel: col,
                 sample: s,
-                ray: primary_ray(&scene.camera, col, row, off, scene.render.max_distance),
+                ray: primary_ray_on(&plane, col, row, off, scene.render.max_distance),
                 throughput: 1.0,
             });
         }

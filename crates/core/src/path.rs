@@ -27,7 +27,7 @@ use glam::Vec3;
 use marchmesh_scene::Scene;
 
 use crate::background::BackgroundSampler;
-use crate::camera::{PrimarySamples, primary_ray, sample_offset};
+use crate::camera::{PrimarySamples, primary_ray_on, sample_offset};
 use crate::geometry::{Geometry, OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
     RowOutput, Shading, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
@@ -83,6 +83,7 @@ pub(crate) fn trace_row(
     let mut pending: Vec<Pending> = Vec::new();
     let mut occlusion: Vec<OcclusionResult> = Vec::new();
     let mut first = 0;
+    let plane = scene.camera.image_plane();
     while first < sh.spp {
         let last = (first + chunk).min(sh.spp);
         paths.clear();
@@ -92,7 +93,7 @@ pub(crate) fn trace_row(
                 paths.push(PathState {
                     pixel: col,
                     sample: s,
-                    ray: primary_ray(&scene.camera, col, row, off, scene.render.max_distance),
+                    ray: primary_ray_on(&plane, col, row, off, scene.render.max_distance),
                     throughput: Vec3::ONE,
                     count_emission: true,
                     bounce: 0,

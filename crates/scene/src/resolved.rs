@@ -67,19 +67,54 @@ impl Camera {
     }
 
     /// Unit direction (world space) through image-plane point `(px, py)` in pixel units,
-    /// `(0, 0)` being the top-left corner of the image.
+    /// `(0, 0)` being the top-left corner of the image. Loops over many rays should take
+    /// [`Camera::image_plane`] once and call its `direction` (same bits, no tangent per ray).
     pub fn direction(&self, px: f64, py: f64) -> DVec3 {
+        self.image_plane().direction(px, py)
+    }
+
+    /// The image plane with the field-of-view tangents computed once.
+    pub fn image_plane(&self) -> ImagePlane {
         let half_h = (self.vfov_rad * 0.5).tan();
-        let half_w = half_h * self.width as f64 / self.height as f64;
-        let x = (2.0 * px / self.width as f64 - 1.0) * half_w;
-        let y = (1.0 - 2.0 * py / self.height as f64) * half_h;
-        (self.forward + x * self.right + y * self.up).normalize()
+        ImagePlane {
+            forward: self.forward,
+            right: self.right,
+            up: self.up,
+            width: self.width as f64,
+            height: self.height as f64,
+            half_w: half_h * self.width as f64 / self.height as f64,
+            half_h,
+        }
     }
 
     /// Angle in radians subtended by one pixel at the image centre (vertical). Tolerances
     /// proportional to `pixel_angle * distance` are one pixel's footprint on screen.
     pub fn pixel_angle(&self) -> f64 {
         2.0 * (self.vfov_rad * 0.5).tan() / self.height as f64
+    }
+}
+
+/// A camera's image plane, ready to turn pixel coordinates into ray directions: the
+/// pinhole formulas of [`crate::CameraSpec`] with `tan(vfov / 2)` evaluated once.
+/// [`ImagePlane::direction`] gives exactly the bits of [`Camera::direction`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImagePlane {
+    forward: DVec3,
+    right: DVec3,
+    up: DVec3,
+    width: f64,
+    height: f64,
+    half_w: f64,
+    half_h: f64,
+}
+
+impl ImagePlane {
+    /// Unit direction (world space) through image-plane point `(px, py)` in pixel units,
+    /// `(0, 0)` being the top-left corner of the image.
+    pub fn direction(&self, px: f64, py: f64) -> DVec3 {
+        let x = (2.0 * px / self.width - 1.0) * self.half_w;
+        let y = (1.0 - 2.0 * py / self.height) * self.half_h;
+        (self.forward + x * self.right + y * self.up).normalize()
     }
 }
 
