@@ -792,6 +792,18 @@ pub fn write_findings(runs: &[Run], plots_dir: &Path, plots_link: &str) -> Resul
         }
     }
     std::fs::create_dir_all(plots_dir).map_err(|e| format!("{}: {e}", plots_dir.display()))?;
+    // The folder belongs to this document: plots of an earlier version that this one no
+    // longer draws are removed (only `.svg` files; anything else is left alone).
+    if let Ok(entries) = std::fs::read_dir(plots_dir) {
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let stale = name.ends_with(".svg") && !plots.iter().any(|p| p.file == name);
+            if stale && e.file_type().is_ok_and(|t| t.is_file()) {
+                std::fs::remove_file(e.path())
+                    .map_err(|err| format!("{}: {err}", e.path().display()))?;
+            }
+        }
+    }
     for p in &plots {
         let path = plots_dir.join(&p.file);
         let mut series = p.series.clone();
@@ -989,8 +1001,13 @@ mod tests {
         assert!(doc.contains("[run1](run1/summary.md)"), "{doc}");
         assert!(doc.contains("| infinite |"), "{doc}");
         assert!(dir.join("suite_repeat.svg").is_file());
+        // A plot the document no longer draws is removed; other files stay.
+        std::fs::write(dir.join("old_axis.svg"), "<svg/>").unwrap();
+        std::fs::write(dir.join("notes.txt"), "mine").unwrap();
         // Same input, same bytes.
         assert_eq!(write_findings(&runs, &dir, "plots").unwrap(), doc);
+        assert!(!dir.join("old_axis.svg").exists());
+        assert!(dir.join("notes.txt").is_file());
         std::fs::remove_dir_all(&dir).ok();
     }
 
