@@ -1,0 +1,155 @@
+//! `summary.md`, `plots/*.svg` and `report.html` from [`Results`]; `marchmesh report`
+//! regenerates them from `results.json` alone, so the tables only depend on what the JSON
+//! holds.
+
+mod analysis;
+mod format;
+mod plots;
+mod summary;
+
+pub(crate) use analysis::label;
+pub use analysis::{pareto_front, verdict};
+pub use format::bytes;
+pub(crate) use format::{opt, opt_bytes, short_num, tail_px};
+pub(crate) use plots::line_plot;
+pub use plots::write_plots;
+pub(crate) use summary::group_scenes;
+pub use summary::{SUMMARY_COLUMNS, SummaryColumn, summary_markdown};
+
+use std::path::Path;
+
+use crate::results::Results;
+
+/// Writes `summary.md`, `plots/` and `report.html` (which inlines the plots and shows the
+/// images of `images/`, see [`crate::html`]) into `dir` from `res`. Returns the plot file
+/// names.
+pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    let summary = dir.join("summary.md");
+    marchmesh_safeio::replace_regular(&summary, summary_markdown(res).as_bytes())
+        .map_err(|e| e.to_string())?;
+    let plots = write_plots(res, &dir.join("plots"))?;
+    let html = dir.join("report.html");
+    marchmesh_safeio::replace_regular(&html, crate::html::report_html(res, dir).as_bytes())
+        .map_err(|e| e.to_string())?;
+    Ok(plots)
+}
+
+/// Creates a fresh run folder `<out>/<UTC timestamp>-<suite>` (suffix `-2`, `-3`, ... if the
+/// name is taken: runs never overwrite each other) with `images/` inside. Returns the run id
+/// and the folder.
+pub fn create_run_dir(out: &Path, suite: &str) -> std::io::Result<(String, std::path::PathBuf)> {
+    std::fs::create_dir_all(out)?;
+    let stamp = crate::results::utc_strings(crate::results::now_secs()).1;
+    let base = format!("{stamp}-{}", crate::bench::slug(suite));
+    for n in 1..1000 {
+        let id = if n == 1 {
+            base.clone()
+        } else {
+            format!("{base}-{n}")
+        };
+        let dir = out.join(&id);
+        match std::fs::create_dir(&dir) {
+            Ok(()) => {
+                std::fs::create_dir(dir.join("images"))?;
+                return Ok((id, dir));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(std::io::Error::other(format!("too many runs named {base}")))
+}
+
+/// Writes `results.json`, then reads it back and writes `results.csv`, `summary.md`,
+/// `plots/` and `report.html` from what was read, so `marchmesh report` on the folder reproduces them exactly.
+/// Returns the plot file names.
+pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    let json = dir.join("results.json");
+    res.write_json(&json).map_err(|e| e.to_string())?;
+    let back = Results::read_json(&json).map_err(|e| e.to_string())?;
+    back.write_csv(&dir.join("results.csv"))
+        .map_err(|e| e.to_string())?;
+    write_report(&back, dir)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::results::tests_support::row;
+    use crate::verdicts::{Timing, headlines};
+
+    #[test]
+    fn axis_numbers_are_short() {
+        assert_eq!(short_num(10_000_000.0), "10M");
+        assert_eq!(short_num(250.0), "250");
+        assert_eq!(short_num(0.125), "0.125");
+        assert_eq!(short_num(45_000.0), "45k");
+    }
+
+    #[test]
+    fn bytes_are_human_readable() {
+        assert_eq!(bytes(512), "512 B");
+        assert_eq!(bytes(2048), "2.00 KiB");
+        assert_eq!(bytes(45 << 20), "45.0 MiB");
+        assert_eq!(bytes(300 << 30), "300 GiB");
+    }
+
+    #[test]
+    fn headlines_compare_the_fastest_rows_above_the_threshold() {
+        let a = row("sdf", "a", 10.0, Some(45.0), 100);
+        let b = row("sdf", "b", 5.0, Some(30.0), 100);
+        let c = row("mesh", "c", 30.0, Some(41.0), 2048);
+        let h = headlines(&[a.clone(), b, c], 40.0, Timing::medians_only());
+        assert_eq!(h.len(), 1);
+        let h0 = h[0].to_string();
+        assert!(h0.contains("sdf:a 10.0 ms (45.0 dB, 100 B) vs mesh:c 30.0 ms (41.0 dB, 2.00 KiB): sdf 3.00x faster than mesh, ratio of medians"), "{h0}");
+        let low = row("mesh", "d", 1.0, Some(30.0), 2048);
+        let h = headlines(&[a, low], 40.0, Timing::medians_only());
+        assert!(h[0].contest.is_none());
+        assert!(
+            h[0].to_string().contains("mesh: none reaches 40 dB"),
+            "{}",
+            h[0]
+        );
+    }
+
+    #[test]
+    fn pareto_front_keeps_only_undominated_rows() {
+        let a = row("sdf", "a", 10.0, Some(30.0), 100);
+        let b = row("sdf", "b", 20.0, Some(25.0), 100); // slower and worse than a
+        let c = row("mesh", "c", 5.0, Some(20.0), 1000);
+        let d = row("mesh", "d", 30.0, Some(40.0), 1000);
+        let e = row("mesh", "e", 1.0, None, 1000); // no accuracy: not on the front
+        let rows = vec![&a, &b, &c, &d, &e];
+        let front: Vec<&str> = pareto_front(&rows)
+            .iter()
+            .map(|&i| rows[i].quality.as_str())
+            .collect();
+        assert_eq!(front, ["c", "a", "d"]);
+    }
+
+    #[test]
+    fn verdict_states_the_winner_per_accuracy_range_and_memory() {
+        let a = row("sdf", "a", 10.0, Some(30.0), 100);
+        let c = row("mesh", "c", 5.0, Some(20.0), 1000);
+        let d = row("mesh", "d", 30.0, Some(40.0), 1000);
+        let v = verdict(&[&a, &c, &d], Timing::medians_only()).join("\n");
+        assert!(
+            v.contains("Fastest configuration: mesh:c at 5.00 ms"),
+            "{v}"
+        );
+        assert!(
+            v.contains("mesh is faster for PSNR target 20.0 dB (mesh 2.00x faster than sdf, ratio of medians at 20.0 dB)"),
+            "{v}"
+        );
+        assert!(
+            v.contains("sdf is faster for PSNR target 30.0 dB (sdf 3.00x faster than mesh, ratio of medians at 30.0 dB)"),
+            "{v}"
+        );
+        assert!(
+            v.contains("PSNR target 40.0 dB: mesh (only mesh reaches it)"),
+            "{v}"
+        );
+        assert!(v.contains("sdf uses 10.0x less than mesh"), "{v}");
+    }
+}
