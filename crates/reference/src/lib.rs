@@ -26,10 +26,13 @@
 //!   normals interpolate the file's vertex normals like the mesh backend does. Open meshes
 //!   are surfaces; only closed ones may take part in intersection or subtraction.
 
+mod compile;
 pub mod meshbvh;
 mod node;
 pub mod poly;
 pub mod primitives;
+mod repeat;
+mod smooth;
 pub mod spans;
 
 use std::collections::HashMap;
@@ -42,7 +45,8 @@ use marchmesh_core::{
 };
 use marchmesh_scene::Scene;
 
-use node::{Compiler, RNode, Work, ray_box};
+use compile::Compiler;
+use node::{CompiledNode, Work, ray_box};
 
 /// Why the reference cannot build a scene.
 #[derive(Debug, thiserror::Error)]
@@ -99,7 +103,7 @@ impl Default for ReferenceOptions {
 /// The built reference for one scene (in its render space).
 #[derive(Debug)]
 pub struct ReferenceGeometry {
-    objects: Vec<RNode>,
+    objects: Vec<CompiledNode>,
     report: GeometryReport,
 }
 
@@ -131,7 +135,7 @@ pub fn build(
         .map(|o| compiler.compile(o, from_world))
         .collect::<Result<Vec<_>, _>>()?;
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let node_bytes = count_nodes(&scene.objects) * std::mem::size_of::<RNode>() as u64;
+    let node_bytes = count_nodes(&scene.objects) * std::mem::size_of::<CompiledNode>() as u64;
     let report = GeometryReport {
         backend: "reference".into(),
         triangles: None,
