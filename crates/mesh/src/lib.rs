@@ -42,7 +42,7 @@ use marchmesh_core::{
     TraceResult,
 };
 use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh};
-use marchmesh_scene::{MaterialId, NodeKind, Scene};
+use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 use obvhs::ray::Ray as ObRay;
 
 use blas::{Blas, BlasInput, Tree};
@@ -201,11 +201,70 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         ..GeometryReport::default()
     };
     let space = RenderSpace::of(scene);
-    let pixel_angle = scene.camera.pixel_angle();
-    let params = options.build_quality.params();
 
     // Phase 1: load every mesh file once.
     let t0 = Instant::now();
+    let meshes = load_meshes(scene, &mut report)?;
+    let mesh_bounds: HashMap<PathBuf, (DVec3, DVec3)> = meshes
+        .iter()
+        .map(|(p, m)| {
+            let (lo, hi) = m.bounds();
+            (p.clone(), (lo.as_dvec3(), hi.as_dvec3()))
+        })
+        .collect();
+    let load_ms = ms(t0.elapsed());
+
+    // Phase 2: walk the scene, group placements by shape, make each shape's triangles.
+    let t1 = Instant::now();
+    let walk = build::walk(scene, options, space.from_world(), &mesh_bounds)?;
+    report.notes.extend(walk.notes.iter().cloned());
+    let groups = group_by_shape(&walk.placements);
+    let shapes = ShapeInputs {
+        scene,
+        options,
+        meshes: &meshes,
+        mesh_bounds: &mesh_bounds,
+    };
+    let (local_meshes, extract_time) =
+        shapes.triangulate(&groups, walk.placements.len(), &mut report)?;
+    let tessellate_ms = ms(t1.elapsed().saturating_sub(extract_time));
+    let extract_ms = ms(extract_time);
+
+    // Phase 3: assemble flat and instanced geometry and build the BVHs.
+    let t2 = Instant::now();
+    let built = shapes.assemble(&groups, &local_meshes, &walk, &mut report);
+    let bvh_ms = ms(t2.elapsed());
+    report.build_phases_ms = vec![
+        ("load".into(), load_ms),
+        ("tessellate".into(), tessellate_ms),
+        ("extract".into(), extract_ms),
+        ("bvh".into(), bvh_ms),
+    ];
+    describe(&built, &walk, options, &mut report);
+    let Assembled {
+        flat_blas,
+        blases,
+        instances,
+        tlas,
+        ..
+    } = built;
+    Ok(MeshGeometry {
+        flat: flat_blas,
+        flat_materials_default: 0,
+        packets: options.packets,
+        blases,
+        instances,
+        tlas,
+        max_distance: scene.render.max_distance as f32,
+        report,
+    })
+}
+
+/// Phase 1: every mesh file of the scene loaded once, with notes on skipped triangles.
+fn load_meshes(
+    scene: &Scene,
+    report: &mut GeometryReport,
+) -> Result<HashMap<PathBuf, TriangleMesh>, MeshError> {
     let mut meshes: HashMap<PathBuf, TriangleMesh> = HashMap::new();
     let mut load_error = None;
     scene.visit_nodes(|n| {
@@ -239,263 +298,345 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             }
         }
     });
-    if let Some(e) = load_error {
-        return Err(e);
+    match load_error {
+        Some(e) => Err(e),
+        None => Ok(meshes),
     }
-    let mesh_bounds: HashMap<PathBuf, (DVec3, DVec3)> = meshes
-        .iter()
-        .map(|(p, m)| {
-            let (lo, hi) = m.bounds();
-            (p.clone(), (lo.as_dvec3(), hi.as_dvec3()))
-        })
-        .collect();
-    let load_ms = ms(t0.elapsed());
+}
 
-    // Phase 2: walk the scene, group placements by shape.
-    let t1 = Instant::now();
-    let walk = build::walk(scene, options, space.from_world(), &mesh_bounds)?;
-    report.notes.extend(walk.notes.iter().cloned());
-    let mut groups: Vec<(ShapeKey, Vec<&Placement>)> = Vec::new();
+/// Placements grouped by shape, in first-appearance order.
+fn group_by_shape<'p, 'a>(
+    placements: &'p [Placement<'a>],
+) -> Vec<(ShapeKey, Vec<&'p Placement<'a>>)> {
+    let mut groups: Vec<(ShapeKey, Vec<&'p Placement<'a>>)> = Vec::new();
     let mut group_of: HashMap<ShapeKey, usize> = HashMap::new();
-    for p in &walk.placements {
+    for p in placements {
         let g = *group_of.entry(p.key.clone()).or_insert_with(|| {
             groups.push((p.key.clone(), Vec::new()));
             groups.len() - 1
         });
         groups[g].1.push(p);
     }
+    groups
+}
 
-    // Tessellate analytic shapes at the finest detail any of their placements needs.
-    let mut local_meshes: Vec<Option<LocalMesh>> = Vec::with_capacity(groups.len());
-    let mut extract_time = Duration::ZERO;
-    let mut budget = BuildBudget {
-        limit_bytes: options.memory_limit_bytes,
-        planned_bytes: 0,
-    };
-    budget.take(
-        (walk.placements.len() as u64).saturating_mul(INSTANCE_BYTES),
-        true,
-        "objects",
-        || format!("{} placements", walk.placements.len()),
-        "max_instances",
-    )?;
-    for (key, placements) in &groups {
-        let node = placements[0].node;
-        // Triangles are stored once per placement unless instanced.
-        let copies = if options.instancing && placements.len() > 1 {
-            1
-        } else {
-            placements.len() as u64
+/// What phases 2 and 3 read: the scene, the options and the loaded meshes.
+struct ShapeInputs<'a> {
+    scene: &'a Scene,
+    options: &'a MeshOptions,
+    meshes: &'a HashMap<PathBuf, TriangleMesh>,
+    mesh_bounds: &'a HashMap<PathBuf, (DVec3, DVec3)>,
+}
+
+/// Phase 3's result: the flat BVH, the instanced BLASes, their instances and the TLAS.
+struct Assembled {
+    flat_blas: Option<Blas>,
+    flat_triangles: usize,
+    blases: Vec<Blas>,
+    instances: Vec<Instance>,
+    tlas: Option<Tree>,
+}
+
+impl ShapeInputs<'_> {
+    /// Phase 2: the local triangles of every group (analytic shapes tessellated at the finest
+    /// detail any placement needs, CSG surfaces extracted; `None` for mesh files, used as
+    /// loaded), refusing before allocating when the build would exceed the memory limit.
+    /// Returns the meshes and the time spent extracting.
+    fn triangulate(
+        &self,
+        groups: &[(ShapeKey, Vec<&Placement>)],
+        placement_count: usize,
+        report: &mut GeometryReport,
+    ) -> Result<(Vec<Option<LocalMesh>>, Duration), MeshError> {
+        let options = self.options;
+        let mut local_meshes: Vec<Option<LocalMesh>> = Vec::with_capacity(groups.len());
+        let mut extract_time = Duration::ZERO;
+        let mut budget = BuildBudget {
+            limit_bytes: options.memory_limit_bytes,
+            planned_bytes: 0,
         };
-        let triangle_bytes = |triangles: u64| {
-            triangles
-                .saturating_mul(copies)
-                .saturating_mul(BUILD_BYTES_PER_TRIANGLE)
-        };
-        match key {
-            ShapeKey::Analytic(..) => {
-                let local =
-                    build::local_bounds(node, &mesh_bounds).unwrap_or((DVec3::ZERO, DVec3::ZERO));
-                let screen_budget;
-                let detail = match options.tessellation {
-                    Tessellation::ScreenError { pixels } => {
-                        screen_budget = screen_budget_for(placements, local, pixels * pixel_angle);
-                        Detail::Screen(&screen_budget)
-                    }
-                    other => placements
-                        .iter()
-                        .map(|p| build::placement_detail(p, other))
-                        .reduce(build::finer)
-                        .unwrap_or(Detail::Level(0)),
-                };
-                let tessellated = tessellate::tessellate_within(
-                    &node.kind,
-                    detail,
-                    options.max_segments_per_turn,
-                    budget.triangles_left(copies),
-                );
-                let mesh = match tessellated {
-                    Ok(Some(mesh)) => mesh,
-                    Ok(None) => {
-                        return Err(MeshError::Unsupported {
-                            json_path: node.json_path.clone(),
-                            reason: "shape has no tessellation".into(),
-                        });
-                    }
-                    Err(too_many) => {
-                        return Err(budget.refusal(
-                            triangle_bytes(too_many.triangles),
-                            &node.json_path,
-                            format!(
-                                "tessellating into {} triangles (segments per turn {:?}) x {copies} placement(s)",
-                                too_many.triangles, too_many.segments
-                            ),
-                            "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
-                        ));
-                    }
-                };
-                budget.take(
-                    triangle_bytes(mesh.triangles.len() as u64),
-                    true,
-                    &node.json_path,
-                    || format!("{} triangles of tessellation", mesh.triangles.len()),
-                    "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
-                )?;
-                if !mesh.segments.is_empty() {
-                    let capped = mesh
-                        .segments
-                        .iter()
-                        .any(|&s| s >= options.max_segments_per_turn);
-                    report.notes.push(format!(
-                        "{}: {} triangles, segments per turn {:?}{}{}",
-                        node.json_path,
-                        mesh.triangles.len(),
-                        mesh.segments,
-                        match detail {
-                            Detail::ChordError(e) => format!(", local chord budget {e:.3e}"),
-                            Detail::Level(l) => format!(", level {l}"),
-                            Detail::Screen(_) => match options.tessellation {
-                                Tessellation::ScreenError { pixels } =>
-                                    format!(", screen budget {pixels} px per band"),
-                                _ => String::new(),
-                            },
-                        },
-                        if capped {
-                            " (capped by max_segments_per_turn)"
-                        } else {
-                            ""
-                        }
-                    ));
+        budget.take(
+            (placement_count as u64).saturating_mul(INSTANCE_BYTES),
+            true,
+            "objects",
+            || format!("{placement_count} placements"),
+            "max_instances",
+        )?;
+        for (key, placements) in groups {
+            let node = placements[0].node;
+            // Triangles are stored once per placement unless instanced.
+            let copies = if options.instancing && placements.len() > 1 {
+                1
+            } else {
+                placements.len() as u64
+            };
+            let mesh = match key {
+                ShapeKey::Analytic(..) => {
+                    Some(self.tessellate(node, placements, copies, &mut budget, report)?)
                 }
-                local_meshes.push(Some(mesh));
-            }
-            ShapeKey::Composite(_) => {
-                let te = Instant::now();
-                let local = build::local_bounds(node, &mesh_bounds);
-                // Meshes inside a CSG node are baked to distance grids as fine as the
-                // extraction grid: a finer bake would not show, a coarser one would.
-                let field_options = marchmesh_field::FieldOptions {
-                    mesh_grid_resolution: options.surface_resolution,
-                    cache_dir: None,
-                };
-                let cells = u64::from(options.surface_resolution + 1).pow(3);
-                budget.take(
-                    cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
-                    false,
-                    &node.json_path,
-                    || {
-                        format!(
-                            "a surface-extraction grid of {}^3 cells",
-                            options.surface_resolution
-                        )
-                    },
-                    "the extraction grid (--opt surface_res)",
-                )?;
-                let mesh =
-                    extract::extract(node, local, options.surface_resolution, &field_options)?;
-                budget.take(
-                    triangle_bytes(mesh.triangles.len() as u64),
-                    true,
-                    &node.json_path,
-                    || format!("{} extracted triangles", mesh.triangles.len()),
-                    "the extraction grid (--opt surface_res)",
-                )?;
-                report.notes.push(format!(
-                    "{}: surface extracted from the distance field, {} triangles at resolution {}",
-                    node.json_path,
-                    mesh.triangles.len(),
-                    options.surface_resolution
-                ));
-                local_meshes.push(Some(mesh));
-                extract_time += te.elapsed();
-            }
-            ShapeKey::Mesh(path) => {
-                let triangles = meshes.get(path).map_or(0, |m| m.triangles.len() as u64);
-                budget.take(
-                    triangle_bytes(triangles),
-                    true,
-                    &node.json_path,
-                    || format!("{triangles} triangles of {} x {copies}", path.display()),
-                    "the mesh (a smaller file, or instancing=true)",
-                )?;
-                local_meshes.push(None)
-            }
+                ShapeKey::Composite(_) => {
+                    Some(self.extract(node, copies, &mut budget, &mut extract_time, report)?)
+                }
+                ShapeKey::Mesh(path) => {
+                    let triangles = self
+                        .meshes
+                        .get(path)
+                        .map_or(0, |m| m.triangles.len() as u64);
+                    budget.take(
+                        triangle_bytes(triangles, copies),
+                        true,
+                        &node.json_path,
+                        || format!("{triangles} triangles of {} x {copies}", path.display()),
+                        "the mesh (a smaller file, or instancing=true)",
+                    )?;
+                    None
+                }
+            };
+            local_meshes.push(mesh);
         }
+        Ok((local_meshes, extract_time))
     }
-    let tessellate_ms = ms(t1.elapsed().saturating_sub(extract_time));
-    let extract_ms = ms(extract_time);
 
-    // Phase 3: assemble flat and instanced geometry and build the BVHs.
-    let t2 = Instant::now();
-    let mut flat = FlatBuilder::default();
-    let mut blases: Vec<Blas> = Vec::new();
-    let mut instances: Vec<Instance> = Vec::new();
-    let mut instance_boxes: Vec<obvhs::aabb::Aabb> = Vec::new();
-    for ((key, placements), local) in groups.iter().zip(&local_meshes) {
-        let source: SourceMesh = match (key, local) {
-            (ShapeKey::Mesh(path), _) => match meshes.get(path) {
-                Some(m) => SourceMesh::File(m),
-                None => continue,
-            },
-            (_, Some(l)) => SourceMesh::Local(l),
-            _ => continue,
-        };
-        if options.instancing && placements.len() > 1 {
-            let input = source.blas_input();
-            if input.triangles.is_empty() {
-                continue;
+    /// An analytic shape tessellated at the finest detail any of its placements needs.
+    fn tessellate(
+        &self,
+        node: &Node,
+        placements: &[&Placement],
+        copies: u64,
+        budget: &mut BuildBudget,
+        report: &mut GeometryReport,
+    ) -> Result<LocalMesh, MeshError> {
+        let (options, mesh_bounds) = (self.options, self.mesh_bounds);
+        let pixel_angle = self.scene.camera.pixel_angle();
+        let local = build::local_bounds(node, mesh_bounds).unwrap_or((DVec3::ZERO, DVec3::ZERO));
+        let screen_budget;
+        let detail = match options.tessellation {
+            Tessellation::ScreenError { pixels } => {
+                screen_budget = screen_budget_for(placements, local, pixels * pixel_angle);
+                Detail::Screen(&screen_budget)
             }
-            let local_box = positions_bounds(&input.positions);
-            let blas_index = blases.len() as u32;
-            blases.push(Blas::build(input, options.bvh, params));
-            for p in placements {
-                instance_boxes.push(render_box(&p.to_render, local_box));
-                instances.push(Instance {
-                    to_local: p.to_render.inverse().as_affine3a_checked(),
-                    blas: blas_index,
-                    material: p.material,
+            other => placements
+                .iter()
+                .map(|p| build::placement_detail(p, other))
+                .reduce(build::finer)
+                .unwrap_or(Detail::Level(0)),
+        };
+        let tessellated = tessellate::tessellate_within(
+            &node.kind,
+            detail,
+            options.max_segments_per_turn,
+            budget.triangles_left(copies),
+        );
+        let mesh = match tessellated {
+            Ok(Some(mesh)) => mesh,
+            Ok(None) => {
+                return Err(MeshError::Unsupported {
+                    json_path: node.json_path.clone(),
+                    reason: "shape has no tessellation".into(),
                 });
             }
-        } else {
-            for p in placements {
-                flat.append(&source, &p.to_render, p.material);
+            Err(too_many) => {
+                return Err(budget.refusal(
+                        triangle_bytes(too_many.triangles, copies),
+                        &node.json_path,
+                        format!(
+                            "tessellating into {} triangles (segments per turn {:?}) x {copies} placement(s)",
+                            too_many.triangles, too_many.segments
+                        ),
+                        "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
+                    ));
             }
-        }
-    }
-    for (node, m) in &walk.planes {
-        if let NodeKind::Plane { normal, offset } = node.kind {
-            let quads =
-                flat.append_plane(normal, offset, m, scene.render.max_distance, node.material);
+        };
+        budget.take(
+            triangle_bytes(mesh.triangles.len() as u64, copies),
+            true,
+            &node.json_path,
+            || format!("{} triangles of tessellation", mesh.triangles.len()),
+            "the tessellation (--opt tess_px / tess_chord / tess_level / max_segments)",
+        )?;
+        if !mesh.segments.is_empty() {
+            let capped = mesh
+                .segments
+                .iter()
+                .any(|&s| s >= options.max_segments_per_turn);
             report.notes.push(format!(
-                "{}: plane clipped to a {:.6}-unit square around the camera's foot point ({quads} cells)",
+                "{}: {} triangles, segments per turn {:?}{}{}",
                 node.json_path,
-                2.0 * scene.render.max_distance
+                mesh.triangles.len(),
+                mesh.segments,
+                match detail {
+                    Detail::ChordError(e) => format!(", local chord budget {e:.3e}"),
+                    Detail::Level(l) => format!(", level {l}"),
+                    Detail::Screen(_) => match options.tessellation {
+                        Tessellation::ScreenError { pixels } =>
+                            format!(", screen budget {pixels} px per band"),
+                        _ => String::new(),
+                    },
+                },
+                if capped {
+                    " (capped by max_segments_per_turn)"
+                } else {
+                    ""
+                }
             ));
         }
+        Ok(mesh)
     }
-    let flat_triangles = flat.triangles.len();
-    let flat_blas =
-        (!flat.triangles.is_empty()).then(|| Blas::build(flat.into_input(), options.bvh, params));
-    let tlas = if instances.is_empty() {
-        None
-    } else {
-        let boxes = instance_boxes;
-        let mut t = Duration::default();
-        let mut tlas = obvhs::bvh2::builder::build_bvh2(&boxes, params, &mut t);
-        tlas.primitives_to_nodes = Vec::new();
-        tlas.parents = Vec::new();
-        tlas.primitive_indices_freelist = Vec::new();
-        tlas.nodes.shrink_to_fit();
-        Some(Tree::Bvh2(tlas))
-    };
-    let bvh_ms = ms(t2.elapsed());
 
-    report.build_phases_ms = vec![
-        ("load".into(), load_ms),
-        ("tessellate".into(), tessellate_ms),
-        ("extract".into(), extract_ms),
-        ("bvh".into(), bvh_ms),
-    ];
+    /// A CSG node's surface extracted from its distance field.
+    fn extract(
+        &self,
+        node: &Node,
+        copies: u64,
+        budget: &mut BuildBudget,
+        extract_time: &mut Duration,
+        report: &mut GeometryReport,
+    ) -> Result<LocalMesh, MeshError> {
+        let (options, mesh_bounds) = (self.options, self.mesh_bounds);
+        let te = Instant::now();
+        let local = build::local_bounds(node, mesh_bounds);
+        // Meshes inside a CSG node are baked to distance grids as fine as the
+        // extraction grid: a finer bake would not show, a coarser one would.
+        let field_options = marchmesh_field::FieldOptions {
+            mesh_grid_resolution: options.surface_resolution,
+            cache_dir: None,
+        };
+        let cells = u64::from(options.surface_resolution + 1).pow(3);
+        budget.take(
+            cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
+            false,
+            &node.json_path,
+            || {
+                format!(
+                    "a surface-extraction grid of {}^3 cells",
+                    options.surface_resolution
+                )
+            },
+            "the extraction grid (--opt surface_res)",
+        )?;
+        let mesh = extract::extract(node, local, options.surface_resolution, &field_options)?;
+        budget.take(
+            triangle_bytes(mesh.triangles.len() as u64, copies),
+            true,
+            &node.json_path,
+            || format!("{} extracted triangles", mesh.triangles.len()),
+            "the extraction grid (--opt surface_res)",
+        )?;
+        report.notes.push(format!(
+            "{}: surface extracted from the distance field, {} triangles at resolution {}",
+            node.json_path,
+            mesh.triangles.len(),
+            options.surface_resolution
+        ));
+
+        *extract_time += te.elapsed();
+        Ok(mesh)
+    }
+
+    /// Phase 3: flat and instanced geometry assembled and their BVHs built.
+    fn assemble(
+        &self,
+        groups: &[(ShapeKey, Vec<&Placement>)],
+        local_meshes: &[Option<LocalMesh>],
+        walk: &build::Walk<'_>,
+        report: &mut GeometryReport,
+    ) -> Assembled {
+        let (scene, options, meshes) = (self.scene, self.options, self.meshes);
+        let params = options.build_quality.params();
+        let mut flat = FlatBuilder::default();
+        let mut blases: Vec<Blas> = Vec::new();
+        let mut instances: Vec<Instance> = Vec::new();
+        let mut instance_boxes: Vec<obvhs::aabb::Aabb> = Vec::new();
+        for ((key, placements), local) in groups.iter().zip(local_meshes) {
+            let source: SourceMesh = match (key, local) {
+                (ShapeKey::Mesh(path), _) => match meshes.get(path) {
+                    Some(m) => SourceMesh::File(m),
+                    None => continue,
+                },
+                (_, Some(l)) => SourceMesh::Local(l),
+                _ => continue,
+            };
+            if options.instancing && placements.len() > 1 {
+                let input = source.blas_input();
+                if input.triangles.is_empty() {
+                    continue;
+                }
+                let local_box = positions_bounds(&input.positions);
+                let blas_index = blases.len() as u32;
+                blases.push(Blas::build(input, options.bvh, params));
+                for p in placements {
+                    instance_boxes.push(render_box(&p.to_render, local_box));
+                    instances.push(Instance {
+                        to_local: p.to_render.inverse().as_affine3a_checked(),
+                        blas: blas_index,
+                        material: p.material,
+                    });
+                }
+            } else {
+                for p in placements {
+                    flat.append(&source, &p.to_render, p.material);
+                }
+            }
+        }
+        for (node, m) in &walk.planes {
+            if let NodeKind::Plane { normal, offset } = node.kind {
+                let quads =
+                    flat.append_plane(normal, offset, m, scene.render.max_distance, node.material);
+                report.notes.push(format!(
+                    "{}: plane clipped to a {:.6}-unit square around the camera's foot point ({quads} cells)",
+                    node.json_path,
+                    2.0 * scene.render.max_distance
+                ));
+            }
+        }
+        let flat_triangles = flat.triangles.len();
+        let flat_blas = (!flat.triangles.is_empty())
+            .then(|| Blas::build(flat.into_input(), options.bvh, params));
+        let tlas = if instances.is_empty() {
+            None
+        } else {
+            let boxes = instance_boxes;
+            let mut t = Duration::default();
+            let mut tlas = obvhs::bvh2::builder::build_bvh2(&boxes, params, &mut t);
+            tlas.primitives_to_nodes = Vec::new();
+            tlas.parents = Vec::new();
+            tlas.primitive_indices_freelist = Vec::new();
+            tlas.nodes.shrink_to_fit();
+            Some(Tree::Bvh2(tlas))
+        };
+
+        Assembled {
+            flat_blas,
+            flat_triangles,
+            blases,
+            instances,
+            tlas,
+        }
+    }
+}
+
+/// Peak build bytes of `triangles` stored `copies` times.
+fn triangle_bytes(triangles: u64, copies: u64) -> u64 {
+    triangles
+        .saturating_mul(copies)
+        .saturating_mul(BUILD_BYTES_PER_TRIANGLE)
+}
+
+/// The report's memory, triangle counts, counters and notes on the built geometry.
+fn describe(
+    built: &Assembled,
+    walk: &build::Walk<'_>,
+    options: &MeshOptions,
+    report: &mut GeometryReport,
+) {
+    let Assembled {
+        flat_blas,
+        flat_triangles,
+        blases,
+        instances,
+        tlas,
+    } = built;
+    let flat_triangles = *flat_triangles;
     let blas_triangles: usize = blases.iter().map(|b| b.triangle_count).sum();
     let instance_bytes = (instances.len() * size_of::<Instance>()) as u64;
     let memory = flat_blas.as_ref().map_or(0, Blas::memory_bytes)
@@ -544,16 +685,6 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
             blas::CWBVH_MIN_EXTENT
         ));
     }
-    Ok(MeshGeometry {
-        flat: flat_blas,
-        flat_materials_default: 0,
-        packets: options.packets,
-        blases,
-        instances,
-        tlas,
-        max_distance: scene.render.max_distance as f32,
-        report,
-    })
 }
 
 /// Most placements a screen budget considers (the nearest ones; farther copies of a shape
