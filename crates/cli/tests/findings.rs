@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    marchmesh_testkit::repo_root()
 }
 
 /// The run folders of the committed FINDINGS.md: its regenerate command names them.

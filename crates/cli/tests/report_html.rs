@@ -22,14 +22,11 @@ fn marchmesh(args: &[&str], cwd: &Path) -> (bool, String, String) {
 }
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    marchmesh_testkit::repo_root()
 }
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("marchmesh-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    marchmesh_testkit::temp_dir(&format!("cli-{name}"))
 }
 
 /// Drives `report.html` in a frame (same folder; needs `--allow-file-access-from-files`):

@@ -8,14 +8,11 @@ use std::process::Command;
 use marchmesh_harness::results::Results;
 
 fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+    marchmesh_testkit::repo_root()
 }
 
 fn tmp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("marchmesh-shard-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    marchmesh_testkit::temp_dir(&format!("shard-{name}"))
 }
 
 fn marchmesh(args: &[&str]) -> (bool, String, String) {

@@ -75,24 +75,10 @@ impl Geometry for Spheres {
     }
 }
 
-fn scene(json: &str) -> Scene {
-    parse_scene(json, "<test>", std::path::Path::new(".")).expect("test scene is valid")
-}
+use marchmesh_testkit::scene;
 
 fn run(scene: &Scene, threads: usize) -> marchmesh_core::RenderOutput {
-    let g = Spheres::from_scene(scene);
-    let bg = BackgroundSampler::load(&scene.background).unwrap();
-    render(
-        scene,
-        &g,
-        &bg,
-        &RenderOptions {
-            threads,
-            ..Default::default()
-        },
-        &|| {},
-    )
-    .unwrap()
+    marchmesh_testkit::render_with(scene, &Spheres::from_scene(scene), threads)
 }
 
 const ONE_SPHERE: &str = r#"{

@@ -1,12 +1,10 @@
 //! Hits of the mesh backend against independent answers: analytic spheres, a brute-force
 //! f64 ray caster over the bunny, flattened versus instanced geometry, Bvh2 versus CwBvh.
 
-mod common;
-
-use common::*;
 use glam::DVec3;
 use marchmesh_core::Geometry;
 use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation, build};
+use marchmesh_testkit::*;
 
 #[test]
 fn sphere_hits_match_the_analytic_sphere_within_the_chord_budget() {

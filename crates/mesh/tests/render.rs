@@ -1,7 +1,7 @@
 //! The foundation scenes and the mesh scenes render through the core integrator with the
 //! mesh backend: finite pixels, the expected objects hit, counters filled.
 
-mod common;
+use marchmesh_testkit as common;
 
 use marchmesh_core::Geometry;
 use marchmesh_mesh::{MeshError, MeshOptions, build};

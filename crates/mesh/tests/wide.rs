@@ -2,13 +2,11 @@
 //! closest-hit distance bit for bit and the same occlusion on every conformance case and the
 //! bunny, and no ray slipping between the triangles of closed meshes.
 
-mod common;
-
-use common::*;
 use glam::{DVec3, Vec3};
 use marchmesh_core::{Geometry, Ray};
 use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation, build};
 use marchmesh_scene::Scene;
+use marchmesh_testkit::*;
 
 fn both(scene: &Scene, options: MeshOptions) -> (impl Geometry, impl Geometry) {
     let bvh2 = build(

@@ -3,27 +3,14 @@
 //! and no-occlusion limits.
 
 use glam::Vec3;
-use marchmesh_core::{BackgroundSampler, RenderOptions, RenderOutput, render};
-use marchmesh_scene::{Scene, parse_scene};
+use marchmesh_core::RenderOutput;
+use marchmesh_scene::Scene;
 
-fn scene(json: &str) -> Scene {
-    parse_scene(json, "test.json", std::path::Path::new(".")).unwrap_or_else(|e| panic!("{e}"))
-}
+use marchmesh_testkit::scene;
 
 fn render_with(scene: &Scene, threads: usize) -> RenderOutput {
     let g = marchmesh_reference::build(scene, &Default::default()).unwrap();
-    let bg = BackgroundSampler::load(&scene.background).unwrap();
-    let out = render(
-        scene,
-        &g,
-        &bg,
-        &RenderOptions {
-            threads,
-            ..Default::default()
-        },
-        &|| {},
-    )
-    .unwrap();
+    let out = marchmesh_testkit::render_with(scene, &g, threads);
     assert_eq!(out.stats.non_finite_pixels, 0);
     out
 }

@@ -1,5 +1,10 @@
-//! Helpers shared by the mesh backend's integration tests.
-#![allow(dead_code)]
+//! Test support shared by the workspace's integration tests (a dev-dependency only): the
+//! repository's folders, scenes parsed from JSON, renders, camera rays, unique temporary
+//! folders, and brute-force f64 oracles (triangle and sphere intersection) to check fast
+//! intersection code against.
+//!
+//! Everything panics with a message on failure: these helpers serve tests, where a panic is
+//! the failure report.
 
 use std::path::{Path, PathBuf};
 
@@ -7,9 +12,23 @@ use glam::{DVec3, Vec3};
 use marchmesh_core::{BackgroundSampler, Geometry, Ray, RenderOptions, RenderOutput, render};
 use marchmesh_scene::Scene;
 
+/// The repository's root folder.
+pub fn repo_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
 /// The repository's `scenes/` folder.
 pub fn scenes_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
+    repo_root().join("scenes")
+}
+
+/// A fresh, empty folder `marchmesh-<name>-<process id>` in the system's temporary folder
+/// (removed first if a crashed earlier run left it). Tests remove it when they pass.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("marchmesh-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap_or_else(|e| panic!("{}: {e}", d.display()));
+    d
 }
 
 /// Parses a scene given as JSON (mesh paths relative to `scenes/`).
@@ -17,14 +36,19 @@ pub fn scene(json: &str) -> Scene {
     marchmesh_scene::parse_scene(json, "test", &scenes_dir()).expect("valid test scene")
 }
 
-/// Renders `scene` with `geometry` on one thread (deterministic counters).
-pub fn render_1t(scene: &Scene, geometry: &dyn Geometry) -> RenderOutput {
+/// Renders `scene` with `geometry` on `threads` threads (0 = all cores).
+pub fn render_with(scene: &Scene, geometry: &dyn Geometry, threads: usize) -> RenderOutput {
     let bg = BackgroundSampler::load(&scene.background).expect("background");
     let opts = RenderOptions {
-        threads: 1,
+        threads,
         ..Default::default()
     };
     render(scene, geometry, &bg, &opts, &|| {}).expect("render")
+}
+
+/// Renders `scene` with `geometry` on one thread (deterministic counters).
+pub fn render_1t(scene: &Scene, geometry: &dyn Geometry) -> RenderOutput {
+    render_with(scene, geometry, 1)
 }
 
 /// Primary rays (render space) through an `n x n` grid of pixel centres of the scene camera.
