@@ -9,16 +9,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn marchmesh(args: &[&str], cwd: &Path) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run marchmesh");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    marchmesh_testkit::run_program(env!("CARGO_BIN_EXE_marchmesh"), args, cwd)
 }
 
 fn repo() -> PathBuf {

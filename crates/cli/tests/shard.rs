@@ -16,16 +16,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 fn marchmesh(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
-        .args(args)
-        .current_dir(repo())
-        .output()
-        .expect("run marchmesh");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
+    marchmesh_testkit::run_program(env!("CARGO_BIN_EXE_marchmesh"), args, &repo())
 }
 
 fn runs_in(dir: &Path) -> Vec<PathBuf> {

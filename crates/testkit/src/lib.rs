@@ -118,3 +118,18 @@ pub fn ray_sphere(origin: DVec3, dir: DVec3, centre: DVec3, radius: f64) -> Opti
     let t = -b - disc.sqrt();
     (t > 0.0).then_some(t)
 }
+
+/// Runs the program `bin` (e.g. `env!("CARGO_BIN_EXE_marchmesh")`, which only the binary's own
+/// tests can name) with `args` in `cwd`: (exited successfully, stdout, stderr).
+pub fn run_program(bin: &str, args: &[&str], cwd: &Path) -> (bool, String, String) {
+    let out = std::process::Command::new(bin)
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap_or_else(|e| panic!("running {bin}: {e}"));
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
