@@ -356,8 +356,24 @@ impl Field {
         self.eval::<F32x8, false>(&self.p32, p).0
     }
 
-    /// Box containing every surface, `None` when unbounded (planes, infinite repetition) or
-    /// empty.
+    /// The same field without its skipping bounds: every node is evaluated at every query
+    /// (otherwise a subtree far outside its box contributes a bound instead of its value;
+    /// the sign and the values near surfaces are the same either way) and [`Field::bounds`]
+    /// is `None`, so a tracer has no scene box to clip rays to. What the sdf backend's `bounds=false` measures: the cost of
+    /// a field evaluated without bounding volumes.
+    pub fn without_bounds(mut self) -> Self {
+        for i in &mut self.p32.instrs {
+            i.has_bound = false;
+        }
+        for i in &mut self.p64.instrs {
+            i.has_bound = false;
+        }
+        self.bounds = None;
+        self
+    }
+
+    /// Box containing every surface, `None` when unbounded (planes, infinite repetition),
+    /// empty, or after [`Field::without_bounds`].
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
         self.bounds
     }

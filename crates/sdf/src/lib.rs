@@ -176,6 +176,11 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         cache_dir: opts.cache_dir.clone(),
     };
     let field = Field::compile_scene(scene, &field_opts)?;
+    let field = if opts.bounds {
+        field
+    } else {
+        field.without_bounds()
+    };
     let inside = Inside::build(scene, &field, &field_opts)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bounds = field.bounds().map(|(lo, hi)| {

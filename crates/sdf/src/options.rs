@@ -64,6 +64,10 @@ pub struct SdfOptions {
     /// Trace `closest_hits` batches 8 rays in lockstep (SoA lanes, default true); false
     /// traces them one at a time (same results).
     pub lockstep: bool,
+    /// Skip subtrees outside their bounding boxes and clip rays to the scene's box (default
+    /// true); false evaluates every node at every step ([`marchmesh_field::Field::without_bounds`]):
+    /// the cost of sphere tracing without bounding volumes, for the naive baseline level.
+    pub bounds: bool,
     /// Cells on the longest side of baked mesh grids (default 64).
     pub mesh_grid_resolution: u32,
     /// Cache folder for baked grids; `None` (default) = no disk cache.
@@ -92,6 +96,7 @@ impl SdfOptions {
         refine_steps: 16,
         normal_step: 0.02,
         lockstep: true,
+        bounds: true,
         mesh_grid_resolution: 64,
         cache_dir: None,
         cone_shadows: false,

@@ -33,6 +33,9 @@ pub struct SdfSettings {
     pub normal_step: f64,
     /// Trace batches 8 rays in lockstep (same results).
     pub lockstep: bool,
+    /// Skip subtrees by their bounding boxes and clip rays to the scene box (false: every
+    /// node at every step, the naive cost).
+    pub bounds: bool,
     /// Cells on the longest side of baked mesh distance grids.
     pub grid_res: u32,
     /// Folder caching baked grids (none = no disk cache).
@@ -67,6 +70,7 @@ impl SdfSettings {
             refine_steps: o.refine_steps,
             normal_step: o.normal_step,
             lockstep: o.lockstep,
+            bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
             cache_dir: o.cache_dir.clone(),
             cone_shadows: o.cone_shadows,
@@ -87,6 +91,7 @@ impl SdfSettings {
             refine_steps: self.refine_steps,
             normal_step: self.normal_step,
             lockstep: self.lockstep,
+            bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,
             cache_dir: self.cache_dir.clone(),
             cone_shadows: self.cone_shadows,

@@ -499,3 +499,32 @@ fn absolute_epsilon_extremes_still_converge() {
         );
     }
 }
+
+#[test]
+fn without_bounds_the_picture_is_the_same() {
+    // bounds=false (the naive baseline's field: every node every step, no scene box) must
+    // find the same surfaces; only the cost differs.
+    let s = scene(
+        r#"{"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [-1.2, 0, 0]}},
+           {"shape": {"union": {"children": [
+               {"shape": {"box": {"half_extents": [0.5, 0.5, 0.5]}}},
+               {"shape": {"sphere": {"radius": 0.6}}, "transform": {"translate": [0, 0.6, 0]}}]}},
+            "transform": {"translate": [1.2, 0, 0]}},
+           {"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}}"#,
+        "",
+    );
+    let with = build(&s, &SdfOptions::DEFAULT).expect("bounded build");
+    let without = build(
+        &s,
+        &SdfOptions {
+            bounds: false,
+            ..SdfOptions::DEFAULT
+        },
+    )
+    .expect("unbounded build");
+    let a = marchmesh_testkit::render_1t(&s, &with);
+    let b = marchmesh_testkit::render_1t(&s, &without);
+    let acc = marchmesh_core::compare(&b.framebuffer, &a.framebuffer).expect("same size");
+    assert!(acc.silhouette_mismatch_pct <= 0.1, "{acc:?}");
+    assert!(acc.depth_rel_p95 <= 1e-4, "{acc:?}");
+}
