@@ -45,14 +45,7 @@ impl Point<'_> {
     }
     /// The 95% CI of the median on the run's clock.
     fn ci(&self) -> (f64, f64) {
-        match (
-            self.clock,
-            self.row.render_cpu_ms_ci_low,
-            self.row.render_cpu_ms_ci_high,
-        ) {
-            (Clock::Cpu, Some(lo), Some(hi)) => (lo, hi),
-            _ => (self.row.render_ms_ci_low, self.row.render_ms_ci_high),
-        }
+        self.clock.ci_ms(self.row)
     }
     fn label(&self) -> String {
         format!("{}:{}", self.row.backend, self.row.quality)

@@ -59,16 +59,6 @@ pub fn round_order(active: &[usize], run_seed: u64, group: &str, round: u32) -> 
     order
 }
 
-/// A fixed rotation of `members` configurations for `rounds` rounds (every member in every
-/// round, each round shuffled): the schedule when every configuration wants the same number of
-/// repeats, and what the tests check.
-pub fn rotation(members: usize, rounds: u32, run_seed: u64, group: &str) -> Vec<Vec<usize>> {
-    let all: Vec<usize> = (0..members).collect();
-    (0..rounds)
-        .map(|r| round_order(&all, run_seed, group, r))
-        .collect()
-}
-
 /// A run seed from the clock (recorded in the results; pass `--seed` to reproduce an order).
 pub fn clock_seed() -> u64 {
     std::time::SystemTime::now()
@@ -79,6 +69,14 @@ pub fn clock_seed() -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A fixed rotation: every member in every round, each round shuffled.
+    fn rotation(members: usize, rounds: u32, run_seed: u64, group: &str) -> Vec<Vec<usize>> {
+        let all: Vec<usize> = (0..members).collect();
+        (0..rounds)
+            .map(|r| round_order(&all, run_seed, group, r))
+            .collect()
+    }
 
     #[test]
     fn every_configuration_gets_every_round_and_the_seed_reproduces_the_order() {

@@ -169,26 +169,6 @@ impl RepeatPolicy {
     pub fn wants_more(&self, count: u32, total_s: f64) -> bool {
         count < self.min_count.max(1) || (total_s < self.min_time_s && count < self.max_count)
     }
-
-    /// Calls `once` (which returns one sample in seconds) until the policy is satisfied or
-    /// `stop` returns true (after at least one sample), returning the samples.
-    pub fn run<E>(
-        &self,
-        mut once: impl FnMut() -> Result<f64, E>,
-        stop: impl Fn() -> bool,
-    ) -> Result<Vec<f64>, E> {
-        let mut samples = Vec::new();
-        let mut total = 0.0;
-        while self.wants_more(samples.len() as u32, total) {
-            if !samples.is_empty() && stop() {
-                break;
-            }
-            let s = once()?;
-            total += s;
-            samples.push(s);
-        }
-        Ok(samples)
-    }
 }
 
 #[cfg(test)]
@@ -283,25 +263,20 @@ mod tests {
     }
 
     #[test]
-    fn repeat_policy_honours_count_time_and_stop() {
+    fn repeat_policy_honours_count_and_time() {
         let p = RepeatPolicy {
             min_count: 3,
             min_time_s: 1.0,
             max_count: 10,
         };
-        // Fast samples: keep going to the max count (time never reached).
-        let v: Vec<f64> = p.run(|| Ok::<_, ()>(0.01), || false).unwrap();
-        assert_eq!(v.len(), 10);
-        // Slow samples: the min count suffices once time is reached.
-        let v = p.run(|| Ok::<_, ()>(0.6), || false).unwrap();
-        assert_eq!(v.len(), 3);
-        // Stop after the first sample.
-        let v = p.run(|| Ok::<_, ()>(0.01), || true).unwrap();
-        assert_eq!(v.len(), 1);
+        // Fast samples (10 ms): keep going to the max count (time never reached).
+        assert!(p.wants_more(9, 0.09));
+        assert!(!p.wants_more(10, 0.1));
+        // Slow samples (600 ms): the min count suffices once time is reached.
+        assert!(p.wants_more(2, 1.2));
+        assert!(!p.wants_more(3, 1.8));
         // Quick: one sample.
-        let v = p.quick().run(|| Ok::<_, ()>(0.01), || false).unwrap();
-        assert_eq!(v.len(), 1);
-        // Errors propagate.
-        assert!(p.run(|| Err::<f64, _>("boom"), || false).is_err());
+        assert!(p.quick().wants_more(0, 0.0));
+        assert!(!p.quick().wants_more(1, 0.01));
     }
 }

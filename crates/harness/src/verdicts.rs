@@ -72,7 +72,7 @@ impl Clock {
     }
 
     /// The 95% confidence interval of that median, ms.
-    fn ci_ms(self, r: &Row) -> (f64, f64) {
+    pub(crate) fn ci_ms(self, r: &Row) -> (f64, f64) {
         match (self, r.render_cpu_ms_ci_low, r.render_cpu_ms_ci_high) {
             (Self::Cpu, Some(lo), Some(hi)) => (lo, hi),
             _ => (r.render_ms_ci_low, r.render_ms_ci_high),
