@@ -66,3 +66,26 @@ fn committed_findings_regenerate_byte_identically() {
     assert_eq!(std::fs::read_to_string(&out).unwrap(), committed);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn missing_or_broken_runs_are_clear_errors_and_write_nothing() {
+    let dir = marchmesh_testkit::temp_dir("findings-bad");
+    let broken = dir.join("broken");
+    std::fs::create_dir_all(&broken).unwrap();
+    std::fs::write(broken.join("results.json"), "{ not json").unwrap();
+    let out = dir.join("FINDINGS.md");
+    for (run, expect) in [("no-such-run", "no-such-run"), ("broken", "results.json")] {
+        let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+            .args(["findings", run, "--out"])
+            .arg(&out)
+            .current_dir(&dir)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success());
+        assert!(stderr.contains(expect), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(!out.exists() && !dir.join("FINDINGS-plots").exists());
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
