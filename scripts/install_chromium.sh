@@ -20,8 +20,11 @@ if [ "$(id -u)" -ne 0 ]; then
 fi
 export DEBIAN_FRONTEND=noninteractive
 # Debian calls the package chromium; Ubuntu's chromium-browser is a transitional package.
-if ! "${sudo[@]}" apt-get install -y chromium; then
+# No recommended packages and no kept .deb files: CI machines may be short of disk.
+install=("${sudo[@]}" apt-get install -y --no-install-recommends)
+if ! "${install[@]}" chromium; then
     "${sudo[@]}" apt-get update
-    "${sudo[@]}" apt-get install -y chromium || "${sudo[@]}" apt-get install -y chromium-browser
+    "${install[@]}" chromium || "${install[@]}" chromium-browser
 fi
+"${sudo[@]}" apt-get clean || true
 command -v chromium || command -v chromium-browser
