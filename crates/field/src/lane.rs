@@ -64,6 +64,8 @@ pub trait Lane:
     fn mat_select(m: Self::Mask, a: Self::Mat, b: Self::Mat) -> Self::Mat;
     /// Largest lane, as f64.
     fn hmax(self) -> f64;
+    /// Sum of the lanes (traversal-order heuristics only).
+    fn hsum(self) -> f64;
     /// Applies `f` per lane (f64 in, f64 out); used for mesh grids.
     fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self;
     /// Clamp to `[lo, hi]`.
@@ -153,6 +155,10 @@ macro_rules! scalar_lane {
             }
             #[inline(always)]
             fn hmax(self) -> f64 {
+                self as f64
+            }
+            #[inline(always)]
+            fn hsum(self) -> f64 {
                 self as f64
             }
             #[inline]
@@ -323,6 +329,10 @@ impl Lane for F32x8 {
     #[inline(always)]
     fn hmax(self) -> f64 {
         self.0.iter().fold(f32::NEG_INFINITY, |a, &b| a.max(b)) as f64
+    }
+    #[inline(always)]
+    fn hsum(self) -> f64 {
+        self.0.iter().map(|&v| f64::from(v)).sum()
     }
     #[inline]
     fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {

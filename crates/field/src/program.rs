@@ -317,6 +317,26 @@ impl<S: Scalar> Program<S> {
             }
             Op::Union => {
                 let mut j = i + 1;
+                if let Some(second) = self.nearer_second::<T>(j, end, q) {
+                    // Two bounded children, the second nearer: visit it first, so the running
+                    // minimum is small early and the farther child is more likely skipped
+                    // (front-to-back order, as a BVH traversal visits the nearer child
+                    // first). Union is order-independent: the value is the same.
+                    let (mut best, mut bm) = match above {
+                        Some(thr) => (thr, mat),
+                        None => self.child::<T, M>(second, q, Ctx::Plain, grids),
+                    };
+                    for k in [second, j] {
+                        if k == second && above.is_none() {
+                            continue;
+                        }
+                        let (d, m) = self.child::<T, M>(k, q, Ctx::Below(best), grids);
+                        let take = T::lt(d, best);
+                        best = best.min(d);
+                        bm = msel::<T, M>(take, m, bm);
+                    }
+                    return (best * T::splat(ins.dscale), bm);
+                }
                 let (mut best, mut bm) = match above {
                     Some(thr) => (thr, mat),
                     None => {
@@ -384,6 +404,29 @@ impl<S: Scalar> Program<S> {
             } => self.repeat::<T, M>(i + 1, q, period, count, first, *r, grids),
         };
         (d * T::splat(ins.dscale), m)
+    }
+
+    /// For a union whose children start at `first` and end at `end`: when it has exactly two
+    /// children, both bounded, and the second's box is nearer to `q` (summed over lanes),
+    /// the second's index; otherwise `None` (visit in stored order). The compiler's union
+    /// hierarchy ([`crate::compile`]'s median splits) is made of such pairs, so this turns its
+    /// traversal front-to-back: a union of N separate objects then costs about `log N` box
+    /// tests per evaluation near a surface instead of opening every box nearer than the
+    /// first leaf found (issue 14: 10000 spheres were ~100x slower per step than one).
+    #[inline(always)]
+    fn nearer_second<T: Lane<S = S>>(&self, first: usize, end: usize, q: V3<T>) -> Option<usize> {
+        let a = &self.instrs[first];
+        let second = a.end as usize;
+        if second >= end {
+            return None;
+        }
+        let b = &self.instrs[second];
+        if b.end as usize != end || !a.has_bound || !b.has_bound {
+            return None;
+        }
+        let la = shapes::box_distance(q, V3::splat3(a.lo), V3::splat3(a.hi));
+        let lb = shapes::box_distance(q, V3::splat3(b.lo), V3::splat3(b.hi));
+        (lb.hsum() < la.hsum()).then_some(second)
     }
 
     /// A subtracted child: exact skip when it cannot cut into `first`.
