@@ -34,6 +34,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod compile;
+pub mod cull;
 pub mod lane;
 pub mod program;
 pub mod shapes;
@@ -45,6 +46,7 @@ use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 
 use compile::{Aabb, MeshResolver, compile_roots};
+pub use cull::{RayCone, Restricted};
 pub use lane::{F32x8, Lane, M8, Scalar, V3};
 use program::{GridSampler, Program};
 

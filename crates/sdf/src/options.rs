@@ -64,6 +64,13 @@ pub struct SdfOptions {
     /// Trace `closest_hits` batches 8 rays in lockstep (SoA lanes, default true); false
     /// traces them one at a time (same results).
     pub lockstep: bool,
+    /// In lockstep batches, trace each bundle of up to [`crate::CULL_BUNDLE`] rays sharing an
+    /// origin (primary rays) through the field restricted to the objects the bundle's cone
+    /// can reach ([`marchmesh_field::RayCone`]; default true): a step then costs what the
+    /// objects near the bundle cost, not what the scene's object count costs. Hits agree
+    /// with the unrestricted field to the refinement threshold (the steps differ, so not
+    /// bit for bit); false traces every ray through the whole field.
+    pub cull: bool,
     /// Skip subtrees outside their bounding boxes and clip rays to the scene's box (default
     /// true); false evaluates every node at every step ([`marchmesh_field::Field::without_bounds`]):
     /// the cost of sphere tracing without bounding volumes, for the naive baseline level.
@@ -96,6 +103,7 @@ impl SdfOptions {
         refine_steps: 16,
         normal_step: 0.02,
         lockstep: true,
+        cull: true,
         bounds: true,
         mesh_grid_resolution: 64,
         cache_dir: None,

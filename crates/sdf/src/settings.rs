@@ -33,6 +33,9 @@ pub struct SdfSettings {
     pub normal_step: f64,
     /// Trace batches 8 rays in lockstep (same results).
     pub lockstep: bool,
+    /// In lockstep batches, trace bundles of primary rays through only the objects their
+    /// cone can reach (false: the whole field for every ray).
+    pub cull: bool,
     /// Skip subtrees by their bounding boxes and clip rays to the scene box (false: every
     /// node at every step, the naive cost).
     pub bounds: bool,
@@ -70,6 +73,7 @@ impl SdfSettings {
             refine_steps: o.refine_steps,
             normal_step: o.normal_step,
             lockstep: o.lockstep,
+            cull: o.cull,
             bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
             cache_dir: o.cache_dir.clone(),
@@ -91,6 +95,7 @@ impl SdfSettings {
             refine_steps: self.refine_steps,
             normal_step: self.normal_step,
             lockstep: self.lockstep,
+            cull: self.cull,
             bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,
             cache_dir: self.cache_dir.clone(),

@@ -3,7 +3,7 @@
 //! lockstep batches equal to single rays, shadow rays leaving their surface.
 
 use glam::Vec3;
-use marchmesh_core::{Geometry, Ray, Termination};
+use marchmesh_core::{Geometry, Ray, Termination, TraceResult};
 use marchmesh_scene::{Scene, parse_scene};
 use marchmesh_sdf::{HitEpsilon, SdfOptions, build};
 use proptest::prelude::*;
@@ -206,7 +206,16 @@ fn lockstep_batches_equal_single_rays() {
            {"shape": {"smooth_union": {"blend_radius": 0.3, "children": [{"shape": {"sphere": {"radius": 0.4}}, "transform": {"translate": [1, 1, 0]}}, {"shape": {"box": {"half_extents": [0.3, 0.3, 0.3]}}, "transform": {"translate": [1.4, 1, 0]}}]}}}"#,
         "",
     );
-    let g = build(&s, &SdfOptions::DEFAULT).unwrap();
+    // Without culling the lockstep path runs the same arithmetic as single rays: bit for
+    // bit the same results (culling changes the step sizes; see the next test).
+    let g = build(
+        &s,
+        &SdfOptions {
+            cull: false,
+            ..SdfOptions::DEFAULT
+        },
+    )
+    .unwrap();
     let rays: Vec<Ray> = (0..1000)
         .map(|i| {
             let x = (i % 37) as f32 / 37.0 - 0.5;
@@ -226,6 +235,75 @@ fn lockstep_batches_equal_single_rays() {
         assert_eq!(batch[i], g.closest_hit(r), "ray {i}");
         assert_eq!(occ[i], g.occluded(r), "ray {i}");
     }
+}
+
+#[test]
+fn culled_bundles_find_the_same_hits_as_the_whole_field() {
+    // 144 spheres on a grid, a box among them and a ground plane; camera rays in rows.
+    let mut objects = Vec::new();
+    for i in 0..144 {
+        let (x, y) = ((i % 12) as f64 * 0.5 - 2.75, (i / 12) as f64 * 0.4 - 2.2);
+        let z = 1.0 + (i % 7) as f64 * 0.3;
+        objects.push(format!(
+            r#"{{"shape": {{"sphere": {{"radius": 0.17}}}}, "transform": {{"translate": [{x}, {y}, {z}]}}}}"#
+        ));
+    }
+    objects.push(r#"{"shape": {"box": {"half_extents": [0.3, 0.2, 0.3]}}, "transform": {"translate": [0.1, 0.3, 0.5]}}"#.into());
+    objects.push(r#"{"shape": {"plane": {}}, "transform": {"translate": [0, -2.6, 0]}}"#.into());
+    let s = scene(&objects.join(","), "");
+    let with = |cull: bool| {
+        build(
+            &s,
+            &SdfOptions {
+                cull,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .unwrap()
+    };
+    let (culled, whole) = (with(true), with(false));
+    let (w, h) = (96, 64);
+    let rays: Vec<Ray> = (0..w * h)
+        .map(|i| {
+            let x = (i % w) as f32 / w as f32 - 0.5;
+            let y = (i / w) as f32 / h as f32 - 0.5;
+            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
+        })
+        .collect();
+    let mut a = vec![TraceResult::default(); rays.len()];
+    let mut b = vec![TraceResult::default(); rays.len()];
+    let (mut steps_a, mut steps_b, mut hits) = (0u64, 0u64, 0);
+    for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
+        culled.closest_hits(row, out_a);
+        whole.closest_hits(row, out_b);
+    }
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        steps_a += u64::from(x.work.steps);
+        steps_b += u64::from(y.work.steps);
+        assert_eq!(x.termination(), y.termination(), "ray {i}");
+        if let (Some(p), Some(q)) = (x.hit(), y.hit()) {
+            hits += 1;
+            assert!(
+                (p.t - q.t).abs() <= 1e-4 * q.t,
+                "ray {i}: t {} vs {}",
+                p.t,
+                q.t
+            );
+            assert!(
+                p.normal.dot(q.normal) > 0.9999,
+                "ray {i}: normals {:?} {:?}",
+                p.normal,
+                q.normal
+            );
+            assert_eq!(p.material, q.material, "ray {i}");
+        }
+    }
+    assert!(hits > 3000, "{hits} hits");
+    // The point of culling: fewer objects per step, and never more steps.
+    assert!(
+        steps_a <= steps_b,
+        "culled {steps_a} steps > whole {steps_b}"
+    );
 }
 
 #[test]
