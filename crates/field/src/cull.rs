@@ -192,6 +192,13 @@ impl Field {
         self.eval::<F32x8, false>(&r.prog, v).0.0
     }
 
+    /// Distances of eight points given as SoA lanes under a restriction (per lane the same
+    /// as [`Field::restricted_distance`]).
+    #[inline]
+    pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
+        self.eval::<F32x8, false>(&r.prog, p).0
+    }
+
     /// The scalar distance under a restriction (same values per point as
     /// [`Field::restricted_distance_x8`]).
     #[inline]

@@ -238,7 +238,7 @@ impl F32x8 {
 
 /// Eight lane masks, each all ones (true) or all zeros (false), so selects are bitwise
 /// blends that vectorise.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[repr(align(32))]
 pub struct M8(pub [u32; 8]);
 
@@ -345,7 +345,7 @@ impl Lane for F32x8 {
 }
 
 /// A 3-vector of lanes (no glam type is generic over the number type).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, Default)]
 pub struct V3<T> {
     /// x.
     pub x: T,

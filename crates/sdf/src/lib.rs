@@ -35,11 +35,11 @@ use marchmesh_core::{
     Cone, Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, Shortcuts,
     SurfacePoint, Termination, TraceResult, Visibility,
 };
-use marchmesh_field::{Field, FieldError, FieldOptions, RayCone, Restricted};
+use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, RayCone, Restricted, V3};
 use marchmesh_scene::{MaterialId, Scene};
 
 use inside::Inside;
-use march::{March, Next, Params};
+use march::{Lanes8, March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
 pub use settings::{SdfBackend, SdfSettings};
 
@@ -405,7 +405,7 @@ impl SdfGeometry {
         mut done: impl FnMut(usize, Option<&March>, Termination),
     ) {
         if !self.cull {
-            self.lockstep_with(rays, 0, refine, &mut done, |p| self.field.distance_x8(p));
+            self.lockstep_with(rays, 0, refine, &mut done, |p| self.field.distance_lanes(p));
             return;
         }
         let mut restricted = Restricted::default();
@@ -414,11 +414,11 @@ impl SdfGeometry {
                 Some(cone) => {
                     self.field.restrict_to(&cone, &mut restricted);
                     self.lockstep_with(bundle, k * CULL_BUNDLE, refine, &mut done, |p| {
-                        self.field.restricted_distance_x8(&restricted, p)
+                        self.field.restricted_distance_lanes(&restricted, p)
                     });
                 }
                 None => self.lockstep_with(bundle, k * CULL_BUNDLE, refine, &mut done, |p| {
-                    self.field.distance_x8(p)
+                    self.field.distance_lanes(p)
                 }),
             }
         }
@@ -446,16 +446,18 @@ impl SdfGeometry {
     }
 
     /// The lockstep loop over `rays` (indices reported from `first_index`) with the 8-lane
-    /// distance function `distance_x8`.
+    /// distance function `distance`: plain marching steps run on all lanes at once
+    /// ([`Lanes8::step`]), every other decision in the lane's scalar [`March`].
     fn lockstep_with(
         &self,
         rays: &[Ray],
         first_index: usize,
         refine: bool,
         done: &mut impl FnMut(usize, Option<&March>, Termination),
-        distance_x8: impl Fn([Vec3; 8]) -> [f32; 8],
+        distance: impl Fn(V3<F32x8>) -> F32x8,
     ) {
         let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
+        let mut soa = Lanes8::default();
         let mut next = 0usize;
         let load = |next: &mut usize, done: &mut dyn FnMut(usize, Option<&March>, Termination)| {
             while *next < rays.len() {
@@ -468,20 +470,44 @@ impl SdfGeometry {
             }
             None
         };
-        for lane in lanes.iter_mut() {
-            *lane = load(&mut next, done);
+        let Some(first) = load(&mut next, done) else {
+            return;
+        };
+        // Every lane starts on the first ray's point, so empty lanes evaluate finite points.
+        for k in 0..8 {
+            soa.load(k, &first.1);
+            soa.clear(k);
         }
-        while let Some(fill) = lanes.iter().flatten().next().map(|l| l.1.point()) {
-            let pts: [Vec3; 8] =
-                std::array::from_fn(|k| lanes[k].as_ref().map_or(fill, |l| l.1.point()));
-            let d = distance_x8(pts);
+        soa.load(0, &first.1);
+        lanes[0] = Some(first);
+        for k in 1..8 {
+            lanes[k] = load(&mut next, done);
+            match &lanes[k] {
+                Some((_, m)) => soa.load(k, m),
+                None => soa.clear(k),
+            }
+        }
+        while lanes.iter().any(Option::is_some) {
+            let d = distance(soa.points());
+            let slow = soa.step(d, &self.params);
             for k in 0..8 {
+                if slow & (1 << k) == 0 {
+                    continue;
+                }
                 let Some((i, m)) = lanes[k].as_mut() else {
                     continue;
                 };
-                if let Next::Done(t) = m.feed(d[k], &self.params) {
-                    done(*i, Some(m), t);
-                    lanes[k] = load(&mut next, done);
+                soa.store(k, m);
+                match m.feed(d.0[k], &self.params) {
+                    Next::Continue => soa.load(k, m),
+                    Next::Done(t) => {
+                        done(*i, Some(m), t);
+                        lanes[k] = load(&mut next, done);
+                        match &lanes[k] {
+                            Some((_, m)) => soa.load(k, m),
+                            None => soa.clear(k),
+                        }
+                    }
                 }
             }
         }

@@ -30,6 +30,7 @@
 
 use glam::Vec3;
 use marchmesh_core::{NoHit, Ray, Termination};
+use marchmesh_field::{F32x8, Lane, M8, V3};
 
 /// Per-ray constants shared by every ray of a geometry.
 #[derive(Debug, Clone, Copy)]
@@ -171,6 +172,30 @@ impl March {
             evals: 0,
             refine,
         })
+    }
+
+    /// The plain-marching state when the ray is in the `March` phase (the only state the
+    /// lockstep fast path [`Lanes8::step`] changes), else `None`.
+    #[inline]
+    pub fn plain(&self) -> Option<Plain> {
+        (self.phase == Phase::March).then_some(Plain {
+            t: self.t,
+            t_prev: self.t_prev,
+            r_prev: self.r_prev,
+            omega: self.omega,
+            evals: self.evals,
+        })
+    }
+
+    /// Writes back a state taken by [`March::plain`] and advanced by [`Lanes8::step`].
+    #[inline]
+    fn set_plain(&mut self, s: Plain) {
+        debug_assert!(self.phase == Phase::March);
+        self.t = s.t;
+        self.t_prev = s.t_prev;
+        self.r_prev = s.r_prev;
+        self.omega = s.omega;
+        self.evals = s.evals;
     }
 
     /// The point whose distance [`March::feed`] needs next.
@@ -552,4 +577,139 @@ fn nan_max(a: f32, b: f32) -> f32 {
 #[inline]
 fn nan_min(a: f32, b: f32) -> f32 {
     if a < b || b.is_nan() { a } else { b }
+}
+
+/// The part of a ray's state that plain marching changes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Plain {
+    t: f32,
+    t_prev: f32,
+    r_prev: f32,
+    omega: f32,
+    evals: u32,
+}
+
+/// Eight rays marched in lockstep, structure of arrays. The common case, a step of plain
+/// (relaxed) marching that enters no shell, undoes no relaxed step, leaves no range and
+/// exhausts no budget, runs on all lanes at once in [`Lanes8::step`] with exactly the
+/// arithmetic of [`March::feed`]'s `March` phase in 8-lane vector operations (so results
+/// are bit for bit those of single rays); a lane that needs any other decision, or is in
+/// another phase, is handed to its scalar [`March`] for that step.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Lanes8 {
+    o: V3<F32x8>,
+    dir: V3<F32x8>,
+    base: F32x8,
+    sign: F32x8,
+    t_end: F32x8,
+    t: F32x8,
+    t_prev: F32x8,
+    r_prev: F32x8,
+    omega: F32x8,
+    evals: [u32; 8],
+    /// Lane holds a ray in the `March` phase whose plain state lives here (all ones).
+    fast: M8,
+}
+
+impl Lanes8 {
+    /// Lane `k` now traces `m` (or, after [`March::feed`] returned `Continue`, continues
+    /// it): takes its constants and current state.
+    #[inline]
+    pub fn load(&mut self, k: usize, m: &March) {
+        self.o.x.0[k] = m.o.x;
+        self.o.y.0[k] = m.o.y;
+        self.o.z.0[k] = m.o.z;
+        self.dir.x.0[k] = m.dir.x;
+        self.dir.y.0[k] = m.dir.y;
+        self.dir.z.0[k] = m.dir.z;
+        self.base.0[k] = m.base;
+        self.sign.0[k] = m.sign;
+        self.t_end.0[k] = m.t_end;
+        self.t.0[k] = m.t;
+        match m.plain() {
+            Some(s) => {
+                self.t_prev.0[k] = s.t_prev;
+                self.r_prev.0[k] = s.r_prev;
+                self.omega.0[k] = s.omega;
+                self.evals[k] = s.evals;
+                self.fast.0[k] = !0;
+            }
+            None => self.fast.0[k] = 0,
+        }
+    }
+
+    /// Lane `k` is empty: it keeps evaluating its last point (finite) and is never handed
+    /// out again.
+    #[inline]
+    pub fn clear(&mut self, k: usize) {
+        self.fast.0[k] = 0;
+    }
+
+    /// Writes lane `k`'s plain state back into its ray before a scalar step.
+    #[inline]
+    pub fn store(&self, k: usize, m: &mut March) {
+        if self.fast.0[k] != 0 {
+            m.set_plain(Plain {
+                t: self.t.0[k],
+                t_prev: self.t_prev.0[k],
+                r_prev: self.r_prev.0[k],
+                omega: self.omega.0[k],
+                evals: self.evals[k],
+            });
+        }
+    }
+
+    /// The eight points to evaluate (`o + dir * t`, as [`March::point`]).
+    #[inline]
+    pub fn points(&self) -> V3<F32x8> {
+        V3::new(
+            self.o.x + self.dir.x * self.t,
+            self.o.y + self.dir.y * self.t,
+            self.o.z + self.dir.z * self.t,
+        )
+    }
+
+    /// Consumes the distances `d` at [`Lanes8::points`]: advances every fast lane whose
+    /// step is plain and returns the mask (bit `k`) of the lanes that did not advance (not
+    /// fast, or needing a decision): the caller feeds those to their [`March`].
+    #[inline]
+    pub fn step(&mut self, d: F32x8, p: &Params) -> u8 {
+        // The `March` arm of `March::feed`, then `step_from` and `budget`, with the same
+        // expressions: `eps`, `noise` and `thr` as their methods compute them.
+        let c = F32x8::splat;
+        let t = self.t;
+        let s = d * self.sign;
+        let r = s.abs();
+        let path = self.base + t;
+        let noise = c(2.4e-7) * path;
+        let eps = (c(p.eps_abs) + c(p.eps_cone) * path).max(c(4.0) * noise);
+        let thr = (eps * c(1e-3)).max(noise);
+        let undo = F32x8::and(
+            F32x8::lt(c(1.0), self.omega),
+            F32x8::lt(r + self.r_prev, (t - self.t_prev) + thr),
+        );
+        let budget = M8(std::array::from_fn(|k| {
+            if self.evals[k] + 1 < p.max_steps {
+                !0
+            } else {
+                0
+            }
+        }));
+        // `eps <= s` is false for NaN too; `t + s <= t_end` is `!(t + s > t_end)` there.
+        let ok = F32x8::and(
+            F32x8::and(self.fast, F32x8::le(eps, s)),
+            F32x8::and(F32x8::le(t + s, self.t_end), budget),
+        );
+        let plain = M8(std::array::from_fn(|k| ok.0[k] & !undo.0[k]));
+        let stepped = (t + s * self.omega).min(self.t_end);
+        self.t_prev = F32x8::select(plain, t, self.t_prev);
+        self.r_prev = F32x8::select(plain, s, self.r_prev);
+        self.t = F32x8::select(plain, stepped, t);
+        let mut slow = 0u8;
+        for k in 0..8 {
+            self.evals[k] += plain.0[k] & 1;
+            slow |= u8::from(plain.0[k] == 0) << k;
+        }
+        slow
+    }
 }
