@@ -480,9 +480,9 @@ impl SdfGeometry {
         }
         soa.load(0, &first.1);
         lanes[0] = Some(first);
-        for k in 1..8 {
-            lanes[k] = load(&mut next, done);
-            match &lanes[k] {
+        for (k, lane) in lanes.iter_mut().enumerate().skip(1) {
+            *lane = load(&mut next, done);
+            match lane {
                 Some((_, m)) => soa.load(k, m),
                 None => soa.clear(k),
             }
@@ -490,11 +490,11 @@ impl SdfGeometry {
         while lanes.iter().any(Option::is_some) {
             let d = distance(soa.points());
             let slow = soa.step(d, &self.params);
-            for k in 0..8 {
+            for (k, lane) in lanes.iter_mut().enumerate() {
                 if slow & (1 << k) == 0 {
                     continue;
                 }
-                let Some((i, m)) = lanes[k].as_mut() else {
+                let Some((i, m)) = lane.as_mut() else {
                     continue;
                 };
                 soa.store(k, m);
@@ -502,8 +502,8 @@ impl SdfGeometry {
                     Next::Continue => soa.load(k, m),
                     Next::Done(t) => {
                         done(*i, Some(m), t);
-                        lanes[k] = load(&mut next, done);
-                        match &lanes[k] {
+                        *lane = load(&mut next, done);
+                        match lane {
                             Some((_, m)) => soa.load(k, m),
                             None => soa.clear(k),
                         }
