@@ -6,10 +6,12 @@
 //! issue 14 is measured (the image stays the same size and similar in coverage).
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
-//! [repeats=9] [spheres=N] [lockstep=true|false]`
+//! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [versus=KEY=VALUE]`
 //!
-//! Compare builds or options by alternating runs and quoting ratios with the load average
-//! (`uptime`): this prints absolute times, which drift on a shared machine.
+//! `versus=cull=false` (or `lockstep=false`) builds a second geometry with that option
+//! changed and times the two in alternating rounds (order swapped every round), printing
+//! the median of the per-round time ratios: the number to quote on a shared machine, with
+//! the load average (`uptime`); absolute times drift.
 
 use std::path::Path;
 use std::time::Instant;
@@ -43,7 +45,9 @@ fn run() -> Result<(), String> {
     let side = num("side", 512)?;
     let repeats = num("repeats", 9)?.max(1);
     let spheres = num("spheres", 0)?;
-    let lockstep = kv("lockstep").is_none_or(|v| v != "false");
+    let flag = |v: Option<&str>| v.is_none_or(|v| v != "false");
+    let lockstep = flag(kv("lockstep"));
+    let cull = flag(kv("cull"));
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -51,14 +55,30 @@ fn run() -> Result<(), String> {
     if spheres > 0 {
         scene = with_spheres(scene, spheres);
     }
-    let g = build(
-        &scene,
-        &SdfOptions {
-            lockstep,
-            ..SdfOptions::DEFAULT
-        },
-    )
-    .map_err(|e| e.to_string())?;
+    let options = SdfOptions {
+        lockstep,
+        cull,
+        ..SdfOptions::DEFAULT
+    };
+    let g = build(&scene, &options).map_err(|e| e.to_string())?;
+    let versus = match kv("versus") {
+        None => None,
+        Some(spec) => {
+            let mut other = options.clone();
+            match spec {
+                "cull=false" => other.cull = false,
+                "cull=true" => other.cull = true,
+                "lockstep=false" => other.lockstep = false,
+                "lockstep=true" => other.lockstep = true,
+                _ => {
+                    return Err(format!(
+                        "versus: {spec}: expected cull=BOOL or lockstep=BOOL"
+                    ));
+                }
+            }
+            Some((spec, build(&scene, &other).map_err(|e| e.to_string())?))
+        }
+    };
     let plane = scene.camera.image_plane();
     let t_max = scene.render.max_distance;
     let rows: Vec<Vec<_>> = (0..side)
@@ -69,9 +89,8 @@ fn run() -> Result<(), String> {
         })
         .collect();
     let mut out = vec![TraceResult::default(); side as usize];
-    let mut times = Vec::new();
-    let (mut steps, mut hits) = (0u64, 0u64);
-    for rep in 0..=repeats {
+    // One render: (seconds, field evaluations, hits).
+    let mut trace = |g: &dyn Geometry| {
         let (mut s, mut h) = (0u64, 0u64);
         let start = Instant::now();
         for row in &rows {
@@ -81,27 +100,60 @@ fn run() -> Result<(), String> {
                 h += u64::from(r.termination() == Termination::Hit);
             }
         }
-        let dt = start.elapsed().as_secs_f64();
-        if rep > 0 {
-            times.push(dt);
-        }
-        (steps, hits) = (s, h);
-    }
-    times.sort_by(f64::total_cmp);
-    let median = times[times.len() / 2];
+        (start.elapsed().as_secs_f64(), s, h)
+    };
     let rays = f64::from(side) * f64::from(side);
+    let label = if spheres > 0 {
+        format!("{path} spheres={spheres}")
+    } else {
+        path.clone()
+    };
+    let (mut times, mut other_times, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut steps, mut hits, mut other_steps) = (0, 0, 0);
+    for rep in 0..=repeats {
+        let a_first = rep % 2 == 0;
+        let mut a = (0.0, 0, 0);
+        let mut b = None;
+        for turn in 0..2 {
+            match (&versus, (turn == 0) == a_first) {
+                (_, true) => a = trace(&g),
+                (Some((_, other)), false) => b = Some(trace(other)),
+                (None, false) => {}
+            }
+        }
+        if rep == 0 {
+            continue; // warm-up
+        }
+        (steps, hits) = (a.1, a.2);
+        times.push(a.0);
+        if let Some(b) = b {
+            other_steps = b.1;
+            other_times.push(b.0);
+            ratios.push(b.0 / a.0);
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let t = median(&mut times);
     println!(
-        "{path}{} {side}x{side} lockstep={lockstep}: {:.3} Mrays/s (median of {repeats}, min {:.1} ms), mean steps {:.2}, {:.1} ns per ray-step, hits {hits}",
-        if spheres > 0 {
-            format!(" spheres={spheres}")
-        } else {
-            String::new()
-        },
-        rays / median / 1e6,
-        times[0] * 1e3,
+        "{label} {side}x{side} lockstep={lockstep} cull={cull}: {:.3} Mrays/s (median of {repeats}), mean steps {:.2}, {:.1} ns per ray-step, hits {hits}",
+        rays / t / 1e6,
         steps as f64 / rays,
-        median * 1e9 / steps as f64,
+        t * 1e9 / steps as f64,
     );
+    if let Some((spec, _)) = &versus {
+        let tb = median(&mut other_times);
+        println!(
+            "  versus {spec}: {:.3} Mrays/s, mean steps {:.2}, {:.1} ns per ray-step; time ratio (versus / this, median of {} alternating rounds) {:.3}",
+            rays / tb / 1e6,
+            other_steps as f64 / rays,
+            tb * 1e9 / other_steps as f64,
+            ratios.len(),
+            median(&mut ratios),
+        );
+    }
     Ok(())
 }
 
