@@ -79,7 +79,7 @@ pub struct ViewArgs {
     /// Folder P saves screenshots into in the window (default: the current folder).
     #[arg(long, value_name = "DIR", default_value = ".")]
     shots: PathBuf,
-    /// End the window session after this many frames (for tests).
+    /// End the window session after this many window updates (for tests).
     #[arg(long, hide = true)]
     exit_after_frames: Option<u64>,
 }
@@ -156,8 +156,9 @@ pub fn view(args: ViewArgs) -> Result<()> {
     };
     let summary = window::run(&mut session, &run)?;
     println!(
-        "window closed after {} frames, {} shots",
+        "window closed after {} frames ({} updates), {} shots",
         summary.frames,
+        summary.updates,
         summary.shots.len()
     );
     Ok(())

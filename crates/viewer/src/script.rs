@@ -90,9 +90,18 @@ impl Script {
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
         let mut de = serde_json::Deserializer::from_str(text);
         let raw: Vec<RawEntry> = serde_path_to_error::deserialize(&mut de).map_err(|e| {
-            let entry = entry_index(&e.path().to_string());
+            let path = e.path().to_string();
+            let entry = entry_index(&path);
             let inner = e.into_inner();
-            err(entry, inner.line(), strip_position(&inner.to_string()))
+            let reason = strip_position(&inner.to_string());
+            // Name the field when the error is inside an entry (`[0].mouse_drag`).
+            let reason = match path.split_once('.') {
+                Some((_, field)) if entry.is_some() && !field.is_empty() => {
+                    format!("\"{field}\": {reason}")
+                }
+                _ => reason,
+            };
+            err(entry, inner.line(), reason)
         })?;
         de.end()
             .map_err(|e| err(None, e.line(), strip_position(&e.to_string())))?;

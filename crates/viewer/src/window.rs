@@ -22,7 +22,8 @@ use crate::state::{Event, Key};
 pub struct WindowRun {
     /// Folder P saves screenshots and camera scenes into.
     pub shots_dir: PathBuf,
-    /// End by itself after this many rendered frames (for tests under a virtual display).
+    /// End by itself after this many window updates, rendered or idle (idle updates come
+    /// every 10 ms once the picture is refined; for tests under a virtual display).
     pub exit_after_frames: Option<u64>,
 }
 
@@ -31,6 +32,8 @@ pub struct WindowRun {
 pub struct WindowSummary {
     /// Frames rendered and shown.
     pub frames: u64,
+    /// Window updates, rendered frames and idle ones.
+    pub updates: u64,
     /// Screenshots saved.
     pub shots: Vec<PathBuf>,
 }
@@ -57,7 +60,7 @@ fn viewer_key(k: minifb::Key) -> Option<Key> {
     })
 }
 
-/// Opens the window and runs until it is closed (Escape) or `exit_after_frames` frames were
+/// Opens the window and runs until it is closed (Escape) or `exit_after_frames` updates were
 /// shown. Errors: no window can be opened (no display, no X11 libraries), a frame fails to
 /// render on the first frame (later render errors are shown in the window instead).
 pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, ViewerError> {
@@ -68,6 +71,7 @@ pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, View
     window.set_target_fps(0);
     let mut summary = WindowSummary {
         frames: 0,
+        updates: 0,
         shots: Vec::new(),
     };
     let mut pixels = vec![0u32; w as usize * h as usize];
@@ -117,6 +121,10 @@ pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, View
             // Nothing changed: refine, or rest once refined.
             if session.state().is_refined() && last_frame.is_some() {
                 window.update();
+                summary.updates += 1;
+                if run.exit_after_frames.is_some_and(|n| summary.updates >= n) {
+                    break;
+                }
                 std::thread::sleep(Duration::from_millis(10));
                 if message
                     .as_ref()
@@ -155,7 +163,8 @@ pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, View
             .update_with_buffer(&pixels, w as usize, h as usize)
             .map_err(|e| ViewerError::Window(e.to_string()))?;
         summary.frames += 1;
-        if run.exit_after_frames.is_some_and(|n| summary.frames >= n) {
+        summary.updates += 1;
+        if run.exit_after_frames.is_some_and(|n| summary.updates >= n) {
             break;
         }
     }
