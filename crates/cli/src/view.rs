@@ -9,8 +9,7 @@ use marchmesh_harness::backend::{self, BackendKind};
 use marchmesh_viewer::{Script, Session, SessionOptions, headless, window};
 
 /// The `--help` text after the options: keys and the script format.
-pub const AFTER_HELP: &str = "\
-Keys: W/S forward/back, A/D left/right, Q/E down/up (one step per frame while held; --step),
+pub const AFTER_HELP: &str = r#"Keys: W/S forward/back, A/D left/right, Q/E down/up (one step per frame while held; --step),
 mouse drag (left button) to look, 1 sdf, 2 mesh, 3 reference (each built once and kept),
 Tab split (left: the shown backend, right: the one shown before, same camera),
 +/- quality of the shown backend (sdf: hit epsilon eps_px, mesh: tessellation budget tess_px;
@@ -23,14 +22,14 @@ camera, shifted; still frames rebuild at the camera and are exactly `marchmesh r
 Refined frames are measured against the reference at the same camera and full resolution.
 
 Script (--headless --script FILE --frames DIR), a JSON array of entries:
-  {\"key\": \"W\", \"frames\": 10}    movement key (W A S D Q E) held for 10 frames (default 1)
-  {\"key\": \"2\"}                     1 2 3 Tab + - R: pressed on the first of `frames` frames
-  {\"mouse_drag\": [dx, dy]}          drag by dx, dy window pixels on each of `frames` frames
-  {\"wait\": 3}                        3 still frames (refines one level per frame)
-  {\"key\": \"P\"}                     no frame: save the last frame and its camera into DIR
+  {"key": "W", "frames": 10}  movement key (W A S D Q E) held for 10 frames (default 1)
+  {"key": "2"}                1 2 3 Tab + - R: pressed on the first of `frames` frames
+  {"mouse_drag": [dx, dy]}    drag by dx, dy window pixels on each of `frames` frames
+  {"wait": 3}                 3 still frames (refines one level per frame)
+  {"key": "P"}                no frame: save the last frame and its camera into DIR
 DIR gets frame-00000.png ... (window size, no overlay unless --overlay) and frames.json
 (per frame: camera position, yaw, pitch, backend, refinement level, times, accuracy).
-Nothing is overwritten: existing frame files are an error before anything is rendered.";
+Nothing is overwritten: existing frame files are an error before anything is rendered."#;
 
 /// Arguments of `marchmesh view`.
 #[derive(clap::Args)]
@@ -40,7 +39,7 @@ pub struct ViewArgs {
     /// Backend shown first: sdf, mesh or reference.
     #[arg(long, short, default_value = "sdf")]
     backend: String,
-    /// Backend option as [BACKEND:]key=value (repeatable), e.g. `mesh:bvh=bvh2`; without
+    /// Backend option as `[BACKEND:]key=value` (repeatable), e.g. `mesh:bvh=bvh2`; without
     /// BACKEND: for the --backend one. `--opt sdf:help` lists a backend's options. The
     /// quality knob's key applies on top.
     #[arg(long = "opt", short = 'o', value_name = "[BACKEND:]KEY=VALUE")]
@@ -76,7 +75,7 @@ pub struct ViewArgs {
     /// Headless: draw the overlay text into the frames too.
     #[arg(long, requires = "headless")]
     overlay: bool,
-    /// Folder P saves screenshots into in the window (default: the current folder).
+    /// Folder P saves screenshots and camera scenes into in the window.
     #[arg(long, value_name = "DIR", default_value = ".")]
     shots: PathBuf,
     /// End the window session after this many window updates (for tests).
