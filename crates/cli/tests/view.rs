@@ -63,7 +63,8 @@ fn headless_script_moves_the_camera_and_refined_frames_match_one_off_renders() {
   {"key": "Tab"},
   {"wait": 2},
   {"key": "P"},
-  {"key": "R"}
+  {"key": "R"},
+  {"wait": 2}
 ]"#,
     )
     .expect("write script");
@@ -90,7 +91,11 @@ fn headless_script_moves_the_camera_and_refined_frames_match_one_off_renders() {
     assert!(ok, "view failed: {stdout}\n{stderr}");
     let listing = json(&frames.join("frames.json"));
     let list = listing["frames"].as_array().expect("frames");
-    assert_eq!(list.len(), 10, "3 W + 1 drag + 2 wait + Tab + 2 wait + R");
+    assert_eq!(
+        list.len(),
+        12,
+        "3 W + 1 drag + 2 wait + Tab + 2 wait + R + 2 wait"
+    );
     for i in 0..list.len() {
         assert!(
             frames.join(format!("frame-{i:05}.png")).is_file(),
@@ -182,6 +187,32 @@ fn headless_script_moves_the_camera_and_refined_frames_match_one_off_renders() {
     let mesh = one_off("shot-001.json", "mesh", "mesh1.png");
     assert!(max_diff(&frame8, &sdf, 0..32) <= 1, "left half is sdf");
     assert!(max_diff(&frame8, &mesh, 32..64) <= 1, "right half is mesh");
+    // Back at the start (R), the refined frame is a one-off render of the scene itself.
+    let (ok, stdout, stderr) = run_program(
+        BIN,
+        &[
+            "render",
+            &scene,
+            "--backend",
+            "sdf",
+            "--out",
+            "start.png",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--threads",
+            "2",
+        ],
+        &dir,
+    );
+    assert!(ok, "render failed: {stdout}\n{stderr}");
+    let frame11 = rgb(&frames.join("frame-00011.png"));
+    assert_eq!(list[11]["split_with"], "mesh");
+    assert!(
+        max_diff(&frame11, &rgb(&dir.join("start.png")), 0..32) <= 1,
+        "start frame"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

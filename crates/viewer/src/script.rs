@@ -316,7 +316,7 @@ mod tests {
         assert!(e.contains("s.json"), "{e}");
         let e = error("[{\"key\":\"W\"}] x");
         assert!(e.contains("trailing"), "{e}");
-        let many = format!("[{}]", vec![r#"{"wait":10000}"#; 11].join(","));
+        let many = format!("[{}]", [r#"{"wait":10000}"#; 11].join(","));
         assert!(error(&many).contains("more than"));
     }
 

@@ -308,8 +308,16 @@ impl ViewConfig {
     }
 
     /// The camera of `state` as a scene file states it: `look_at = position + forward`, the
-    /// start's up hint, field of view and window size.
+    /// start's up hint, field of view and window size. At the start camera it is the scene
+    /// file's own camera (window size), so the start frame is `marchmesh render`'s of the
+    /// scene itself.
     pub fn camera_spec(&self, state: &ViewState) -> CameraSpec {
+        let home = &self.home;
+        if (state.position, state.yaw_deg, state.pitch_deg)
+            == (home.position, home.yaw_deg, home.pitch_deg)
+        {
+            return self.camera.clone();
+        }
         let forward = self.orientation.forward(state.yaw_deg, state.pitch_deg);
         CameraSpec {
             position: state.position.to_array(),
@@ -451,6 +459,19 @@ mod tests {
         assert!(close(s.position, DVec3::new(0.5, 1.0, 0.0)), "{s:?}");
         let s = apply(&[Event::Key(Key::Q)]);
         assert!(close(s.position, DVec3::new(0.0, -0.5, 0.0)), "{s:?}");
+    }
+
+    #[test]
+    fn the_start_camera_is_the_scene_files() {
+        let c = config();
+        let mut spec = c.camera.clone();
+        spec.look_at = [0.0, 0.5, 7.0];
+        let c = ViewConfig::new(&spec, BackendKind::Sdf, 1.0).expect("valid");
+        assert_eq!(c.camera_spec(&c.home), spec);
+        let moved = update(&c.home, &Event::Key(Key::W), &c);
+        let back = update(&moved, &Event::Key(Key::R), &c);
+        assert_eq!(c.camera_spec(&back), spec, "R returns to it exactly");
+        assert_ne!(c.camera_spec(&moved).position, spec.position);
     }
 
     #[test]
