@@ -7,10 +7,12 @@
 //! (and measured) nothing is rendered until the next input. Escape or closing the window
 //! ends the session.
 
+use std::cell::RefCell;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 use std::time::{Duration, Instant};
 
-use minifb::{KeyRepeat, MouseButton, MouseMode, Window, WindowOptions};
+use minifb::{InputCallback, MouseButton, MouseMode, Window, WindowOptions};
 
 use crate::ViewerError;
 use crate::overlay::Canvas;
@@ -60,6 +62,22 @@ fn viewer_key(k: minifb::Key) -> Option<Key> {
     })
 }
 
+/// Key presses as the window reports them, in order. `get_keys_pressed` compares the key
+/// state between two updates, so a tap pressed and released during one slow frame would be
+/// lost; the callback sees every press.
+#[derive(Default, Clone)]
+struct Presses(Rc<RefCell<Vec<minifb::Key>>>);
+
+impl InputCallback for Presses {
+    fn add_char(&mut self, _uni_char: u32) {}
+
+    fn set_key_state(&mut self, key: minifb::Key, state: bool) {
+        if state {
+            self.0.borrow_mut().push(key);
+        }
+    }
+}
+
 /// Opens the window and runs until it is closed (Escape) or `exit_after_frames` updates were
 /// shown. Errors: no window can be opened (no display, no X11 libraries), a frame fails to
 /// render on the first frame (later render errors are shown in the window instead).
@@ -69,6 +87,8 @@ pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, View
     let mut window = Window::new(&title, w as usize, h as usize, WindowOptions::default())
         .map_err(|e| ViewerError::Window(e.to_string()))?;
     window.set_target_fps(0);
+    let presses = Presses::default();
+    window.set_input_callback(Box::new(presses.clone()));
     let mut summary = WindowSummary {
         frames: 0,
         updates: 0,
@@ -81,26 +101,38 @@ pub fn run(session: &mut Session, run: &WindowRun) -> Result<WindowSummary, View
     let mut dirty = true;
     while window.is_open() && !window.is_key_down(minifb::Key::Escape) {
         let mut events = Vec::new();
-        for k in window.get_keys_pressed(KeyRepeat::No) {
-            match viewer_key(k) {
-                Some(Key::P) => {
+        let held: Vec<Key> = window
+            .get_keys()
+            .into_iter()
+            .filter_map(viewer_key)
+            .collect();
+        let pressed: Vec<Key> = presses
+            .0
+            .borrow_mut()
+            .drain(..)
+            .filter_map(viewer_key)
+            .collect();
+        for key in &pressed {
+            match key {
+                Key::P => {
                     if let Some(frame) = &last_frame {
-                        message = Some((
-                            save(session, frame, &run.shots_dir, &mut summary),
-                            Instant::now(),
-                        ));
+                        let m = save(session, frame, &run.shots_dir, &mut summary);
+                        message = Some((m, Instant::now()));
                         dirty = true;
                     }
                 }
-                Some(key) if !key.is_movement() => events.push(Event::Key(key)),
-                _ => {}
+                // Held movement keys move below; one tapped and released within a frame
+                // still moves once.
+                k if k.is_movement() && held.contains(k) => {}
+                k => events.push(Event::Key(*k)),
             }
         }
-        for k in window.get_keys() {
-            if let Some(key) = viewer_key(k).filter(|k| k.is_movement()) {
-                events.push(Event::Key(key));
-            }
-        }
+        // Held movement keys move one step per frame.
+        events.extend(
+            held.iter()
+                .filter(|k| k.is_movement())
+                .map(|k| Event::Key(*k)),
+        );
         let mouse = window.get_mouse_pos(MouseMode::Pass);
         if window.get_mouse_down(MouseButton::Left) {
             if let (Some((x0, y0)), Some((x1, y1))) = (last_mouse, mouse) {
