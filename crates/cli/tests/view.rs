@@ -217,6 +217,88 @@ fn headless_script_moves_the_camera_and_refined_frames_match_one_off_renders() {
 }
 
 #[test]
+fn a_baked_mesh_scene_rebuilt_at_a_new_camera_matches_a_one_off_render() {
+    // The sdf backend bakes meshes into grids; the session keeps its bakes in a folder of
+    // its own so still frames at a new camera rebuild without baking again. The picture
+    // must not change for it, and the folder is gone afterwards.
+    let dir = marchmesh_testkit::temp_dir("view-bake");
+    std::fs::write(
+        dir.join("s.json"),
+        r#"[{"key": "W", "frames": 2}, {"wait": 2}, {"key": "P"}]"#,
+    )
+    .expect("write script");
+    let scene = marchmesh_testkit::scenes_dir()
+        .join("generated/mesh_bunny.json")
+        .display()
+        .to_string();
+    let args = [
+        "view",
+        &scene,
+        "--headless",
+        "--script",
+        "s.json",
+        "--frames",
+        "f",
+        "--width",
+        "48",
+        "--height",
+        "36",
+        "--threads",
+        "2",
+        "--no-accuracy",
+    ];
+    // Its own temporary folder, to see what the session leaves there.
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).expect("mkdir");
+    let out = Command::new(BIN)
+        .args(args)
+        .env("TMPDIR", &tmp)
+        .current_dir(&dir)
+        .output()
+        .expect("run marchmesh");
+    assert!(
+        out.status.success(),
+        "view failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let leftover: Vec<_> = std::fs::read_dir(&tmp).expect("tmp").collect();
+    assert!(
+        leftover.is_empty(),
+        "the session's bake folder is removed: {leftover:?}"
+    );
+    let listing = json(&dir.join("f/frames.json"));
+    let frames = listing["frames"].as_array().expect("frames");
+    assert!(
+        frames[2]["views"][0]["build_ms"].is_number(),
+        "rebuilt when still"
+    );
+    let (ok, stdout, stderr) = run_program(
+        BIN,
+        &[
+            "render",
+            "f/shot-000.json",
+            "--backend",
+            "sdf",
+            "--out",
+            "one.png",
+            "--threads",
+            "2",
+        ],
+        &dir,
+    );
+    assert!(ok, "render failed: {stdout}\n{stderr}");
+    let (a, b) = (
+        rgb(&dir.join("f/frame-00003.png")),
+        rgb(&dir.join("one.png")),
+    );
+    assert!(
+        max_diff(&a, &b, 0..48) <= 1,
+        "baked sdf frame differs from marchmesh render"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn hostile_scripts_and_outputs_are_clear_errors_and_nothing_is_overwritten() {
     let dir = marchmesh_testkit::temp_dir("view-hostile");
     let scene = seed_spheres();

@@ -134,6 +134,19 @@ pub struct Session {
     accuracy: bool,
     /// The last reference frame rendered for accuracy: (camera bits, framebuffer).
     reference_frame: Option<([u64; 5], Framebuffer)>,
+    /// A folder of this session's baked mesh grids for the sdf backend (scenes with meshes,
+    /// unless the user gave `cache_dir`): the bake does not depend on the camera, so
+    /// rebuilding at a new still camera reads it back instead of baking again. Removed when
+    /// the session ends.
+    bake_cache: Option<PathBuf>,
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.bake_cache {
+            std::fs::remove_dir_all(dir).ok();
+        }
+    }
 }
 
 impl Session {
@@ -197,7 +210,23 @@ impl Session {
             memory_limit_bytes: opts.memory_limit_bytes,
             accuracy: opts.accuracy,
             reference_frame: None,
+            bake_cache: None,
         };
+        let user_cache = opts
+            .options
+            .get(&BackendKind::Sdf)
+            .is_some_and(|o| o.iter().any(|(k, _)| k == "cache_dir"));
+        if !session.scene.mesh_paths().is_empty() && !user_cache {
+            let dir = std::env::temp_dir().join(format!(
+                "marchmesh-view-bakes-{}-{}",
+                std::process::id(),
+                BAKE_CACHES.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            ));
+            // Without the folder the sdf backend bakes at every rebuild: slower, not wrong.
+            if std::fs::create_dir_all(&dir).is_ok() {
+                session.bake_cache = Some(dir);
+            }
+        }
         session.ensure_built(opts.backend, true)?;
         if opts.step.is_none() {
             let step = session.built.get(&opts.backend).map_or(DEFAULT_STEP, |b| {
@@ -280,7 +309,12 @@ impl Session {
         // Drop the old build first: at most one copy of each backend is held.
         self.built.remove(&kind);
         let scene = self.scene_at_camera()?;
-        let spec = quality::spec(kind, &self.user(kind), &self.knob(kind), level);
+        let mut spec = quality::spec(kind, &self.user(kind), &self.knob(kind), level);
+        if let (BackendKind::Sdf, Some(dir)) = (kind, &self.bake_cache) {
+            // Not a picture setting: kept out of the options the frames report.
+            spec.options
+                .insert(0, ("cache_dir".into(), dir.display().to_string()));
+        }
         let t0 = Instant::now();
         let geometry = backend::build_within(&scene, &spec, self.memory_limit_bytes)?;
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
@@ -420,6 +454,9 @@ impl Session {
         self.built.iter().map(|(k, b)| (*k, b.build_ms)).collect()
     }
 }
+
+/// Sessions opened by this process so far (names their bake cache folders apart).
+static BAKE_CACHES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
 
 /// The step when the scene gives nothing to measure: 0.1 world units.
 pub const DEFAULT_STEP: f64 = 0.1;
