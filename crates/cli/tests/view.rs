@@ -386,6 +386,9 @@ fn hostile_scripts_and_outputs_are_clear_errors_and_nothing_is_overwritten() {
         &dir,
     );
     assert!(!ok && stderr.contains("nope.json"), "{stderr}");
+    // A step that is not a positive number is refused.
+    let (ok, _, stderr) = run_program(BIN, &["view", &scene, "--step", "0"], &dir);
+    assert!(!ok && stderr.contains("--step"), "{stderr}");
     // A bad option names the backend and key.
     let (ok, _, stderr) = run_program(BIN, &["view", &scene, "--opt", "mesh:wat=1"], &dir);
     assert!(

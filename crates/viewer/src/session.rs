@@ -191,6 +191,13 @@ impl Session {
             knobs.insert(kind, Knob::of(kind, &user)?);
             user_options.insert(kind, user);
         }
+        if let Some(step) = opts.step
+            && !(step.is_finite() && step > 0.0)
+        {
+            return Err(ViewerError::Options(format!(
+                "--step must be a positive number of world units, got {step}"
+            )));
+        }
         // A provisional step; replaced below once the first backend can probe the scene.
         let provisional = opts.step.unwrap_or(1.0);
         let config = ViewConfig::new(&spec, opts.backend, provisional)
@@ -222,8 +229,9 @@ impl Session {
                 std::process::id(),
                 BAKE_CACHES.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
             ));
-            // Without the folder the sdf backend bakes at every rebuild: slower, not wrong.
-            if std::fs::create_dir_all(&dir).is_ok() {
+            // A new folder (never one that exists, nor a symlink planted under its name);
+            // without it the sdf backend bakes at every rebuild: slower, not wrong.
+            if std::fs::create_dir(&dir).is_ok() {
                 session.bake_cache = Some(dir);
             }
         }
