@@ -1,5 +1,5 @@
-//! `marchmesh`: render a scene with any backend, validate scenes, print the scene schema, and
-//! run benchmarks.
+//! `marchmesh`: render a scene with any backend, validate scenes, print the scene schema, run
+//! benchmarks, and fly through a scene (`view`).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -13,6 +13,7 @@ use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
 
 mod assets;
 mod bench;
+mod view;
 
 #[derive(Parser)]
 #[command(
@@ -78,6 +79,11 @@ enum Command {
     },
     /// Run the numerical-stability cases on every backend against the reference.
     Stability(StabilityArgs),
+    /// Fly through a scene in a window (or replay a script headless): sdf, mesh and reference
+    /// side by side, coarse while moving and refined when still, with time, Mrays/s, memory
+    /// and accuracy on screen.
+    #[command(after_help = view::AFTER_HELP)]
+    View(view::ViewArgs),
 }
 
 #[derive(clap::Args)]
@@ -191,6 +197,7 @@ fn main() {
         Command::Findings { runs, out, force } => bench::findings(&runs, &out, force),
         Command::Compare { a, b } => bench::compare(&a, &b),
         Command::Stability(args) => bench::stability(args),
+        Command::View(args) => view::view(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
