@@ -12,20 +12,23 @@
 //!    2 r` of the centre sorted by distance, each sample stopping at the first that cannot
 //!    beat its best. A candidate whose core samples are all farther than the band plus half
 //!    a cell diagonal holds no surface within the band: it is dropped (empty).
-//! 3. **Sign**: a sample whose closest point lies inside a face (not on an edge or vertex)
-//!    takes the side of that face's plane, exact for closed consistently oriented meshes
+//! 3. **Sign**: for closed meshes, a sample whose closest point lies inside a face (not on
+//!    an edge or vertex) takes the side of that face's plane, exact for closed consistently oriented meshes
 //!    (the face case of Baerentzen & Aanaes 2005, "Signed distance computation using the
 //!    angle weighted pseudonormal"); signs then spread to neighbouring samples wherever no
 //!    surface can lie between the two (one's distance exceeds the spacing, so its empty ball
-//!    covers the segment); a sample still unknown evaluates the fast generalized winding
+//!    covers the segment); a sample still unknown (every seed, for open meshes, whose faces
+//!    need not be consistently oriented: the dragon scan's are not) evaluates the fast generalized winding
 //!    number (Barill et al. 2018), inside at `w >= 0.5`, and spreads it. Then every pair of neighbouring samples
 //!    whose signs differ although no surface can lie between them (`|d_a| + |d_b| > h`: the
 //!    segment between them is shorter than the two distances) marks a winding-number cap,
 //!    which open meshes grow across holes: such a brick stores `|d| - h/2` instead (an
 //!    unsigned shell half a cell thick, hit from either side; its normals are the distance
-//!    gradient, so no spurious silhouette or cap appears). Empty brick cells of open meshes
-//!    are all outside (their side decides nothing a ray from outside sees, and an inside
-//!    region reaching a hole would be a cap).
+//!    gradient, so no spurious silhouette or cap appears inside a brick). Empty brick cells
+//!    take the winding number's side at their centre, as the dense grid: across a large
+//!    hole the boundary between inside and outside empty cells is still a cap (the dense
+//!    grid's limitation), and an inside empty cell next to an outside brick is a sign
+//!    change without a surface.
 //! 4. **Encode**: clamp to `(band + 3)` cells and quantize ([`Quantization`]).
 //!
 //! Everything runs on the caller's rayon pool.
@@ -40,8 +43,7 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::sparse::{
-    BOUND_MAX, BOUND_STEPS, BRICK, EMPTY, INSIDE, Quantization, Reconstruction, Samples,
-    SparseGrid,
+    BOUND_MAX, BOUND_STEPS, BRICK, EMPTY, INSIDE, Quantization, Reconstruction, Samples, SparseGrid,
 };
 use crate::{
     BakeError, CANDIDATES_PER_SAMPLE, MAX_RESOLUTION, MIN_RESOLUTION, PAD_CELLS, cache,
@@ -109,6 +111,20 @@ impl SparseOptions {
         brick_cells
             .saturating_mul(edge.pow(3) * self.quantization.bytes() as u64 + 4)
             .saturating_add(std::mem::size_of::<SparseGrid>() as u64)
+    }
+}
+
+impl SparseOptions {
+    /// Upper bound of the bytes a bake with these options holds at its peak: the grid
+    /// ([`SparseOptions::max_grid_bytes`]) plus every brick's unquantized f32 samples, which
+    /// are kept until they are encoded (the BVH is the caller's to count: it scales with
+    /// the triangles).
+    pub fn max_bake_bytes(&self) -> u64 {
+        let cells = u64::from(self.resolution) + 2 * u64::from(PAD_CELLS) + 1;
+        let brick_cells = cells.div_ceil(u64::from(BRICK)).pow(3);
+        let edge = u64::from(BRICK + 1 + 2 * self.reconstruction.apron());
+        self.max_grid_bytes()
+            .saturating_add(brick_cells.saturating_mul(edge.pow(3) * 4 + 16))
     }
 }
 
@@ -242,7 +258,7 @@ pub fn bake_sparse(
     ));
     if !closed {
         notes.push(format!(
-            "mesh {} is not closed: signs inside the band from face sides and the winding number; {} brick(s) whose signs contradict their distances (caps across holes) are unsigned shells half a cell thick; empty space counts as outside",
+            "mesh {} is not closed: signs from the winding number; {} brick(s) whose signs contradict their distances (caps across holes) are unsigned shells half a cell thick; empty brick cells take the winding number's side, so large holes may still get a cap away from the surface",
             path.display(),
             s.unsigned_bricks
         ));
@@ -491,8 +507,11 @@ fn brick_samples(
             for i in 0..edge {
                 let idx = i + edge * (j + edge * k);
                 let v = values[idx];
-                for (ok, step) in [(i + 1 < edge, 1), (j + 1 < edge, edge), (k + 1 < edge, edge * edge)]
-                {
+                for (ok, step) in [
+                    (i + 1 < edge, 1),
+                    (j + 1 < edge, edge),
+                    (k + 1 < edge, edge * edge),
+                ] {
                     if ok {
                         let w = values[idx + step];
                         if (v < 0.0) != (w < 0.0) && v.abs() + w.abs() > lim {
@@ -573,8 +592,23 @@ fn bake_bricks(
     let outs: Vec<Option<BrickOut>> = candidates
         .par_iter()
         .map_init(Vec::new, |cand, &n| {
-            let b = [(n % bx) as u32, ((n / bx) % by) as u32, (n / (bx * by)) as u32];
-            brick_samples(&bvh, min, h, b, edge, apron, opts.band_voxels, closed, cand, &ns)
+            let b = [
+                (n % bx) as u32,
+                ((n / bx) % by) as u32,
+                (n / (bx * by)) as u32,
+            ];
+            brick_samples(
+                &bvh,
+                min,
+                h,
+                b,
+                edge,
+                apron,
+                opts.band_voxels,
+                closed,
+                cand,
+                &ns,
+            )
         })
         .collect();
     // Wall time split between the two phases by their shares of the summed thread time.
@@ -586,10 +620,11 @@ fn bake_bricks(
     stats.distance_evaluations = (n_cells + candidates.len() * per) as u64;
     stats.band_bytes = (outs.iter().flatten().count() * per * 4) as u64;
 
-    // Sides of empty brick cells: closed meshes from the winding number at the centre (only
-    // for cells not already known from a brick), open meshes outside.
+    // Sides of empty brick cells: the winding number at the centre, as the dense bake (for
+    // open meshes this keeps its caps far from the surface; making them all outside was
+    // measured worse: signed band bricks then meet outside empty cells inside the solid).
     let t = Instant::now();
-    let empty_inside: Vec<bool> = if closed {
+    let empty_inside: Vec<bool> = {
         let is_cand: std::collections::HashSet<usize> = candidates
             .iter()
             .zip(&outs)
@@ -600,12 +635,10 @@ fn bake_bricks(
             .into_par_iter()
             .map(|n| !is_cand.contains(&n) && bvh.winding(centre(n)) >= 0.5)
             .collect()
-    } else {
-        vec![false; n_cells]
     };
     stats.sign_ms += t.elapsed().as_secs_f64() * 1e3;
-    stats.winding_evaluations = outs.iter().flatten().map(|o| o.windings).sum::<u64>()
-        + if closed { n_cells as u64 } else { 0 };
+    stats.winding_evaluations =
+        outs.iter().flatten().map(|o| o.windings).sum::<u64>() + n_cells as u64;
 
     // Phase 4: encode.
     let t = Instant::now();

@@ -85,9 +85,8 @@ pub fn sparse_cache_path(dir: &Path, hash: u64, opts: &SparseOptions) -> PathBuf
 
 /// Serialises a sparse grid with its key.
 pub fn encode_sparse(grid: &SparseGrid, hash: u64, opts: &SparseOptions) -> Vec<u8> {
-    let mut b = Vec::with_capacity(
-        SPARSE_HEADER + grid.cells().len() * 4 + grid.samples().bytes() + 8,
-    );
+    let mut b =
+        Vec::with_capacity(SPARSE_HEADER + grid.cells().len() * 4 + grid.samples().bytes() + 8);
     b.extend_from_slice(SPARSE_MAGIC);
     b.extend_from_slice(&SPARSE_FORMAT_VERSION.to_le_bytes());
     b.extend_from_slice(&hash.to_le_bytes());

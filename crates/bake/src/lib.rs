@@ -57,12 +57,12 @@ use glam::{UVec3, Vec3};
 use marchmesh_meshio::TriangleMesh;
 use rayon::prelude::*;
 
+pub use bricks::{
+    BakedSparse, MAX_BAND_VOXELS, MIN_BAND_VOXELS, SparseBakeStats, SparseOptions, bake_sparse,
+};
 pub use geom::{
     closest_point_on_triangle, closest_point_on_triangle_f64, point_triangle_distance_squared,
     solid_angle,
-};
-pub use bricks::{
-    BakedSparse, MAX_BAND_VOXELS, MIN_BAND_VOXELS, SparseBakeStats, SparseOptions, bake_sparse,
 };
 pub use grid::DistanceGrid;
 pub use sparse::{Quantization, Reconstruction, SparseGrid};
