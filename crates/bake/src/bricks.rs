@@ -310,7 +310,7 @@ fn face_side(p: Vec3, t: &[Vec3; 3]) -> Option<bool> {
     let (ab, ac) = (t[1] - t[0], t[2] - t[0]);
     let n = ab.cross(ac);
     let n2 = n.length_squared();
-    if !(n2 > 1e-6 * ab.length_squared() * ac.length_squared()) {
+    if n2.is_nan() || n2 <= 1e-6 * ab.length_squared() * ac.length_squared() {
         return None;
     }
     let ap = p - t[0];
@@ -320,7 +320,7 @@ fn face_side(p: Vec3, t: &[Vec3; 3]) -> Option<bool> {
     let (d00, d01, d11) = (ab.dot(ab), ab.dot(ac), ac.dot(ac));
     let (d20, d21) = (q.dot(ab), q.dot(ac));
     let den = d00 * d11 - d01 * d01;
-    if !(den > 0.0) {
+    if den.is_nan() || den <= 0.0 {
         return None;
     }
     let v = (d11 * d20 - d01 * d21) / den;

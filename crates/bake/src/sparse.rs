@@ -290,7 +290,7 @@ impl SparseGrid {
         cells: Vec<u32>,
         samples: Samples,
     ) -> Result<SparseGrid, String> {
-        if !min.is_finite() || !(cell_size.is_finite() && cell_size > 0.0) {
+        if !(min.is_finite() && cell_size.is_finite() && cell_size > 0.0) {
             return Err("non-finite min or non-positive cell size".into());
         }
         if !(clamp.is_finite() && clamp > 0.0) {
@@ -307,7 +307,7 @@ impl SparseGrid {
             ));
         }
         let per = (BRICK + 1 + 2 * reconstruction.apron()).pow(3) as usize;
-        if samples.len() % per != 0 {
+        if !samples.len().is_multiple_of(per) {
             return Err(format!(
                 "{} samples are not a whole number of {per}-sample bricks",
                 samples.len()
@@ -444,7 +444,7 @@ impl SparseGrid {
         }
         let opts = |v: u32, a: usize| {
             let hi = (v / BRICK).min(self.bricks[a] - 1);
-            let lo = if v % BRICK == 0 && v > 0 {
+            let lo = if v.is_multiple_of(BRICK) && v > 0 {
                 (v - 1) / BRICK
             } else {
                 hi
@@ -627,7 +627,7 @@ mod tests {
             ),
         };
         // Brick cell 1 spans x in [4, 8]: its centre is 3.7 units (7.4 cells) from x = 2.3.
-        let empty = EMPTY | (7.4 * BOUND_STEPS) as u32 - 1;
+        let empty = EMPTY | ((7.4 * BOUND_STEPS) as u32 - 1);
         SparseGrid::from_parts(
             Vec3::ZERO,
             h,
