@@ -16,6 +16,28 @@
 //! | 4 x count | values (f32) |
 //! | 8 | FNV-1a 64 of every preceding byte |
 //!
+//! Sparse grids ([`encode_sparse`]) are another file kind, `<hash>-r<res>-b<band>-<quant>-<recon>-v<version>.sdfbricks`:
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 8 | magic `b"MMSDFBRK"` |
+//! | 4 | format version (u32, [`SPARSE_FORMAT_VERSION`]) |
+//! | 8 | mesh content hash (u64) |
+//! | 4 | resolution (u32) |
+//! | 4 | band voxels (u32) |
+//! | 1 + 1 | quantization code, reconstruction code |
+//! | 12 | brick cells per axis (3 x u32) |
+//! | 12 | min (3 x f32) |
+//! | 4 | cell size (f32) |
+//! | 4 | clamp (f32) |
+//! | 8 | brick count (u64) |
+//! | 4 x cells | brick-cell words (u32) |
+//! | bytes x samples | brick samples (f32, u16 or u8) |
+//! | 8 | FNV-1a 64 of every preceding byte |
+//!
+//! and are validated as fully: key, sizes, checksum, then every invariant of
+//! [`SparseGrid::from_parts`] (each brick referenced exactly once, finite samples).
+//!
 //! Files are written to a unique temporary name in the same directory and renamed into
 //! place, so readers never see a partial file. Any mismatch on read (short file, magic,
 //! version, key, dims, length, non-finite header, checksum) makes the caller re-bake.
@@ -25,7 +47,9 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 
+use crate::SparseOptions;
 use crate::grid::DistanceGrid;
+use crate::sparse::{Quantization, Reconstruction, Samples, SparseGrid};
 
 /// Cache format version; bump when the file layout or the bake algorithm (padding, sign
 /// rule, far-field parameters) changes, so stale files are re-baked.
@@ -39,6 +63,150 @@ pub fn cache_path(dir: &Path, hash: u64, resolution: u32) -> PathBuf {
     dir.join(format!(
         "{hash:016x}-r{resolution}-v{FORMAT_VERSION}.sdfgrid"
     ))
+}
+
+/// Sparse cache format version; bump when the layout or the sparse bake (band rule, sign
+/// rule, clamp) changes.
+pub const SPARSE_FORMAT_VERSION: u32 = 1;
+
+const SPARSE_MAGIC: &[u8; 8] = b"MMSDFBRK";
+const SPARSE_HEADER: usize = 8 + 4 + 8 + 4 + 4 + 2 + 12 + 12 + 4 + 4 + 8;
+
+/// The cache file of a sparse grid baked from the mesh with content `hash` with `opts`.
+pub fn sparse_cache_path(dir: &Path, hash: u64, opts: &SparseOptions) -> PathBuf {
+    dir.join(format!(
+        "{hash:016x}-r{}-b{}-{}-{}-v{SPARSE_FORMAT_VERSION}.sdfbricks",
+        opts.resolution,
+        opts.band_voxels,
+        opts.quantization.name(),
+        opts.reconstruction.name()
+    ))
+}
+
+/// Serialises a sparse grid with its key.
+pub fn encode_sparse(grid: &SparseGrid, hash: u64, opts: &SparseOptions) -> Vec<u8> {
+    let mut b =
+        Vec::with_capacity(SPARSE_HEADER + grid.cells().len() * 4 + grid.samples().bytes() + 8);
+    b.extend_from_slice(SPARSE_MAGIC);
+    b.extend_from_slice(&SPARSE_FORMAT_VERSION.to_le_bytes());
+    b.extend_from_slice(&hash.to_le_bytes());
+    b.extend_from_slice(&opts.resolution.to_le_bytes());
+    b.extend_from_slice(&grid.band_voxels().to_le_bytes());
+    b.push(grid.samples().quantization().code());
+    b.push(grid.reconstruction().code());
+    for d in grid.bricks() {
+        b.extend_from_slice(&d.to_le_bytes());
+    }
+    for c in grid.min().to_array() {
+        b.extend_from_slice(&c.to_le_bytes());
+    }
+    b.extend_from_slice(&grid.cell_size().to_le_bytes());
+    b.extend_from_slice(&grid.clamp().to_le_bytes());
+    b.extend_from_slice(&(grid.brick_count() as u64).to_le_bytes());
+    for w in grid.cells() {
+        b.extend_from_slice(&w.to_le_bytes());
+    }
+    match grid.samples() {
+        Samples::F32(v) => v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+        Samples::U16(v) => v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
+        Samples::U8(v) => b.extend_from_slice(v),
+    }
+    let mut h = Fnv::new();
+    h.write(&b);
+    b.extend_from_slice(&h.0.to_le_bytes());
+    b
+}
+
+/// Parses and validates a sparse cache file against the expected key (`hash` and the
+/// options that shape the grid). `Err` explains the first problem found.
+pub fn decode_sparse(bytes: &[u8], hash: u64, opts: &SparseOptions) -> Result<SparseGrid, String> {
+    let mut r = Reader { b: bytes, at: 0 };
+    if &r.take::<8>()? != SPARSE_MAGIC {
+        return Err("bad magic".into());
+    }
+    let v = r.u32()?;
+    if v != SPARSE_FORMAT_VERSION {
+        return Err(format!(
+            "format version {v}, expected {SPARSE_FORMAT_VERSION}"
+        ));
+    }
+    let h = r.u64()?;
+    if h != hash {
+        return Err(format!("mesh hash {h:016x}, expected {hash:016x}"));
+    }
+    let res = r.u32()?;
+    if res != opts.resolution {
+        return Err(format!("resolution {res}, expected {}", opts.resolution));
+    }
+    let band = r.u32()?;
+    if band != opts.band_voxels {
+        return Err(format!("band {band}, expected {}", opts.band_voxels));
+    }
+    let [qc, rc] = r.take::<2>()?;
+    let q = Quantization::from_code(qc).ok_or("unknown quantization")?;
+    let recon = Reconstruction::from_code(rc).ok_or("unknown reconstruction")?;
+    if q != opts.quantization || recon != opts.reconstruction {
+        return Err(format!(
+            "{} {} grid, expected {} {}",
+            q.name(),
+            recon.name(),
+            opts.quantization.name(),
+            opts.reconstruction.name()
+        ));
+    }
+    let bricks = [r.u32()?, r.u32()?, r.u32()?];
+    if bricks.iter().any(|&d| d == 0 || d > 1 << 12) {
+        return Err(format!("bad brick cell counts {bricks:?}"));
+    }
+    let min = Vec3::new(r.f32()?, r.f32()?, r.f32()?);
+    let cell = r.f32()?;
+    let clamp = r.f32()?;
+    let count = r.u64()?;
+    let n_cells: usize = bricks.iter().map(|&d| d as usize).product();
+    let edge = (crate::sparse::BRICK + 1 + 2 * recon.apron()) as u64;
+    let samples = usize::try_from(count)
+        .ok()
+        .and_then(|c| c.checked_mul(edge.pow(3) as usize))
+        .filter(|&s| s <= n_cells.saturating_mul(edge.pow(3) as usize))
+        .ok_or("brick count too large")?;
+    let body = n_cells * 4 + samples * q.bytes();
+    if bytes.len() != SPARSE_HEADER + body + 8 {
+        return Err(format!(
+            "file is {} bytes, expected {}",
+            bytes.len(),
+            SPARSE_HEADER + body + 8
+        ));
+    }
+    let mut f = Fnv::new();
+    f.write(&bytes[..SPARSE_HEADER + body]);
+    let stored = u64::from_le_bytes(
+        bytes[SPARSE_HEADER + body..]
+            .try_into()
+            .map_err(|_| "truncated checksum")?,
+    );
+    if stored != f.0 {
+        return Err("checksum mismatch".into());
+    }
+    let cells_end = SPARSE_HEADER + n_cells * 4;
+    let cells: Vec<u32> = bytes[SPARSE_HEADER..cells_end]
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let raw = &bytes[cells_end..SPARSE_HEADER + body];
+    let samples = match q {
+        Quantization::F32 => Samples::F32(
+            raw.chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect(),
+        ),
+        Quantization::U16 => Samples::U16(
+            raw.chunks_exact(2)
+                .map(|c| u16::from_le_bytes([c[0], c[1]]))
+                .collect(),
+        ),
+        Quantization::U8 => Samples::U8(raw.to_vec()),
+    };
+    SparseGrid::from_parts(min, cell, bricks, band, clamp, recon, cells, samples)
 }
 
 struct Fnv(u64);

@@ -43,10 +43,12 @@
 //! `<hash>-r<resolution>-v<version>.sdfgrid` (format in [`cache`]), written atomically and
 //! fully validated on read; any problem is noted in [`Baked::notes`] and the grid re-baked.
 
+mod bricks;
 mod bvh;
 pub mod cache;
 mod geom;
 mod grid;
+pub mod sparse;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -55,11 +57,15 @@ use glam::{UVec3, Vec3};
 use marchmesh_meshio::TriangleMesh;
 use rayon::prelude::*;
 
+pub use bricks::{
+    BakedSparse, MAX_BAND_VOXELS, MIN_BAND_VOXELS, SparseBakeStats, SparseOptions, bake_sparse,
+};
 pub use geom::{
     closest_point_on_triangle, closest_point_on_triangle_f64, point_triangle_distance_squared,
     solid_angle,
 };
 pub use grid::DistanceGrid;
+pub use sparse::{Quantization, Reconstruction, SparseGrid};
 
 /// Padding around the mesh bounds, in cells, on every side.
 pub const PAD_CELLS: u32 = 3;
@@ -103,6 +109,14 @@ pub enum BakeError {
     Resolution {
         /// The rejected value.
         resolution: u32,
+    },
+    /// A sparse grid's band is outside `MIN_BAND_VOXELS..=MAX_BAND_VOXELS`.
+    #[error(
+        "sparse grid band {band_voxels} is out of range {MIN_BAND_VOXELS}..={MAX_BAND_VOXELS} (cells either side of the surface)"
+    )]
+    Band {
+        /// The rejected value.
+        band_voxels: u32,
     },
     /// The mesh has no triangles.
     #[error("mesh {path} has no triangles to bake")]
@@ -169,33 +183,7 @@ pub fn bake_with_stats(
         return Err(BakeError::Resolution { resolution: res });
     }
     let path = mesh.report.source.clone();
-    if mesh.triangles.is_empty() {
-        return Err(BakeError::Empty { path });
-    }
-    let mut tris = Vec::with_capacity(mesh.triangles.len());
-    for (ti, t) in mesh.triangles.iter().enumerate() {
-        let mut v = [Vec3::ZERO; 3];
-        for k in 0..3 {
-            let p = mesh.positions.get(t[k] as usize).copied().ok_or_else(|| {
-                BakeError::InvalidMesh {
-                    path: path.clone(),
-                    reason: format!(
-                        "triangle {ti} uses vertex {} of {}",
-                        t[k],
-                        mesh.positions.len()
-                    ),
-                }
-            })?;
-            if !p.is_finite() {
-                return Err(BakeError::InvalidMesh {
-                    path,
-                    reason: format!("vertex {} is not finite", t[k]),
-                });
-            }
-            v[k] = p;
-        }
-        tris.push(v);
-    }
+    let tris = triangles_of(mesh)?;
     let mut notes = Vec::new();
     let hash = mesh.content_hash();
     let cache_file = opts
@@ -271,6 +259,39 @@ pub fn bake_with_stats(
     Ok((baked, stats))
 }
 
+/// The mesh's triangles by value, checked: at least one, indices in range, finite vertices.
+fn triangles_of(mesh: &TriangleMesh) -> Result<Vec<[Vec3; 3]>, BakeError> {
+    let path = mesh.report.source.clone();
+    if mesh.triangles.is_empty() {
+        return Err(BakeError::Empty { path });
+    }
+    let mut tris = Vec::with_capacity(mesh.triangles.len());
+    for (ti, t) in mesh.triangles.iter().enumerate() {
+        let mut v = [Vec3::ZERO; 3];
+        for k in 0..3 {
+            let p = mesh.positions.get(t[k] as usize).copied().ok_or_else(|| {
+                BakeError::InvalidMesh {
+                    path: path.clone(),
+                    reason: format!(
+                        "triangle {ti} uses vertex {} of {}",
+                        t[k],
+                        mesh.positions.len()
+                    ),
+                }
+            })?;
+            if !p.is_finite() {
+                return Err(BakeError::InvalidMesh {
+                    path,
+                    reason: format!("vertex {} is not finite", t[k]),
+                });
+            }
+            v[k] = p;
+        }
+        tris.push(v);
+    }
+    Ok(tris)
+}
+
 /// Block edge (in cells) of the winding-number shortcut.
 const SIGN_BLOCK: usize = 4;
 /// How far from 0.5 every block corner's winding number must be for the block to share it.
@@ -278,7 +299,7 @@ const SIGN_MARGIN: f32 = 0.15;
 
 /// A block whose candidate list would exceed this many triangles per sample searches the
 /// BVH per sample instead.
-const CANDIDATES_PER_SAMPLE: usize = 4;
+pub(crate) const CANDIDATES_PER_SAMPLE: usize = 4;
 
 /// Coarse lattice indices along an axis of `n >= 2` samples: multiples of `SIGN_BLOCK`
 /// below `n - 1`, then `n - 1`.

@@ -16,11 +16,13 @@
 //!   a 1-Lipschitz bound of its own blended surface.
 //! - Repetition: `min(true distance of the repeated set, R)`, see [`program`].
 //! - Mesh: a baked signed distance grid (`marchmesh-bake`, mesh local frame, cached on disk
-//!   when [`FieldOptions::cache_dir`] is set) sampled trilinearly: within half a cell
-//!   diagonal of the true distance where the sign is right, features thinner than a cell
-//!   lost; the interpolant's gradient can reach `sqrt(3)` between samples near creases, so
-//!   this is the one leaf that is not a strict bound. Open meshes take their sign from the
-//!   generalized winding number.
+//!   when [`FieldOptions::cache_dir`] is set), dense or sparse ([`MeshGrid`]) sampled
+//!   trilinearly (or tricubically, sparse only): within half a cell diagonal of the true
+//!   distance where the sign is right, features thinner than a cell lost; the interpolant's
+//!   gradient can reach `sqrt(3)` between samples near creases, so this is the one leaf that
+//!   is not a strict bound. Sparse grids hold bricks only near the surface and a lower bound
+//!   of the distance (at least the band width) elsewhere, plus the quantization error of
+//!   8/16-bit samples. Open meshes take their sign from the generalized winding number.
 //! - Far from a subtree's bounding box the subtree's value is replaced by the distance to its
 //!   box (see [`program`]).
 //!
@@ -48,23 +50,57 @@ use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 use compile::{Aabb, MeshResolver, compile_roots};
 pub use cull::{RayCone, Restricted};
 pub use lane::{F32x8, Lane, M8, Scalar, V3};
+/// The bake crate (grid types, quantization and reconstruction options), re-exported so
+/// backends name the same types.
+pub use marchmesh_bake as bake;
 use program::{GridSampler, Program};
+
+/// Which representation a mesh's distance field is baked into.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeshGrid {
+    /// A dense trilinear grid ([`marchmesh_bake::DistanceGrid`]): `n^3` f32 samples.
+    Dense,
+    /// A sparse narrow-band brick grid ([`marchmesh_bake::SparseGrid`]): bricks of
+    /// `8^3` cells only where the surface passes, memory proportional to the surface.
+    Sparse {
+        /// Band half-width in cells (bricks within it of the surface).
+        band_voxels: u32,
+        /// Sample storage.
+        quantization: marchmesh_bake::Quantization,
+        /// Interpolation.
+        reconstruction: marchmesh_bake::Reconstruction,
+    },
+}
+
+impl MeshGrid {
+    /// The sparse grid at its defaults: band 2 cells, f32, trilinear.
+    pub const SPARSE_DEFAULT: MeshGrid = MeshGrid::Sparse {
+        band_voxels: 2,
+        quantization: marchmesh_bake::Quantization::F32,
+        reconstruction: marchmesh_bake::Reconstruction::Trilinear,
+    };
+}
 
 /// Options of field compilation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FieldOptions {
-    /// Cells on the longest side of a baked mesh distance grid (default 64). Higher is more
-    /// accurate (error about one cell near thin features) and costs `n^3` memory and bake time.
+    /// Cells on the longest side of a baked mesh distance grid (default 64); for sparse
+    /// grids the effective resolution. Higher is more accurate (error about one cell near
+    /// thin features) and costs `n^3` memory and bake time for dense grids, about `n^2`
+    /// for sparse ones.
     pub mesh_grid_resolution: u32,
     /// Where baked grids are cached (keyed by mesh content and resolution); `None` = no cache.
     pub cache_dir: Option<PathBuf>,
+    /// The representation of mesh distance fields (default [`MeshGrid::Dense`]).
+    pub mesh_grid: MeshGrid,
 }
 
 impl FieldOptions {
-    /// The defaults: resolution 64, no cache.
+    /// The defaults: dense, resolution 64, no cache.
     pub const DEFAULT: FieldOptions = FieldOptions {
         mesh_grid_resolution: 64,
         cache_dir: None,
+        mesh_grid: MeshGrid::Dense,
     };
 }
 
@@ -137,17 +173,29 @@ struct Meshes<'a> {
 }
 
 /// A baked grid as the evaluator sees it.
-struct Grid(marchmesh_bake::DistanceGrid);
+enum Grid {
+    Dense(marchmesh_bake::DistanceGrid),
+    Sparse(marchmesh_bake::SparseGrid),
+}
 
 impl GridSampler for Grid {
     fn sample(&self, x: f64, y: f64, z: f64) -> f64 {
-        self.0.sample_f64(DVec3::new(x, y, z))
+        match self {
+            Grid::Dense(g) => g.sample_f64(DVec3::new(x, y, z)),
+            Grid::Sparse(g) => g.sample_f64(DVec3::new(x, y, z)),
+        }
     }
     fn sample_f32(&self, x: f32, y: f32, z: f32) -> f32 {
-        self.0.sample(Vec3::new(x, y, z))
+        match self {
+            Grid::Dense(g) => g.sample(Vec3::new(x, y, z)),
+            Grid::Sparse(g) => g.sample(Vec3::new(x, y, z)),
+        }
     }
     fn memory_bytes(&self) -> u64 {
-        self.0.memory_bytes()
+        match self {
+            Grid::Dense(g) => g.memory_bytes(),
+            Grid::Sparse(g) => g.memory_bytes(),
+        }
     }
 }
 
@@ -166,45 +214,88 @@ impl MeshResolver for Meshes<'_> {
         };
         let t0 = Instant::now();
         let mesh = marchmesh_meshio::load_mesh(path).map_err(|e| err(e.to_string()))?;
-        let baked = marchmesh_bake::bake(
-            &mesh,
-            &marchmesh_bake::BakeOptions {
-                resolution: self.opts.mesh_grid_resolution,
-                cache_dir: self.opts.cache_dir.clone(),
-            },
-        )
-        .map_err(|e| err(e.to_string()))?;
+        let open_note = if mesh.is_closed() {
+            ""
+        } else {
+            "; open mesh: sign from the generalized winding number, holes may close or leak by about a cell"
+        };
+        let (grid, notes) = match self.opts.mesh_grid {
+            MeshGrid::Dense => {
+                let baked = marchmesh_bake::bake(
+                    &mesh,
+                    &marchmesh_bake::BakeOptions {
+                        resolution: self.opts.mesh_grid_resolution,
+                        cache_dir: self.opts.cache_dir.clone(),
+                    },
+                )
+                .map_err(|e| err(e.to_string()))?;
+                let g = &baked.grid;
+                self.notes.push(format!(
+                    "{}: mesh {} baked to a {}x{}x{} distance grid ({} B{}), trilinear; distances within half a cell diagonal ({:.3e} mesh units), features thinner than a cell lost{}",
+                    node.json_path,
+                    path.display(),
+                    g.dims[0],
+                    g.dims[1],
+                    g.dims[2],
+                    g.memory_bytes(),
+                    if baked.from_cache { ", from cache" } else { "" },
+                    g.cell_size * 0.866,
+                    open_note
+                ));
+                (Grid::Dense(baked.grid), baked.notes)
+            }
+            MeshGrid::Sparse {
+                band_voxels,
+                quantization,
+                reconstruction,
+            } => {
+                let (baked, _) = marchmesh_bake::bake_sparse(
+                    &mesh,
+                    &marchmesh_bake::SparseOptions {
+                        resolution: self.opts.mesh_grid_resolution,
+                        band_voxels,
+                        quantization,
+                        reconstruction,
+                        cache_dir: self.opts.cache_dir.clone(),
+                    },
+                )
+                .map_err(|e| err(e.to_string()))?;
+                let g = &baked.grid;
+                let d = g.dims();
+                self.notes.push(format!(
+                    "{}: mesh {} baked to a sparse grid, effective {}x{}x{}, {} bricks of 8^3 cells ({} B{}), {} {}, band {} cells; distances within half a cell diagonal ({:.3e} mesh units) plus quantization ({:.3e}) in the band, a lower bound (at least the band) elsewhere{}",
+                    node.json_path,
+                    path.display(),
+                    d[0],
+                    d[1],
+                    d[2],
+                    g.brick_count(),
+                    g.memory_bytes(),
+                    if baked.from_cache { ", from cache" } else { "" },
+                    quantization.name(),
+                    reconstruction.name(),
+                    band_voxels,
+                    g.cell_size() * 0.866,
+                    quantization.max_error(g.clamp()),
+                    if mesh.is_closed() {
+                        ""
+                    } else {
+                        "; open mesh: sign-contradicting bricks (caps across holes) are unsigned shells half a cell thick"
+                    }
+                ));
+                (Grid::Sparse(baked.grid), baked.notes)
+            }
+        };
         self.bake_ms += t0.elapsed().as_secs_f64() * 1e3;
         let (lo, hi) = mesh.bounds();
         let bb = Aabb {
             lo: lo.as_dvec3(),
             hi: hi.as_dvec3(),
         };
-        let g = &baked.grid;
-        self.notes.push(format!(
-            "{}: mesh {} baked to a {}x{}x{} distance grid ({} B{}), trilinear; distances within half a cell diagonal ({:.3e} mesh units), features thinner than a cell lost{}",
-            node.json_path,
-            path.display(),
-            g.dims[0],
-            g.dims[1],
-            g.dims[2],
-            g.memory_bytes(),
-            if baked.from_cache { ", from cache" } else { "" },
-            g.cell_size * 0.866,
-            if mesh.is_closed() {
-                ""
-            } else {
-                "; open mesh: sign from the generalized winding number, holes may close or leak by about a cell"
-            }
-        ));
-        self.notes.extend(
-            baked
-                .notes
-                .iter()
-                .map(|n| format!("{}: {n}", node.json_path)),
-        );
+        self.notes
+            .extend(notes.iter().map(|n| format!("{}: {n}", node.json_path)));
         let idx = self.grids.len() as u32;
-        self.grids.push(Box::new(Grid(baked.grid)));
+        self.grids.push(Box::new(grid));
         self.seen.push((path.clone(), idx, bb));
         Ok((idx, bb))
     }

@@ -500,6 +500,7 @@ impl ShapeInputs<'_> {
         let field_options = marchmesh_field::FieldOptions {
             mesh_grid_resolution: options.surface_resolution,
             cache_dir: None,
+            ..marchmesh_field::FieldOptions::DEFAULT
         };
         let cells = u64::from(options.surface_resolution + 1).pow(3);
         budget.take(

@@ -35,13 +35,13 @@ use marchmesh_core::{
     Cone, Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, Shortcuts,
     SurfacePoint, Termination, TraceResult, Visibility,
 };
-use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, RayCone, Restricted, V3};
+use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, MeshGrid, RayCone, Restricted, V3};
 use marchmesh_scene::{MaterialId, Scene};
 
 use inside::Inside;
 use march::{Lanes8, March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
-pub use settings::{SdfBackend, SdfSettings};
+pub use settings::{GridKind, QuantizeKind, ReconKind, SdfBackend, SdfSettings};
 
 /// Why the SDF backend could not build a scene.
 #[derive(Debug, thiserror::Error)]
@@ -92,6 +92,33 @@ pub const CULL_BUNDLE: usize = 32;
 /// faster, 100: 1.55x, 1000: 2.4x, 10000: 2.7x.
 pub const CULL_MIN_NODES: usize = 8;
 
+/// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read: dense,
+/// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper bound
+/// of [`marchmesh_field::bake::SparseOptions::max_bake_bytes`] (every brick cell holding a
+/// brick, which a surface cannot reach: the real grid is proportional to its area).
+pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
+    match opts.mesh_grid {
+        MeshGrid::Dense => {
+            // Cells on the longest side, plus the apron of one sample each side.
+            u64::from(opts.mesh_grid_resolution + 3)
+                .pow(3)
+                .saturating_mul(BAKE_BYTES_PER_CELL)
+        }
+        MeshGrid::Sparse {
+            band_voxels,
+            quantization,
+            reconstruction,
+        } => marchmesh_field::bake::SparseOptions {
+            resolution: opts.mesh_grid_resolution,
+            band_voxels,
+            quantization,
+            reconstruction,
+            cache_dir: None,
+        }
+        .max_bake_bytes(),
+    }
+}
+
 /// Refuses scenes whose mesh grids would not fit in `opts.memory_limit_bytes`.
 fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
     let mut paths = std::collections::HashSet::new();
@@ -101,11 +128,7 @@ fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
         }
     });
     let meshes = paths.len() as u64;
-    // Cells on the longest side, plus the apron of one sample each side.
-    let cells_per_grid = u64::from(opts.mesh_grid_resolution + 3).pow(3);
-    let needed = meshes
-        .saturating_mul(cells_per_grid)
-        .saturating_mul(BAKE_BYTES_PER_CELL);
+    let needed = meshes.saturating_mul(mesh_grid_bytes_bound(opts));
     if needed > opts.memory_limit_bytes {
         return Err(SdfError::OverMemoryLimit {
             meshes,
@@ -185,11 +208,27 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         "mesh_grid_resolution",
         "must be >= 2",
     )?;
+    if let MeshGrid::Sparse { band_voxels, .. } = opts.mesh_grid {
+        use marchmesh_field::bake::{
+            MAX_BAND_VOXELS, MAX_RESOLUTION, MIN_BAND_VOXELS, MIN_RESOLUTION,
+        };
+        check(
+            (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.mesh_grid_resolution),
+            "mesh_grid_resolution",
+            &format!("sparse grids take {MIN_RESOLUTION}..={MAX_RESOLUTION} cells"),
+        )?;
+        check(
+            (MIN_BAND_VOXELS..=MAX_BAND_VOXELS).contains(&band_voxels),
+            "band",
+            &format!("must be in {MIN_BAND_VOXELS}..={MAX_BAND_VOXELS} cells"),
+        )?;
+    }
     check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
     let field_opts = FieldOptions {
         mesh_grid_resolution: opts.mesh_grid_resolution,
         cache_dir: opts.cache_dir.clone(),
+        mesh_grid: opts.mesh_grid,
     };
     let field = Field::compile_scene(scene, &field_opts)?;
     let field = if opts.bounds {

@@ -7,6 +7,8 @@
 
 use std::path::PathBuf;
 
+use marchmesh_field::MeshGrid;
+use marchmesh_field::bake::{Quantization, Reconstruction};
 use marchmesh_scene::Scene;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -39,8 +41,21 @@ pub struct SdfSettings {
     /// Skip subtrees by their bounding boxes and clip rays to the scene box (false: every
     /// node at every step, the naive cost).
     pub bounds: bool,
-    /// Cells on the longest side of baked mesh distance grids.
+    /// Cells on the longest side of baked mesh distance grids (effective resolution for
+    /// sparse grids), 4..=512.
     pub grid_res: u32,
+    /// Mesh distance grid: dense (n^3 f32 samples) or sparse (8^3-cell bricks only within
+    /// `band` cells of the surface, memory ~ n^2).
+    pub grid: GridKind,
+    /// Sparse grids: band half-width in cells, 1..=16 (bricks where the surface comes this
+    /// close; the field is at least this far elsewhere).
+    pub band: u32,
+    /// Sparse grids: sample storage, f32, u16 or u8 (error clamp/65535 or clamp/255, clamp
+    /// = band + 3 cells).
+    pub quantize: QuantizeKind,
+    /// Sparse grids: interpolation, trilinear or tricubic (Catmull-Rom near the surface,
+    /// C1 normals, 11^3 instead of 9^3 samples per brick).
+    pub recon: ReconKind,
     /// Folder caching baked grids (none = no disk cache).
     pub cache_dir: Option<PathBuf>,
     /// Area-light soft shadows from one cone march per light (approximate) instead of
@@ -49,6 +64,38 @@ pub struct SdfSettings {
     /// Ambient occlusion from this many field taps along the normal (approximate); 0 =
     /// sampled rays.
     pub ao_taps: u32,
+}
+
+/// `grid=` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum GridKind {
+    /// Dense trilinear grid.
+    Dense,
+    /// Sparse narrow-band brick grid.
+    Sparse,
+}
+
+/// `quantize=` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum QuantizeKind {
+    /// 32-bit floats.
+    F32,
+    /// 16 bits per sample.
+    U16,
+    /// 8 bits per sample.
+    U8,
+}
+
+/// `recon=` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum ReconKind {
+    /// Trilinear.
+    Trilinear,
+    /// Tricubic Catmull-Rom near the surface.
+    Tricubic,
 }
 
 impl Default for SdfSettings {
@@ -60,6 +107,25 @@ impl Default for SdfSettings {
 impl SdfSettings {
     /// The settings that give `o`.
     pub fn of(o: &SdfOptions) -> SdfSettings {
+        let sparse = match (o.mesh_grid, MeshGrid::SPARSE_DEFAULT) {
+            (
+                MeshGrid::Sparse {
+                    band_voxels,
+                    quantization,
+                    reconstruction,
+                },
+                _,
+            )
+            | (
+                MeshGrid::Dense,
+                MeshGrid::Sparse {
+                    band_voxels,
+                    quantization,
+                    reconstruction,
+                },
+            ) => (band_voxels, quantization, reconstruction),
+            (MeshGrid::Dense, MeshGrid::Dense) => (2, Quantization::F32, Reconstruction::Trilinear),
+        };
         let (eps_px, eps_abs) = match o.hit_epsilon {
             HitEpsilon::PixelCone(k) => (k, None),
             HitEpsilon::Absolute(e) => (0.25, Some(e)),
@@ -76,6 +142,20 @@ impl SdfSettings {
             cull: o.cull,
             bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
+            grid: match o.mesh_grid {
+                MeshGrid::Dense => GridKind::Dense,
+                MeshGrid::Sparse { .. } => GridKind::Sparse,
+            },
+            band: sparse.0,
+            quantize: match sparse.1 {
+                Quantization::F32 => QuantizeKind::F32,
+                Quantization::U16 => QuantizeKind::U16,
+                Quantization::U8 => QuantizeKind::U8,
+            },
+            recon: match sparse.2 {
+                Reconstruction::Trilinear => ReconKind::Trilinear,
+                Reconstruction::Tricubic => ReconKind::Tricubic,
+            },
             cache_dir: o.cache_dir.clone(),
             cone_shadows: o.cone_shadows,
             ao_taps: o.ao_taps,
@@ -98,6 +178,21 @@ impl SdfSettings {
             cull: self.cull,
             bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,
+            mesh_grid: match self.grid {
+                GridKind::Dense => MeshGrid::Dense,
+                GridKind::Sparse => MeshGrid::Sparse {
+                    band_voxels: self.band,
+                    quantization: match self.quantize {
+                        QuantizeKind::F32 => Quantization::F32,
+                        QuantizeKind::U16 => Quantization::U16,
+                        QuantizeKind::U8 => Quantization::U8,
+                    },
+                    reconstruction: match self.recon {
+                        ReconKind::Trilinear => Reconstruction::Trilinear,
+                        ReconKind::Tricubic => Reconstruction::Tricubic,
+                    },
+                },
+            },
             cache_dir: self.cache_dir.clone(),
             cone_shadows: self.cone_shadows,
             ao_taps: self.ao_taps,
@@ -140,6 +235,16 @@ mod tests {
             hit_epsilon: HitEpsilon::Absolute(1e-3),
             max_distance: Some(7.0),
             cache_dir: Some("grids".into()),
+            ..SdfOptions::DEFAULT
+        };
+        assert_eq!(SdfSettings::of(&o).options(), o);
+        let o = SdfOptions {
+            mesh_grid: MeshGrid::Sparse {
+                band_voxels: 3,
+                quantization: Quantization::U8,
+                reconstruction: Reconstruction::Tricubic,
+            },
+            mesh_grid_resolution: 200,
             ..SdfOptions::DEFAULT
         };
         assert_eq!(SdfSettings::of(&o).options(), o);

@@ -22,6 +22,10 @@ pub mod keys {
     pub const SDF_RELAXATION: &str = "relaxation";
     /// SDF: mesh bake grid resolution (cells on the longest side).
     pub const SDF_GRID: &str = "grid_res";
+    /// SDF: mesh grid kind, `dense` or `sparse`.
+    pub const SDF_GRID_KIND: &str = "grid";
+    /// SDF: sparse grid sample storage, `f32`, `u16` or `u8`.
+    pub const SDF_QUANTIZE: &str = "quantize";
     /// Mesh: fixed tessellation level.
     pub const MESH_TESS_LEVEL: &str = "tess_level";
     /// Mesh: screen-space chord budget, pixels.
@@ -460,7 +464,8 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         ));
     }
 
-    // Open meshes baked to a distance grid at growing resolution (sign from winding numbers).
+    // Meshes baked to distance grids at growing resolution (sign from winding numbers):
+    // dense grids and sparse u8 brick grids.
     for (name, scale, translate) in [
         ("teapot", 0.35, [0.0, -0.6, 0.0]),
         ("bunny", 0.15, [0.0, -0.8, 0.0]),
@@ -470,22 +475,49 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         if !ctx.scenes_dir.join(&path).exists() {
             continue;
         }
-        for res in [32u32, 64, 128] {
+        // Dense grids at 32..128, sparse (u8 bricks) at 128..512 effective: one case per
+        // (kind, resolution).
+        let dense = |res: u32| Variant {
+            backend: BackendKind::Sdf,
+            options: vec![
+                (keys::SDF_GRID_KIND.to_string(), "dense".to_string()),
+                (keys::SDF_GRID.to_string(), res.to_string()),
+            ],
+        };
+        let sparse = |res: u32| Variant {
+            backend: BackendKind::Sdf,
+            options: vec![
+                (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
+                (keys::SDF_GRID.to_string(), res.to_string()),
+                (keys::SDF_QUANTIZE.to_string(), "u8".to_string()),
+            ],
+        };
+        for (res, is_sparse, variant) in [
+            (32u32, false, dense(32)),
+            (64, false, dense(64)),
+            (128, false, dense(128)),
+            (128, true, sparse(128)),
+            (256, true, sparse(256)),
+            (512, true, sparse(512)),
+        ] {
             let obj = json!({ "shape": { "mesh": { "path": path } },
                               "transform": { "translate": translate, "scale": scale },
                               "material": { "color": [0.85, 0.8, 0.7], "specular_exponent": 30 } });
             out.push(StabilityCase {
-                family: match name {
-                    "teapot" => "bake_teapot_open",
-                    "bunny" => "bake_bunny_closed",
-                    _ => "bake_dragon_open",
+                family: match (name, is_sparse) {
+                    ("teapot", false) => "bake_teapot_open",
+                    ("bunny", false) => "bake_bunny_closed",
+                    (_, false) => "bake_dragon_open",
+                    ("teapot", true) => "bake_teapot_open_sparse",
+                    ("bunny", true) => "bake_bunny_closed_sparse",
+                    (_, true) => "bake_dragon_open_sparse",
                 },
                 parameter: "grid_res",
                 value: res as f64,
                 scene_json: scene(cam.clone(), vec![obj], 100.0),
                 truth_json: None,
                 scene_size: 2.0,
-                variants: vec![Variant::with(BackendKind::Sdf, keys::SDF_GRID, res)],
+                variants: vec![variant],
                 judge_by_image: false,
                 self_truth: false,
                 base_dir: ctx.scenes_dir.clone(),

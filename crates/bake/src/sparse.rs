@@ -1,0 +1,767 @@
+//! The sparse narrow-band brick grid and its sampler.
+//!
+//! A lattice of cubic cells (edge [`SparseGrid::cell_size`]) is cut into *brick cells* of
+//! [`BRICK`]^3 cells. Only brick cells the surface passes near (within
+//! [`SparseGrid::band_voxels`] cells of the brick's box) hold a *brick*: the signed distance
+//! at its `(BRICK + 1)^3` lattice samples plus an apron of [`Reconstruction::apron`] samples
+//! on every side, so a trilinear (or tricubic) lookup never reads another brick. Every other
+//! brick cell stores one 32-bit word: a conservative lower bound of the distance at its
+//! centre and the side (inside/outside). This is the layout of Unreal Engine's mesh distance
+//! fields (8^3 bricks of 8-bit distances in a narrow band) and of OpenVDB narrow-band level
+//! sets (Museth 2013, "VDB: High-resolution sparse volumes with dynamic topology"), reduced
+//! to one level: a brick-presence map whose empty entries carry distances to the band.
+//!
+//! Memory is proportional to the surface area, not the volume: the bunny at 256 cells on its
+//! longest side holds about as many bytes in 8-bit bricks as a dense 64^3 grid of f32.
+
+use glam::{DVec3, Vec3};
+
+/// Cells along each edge of a brick.
+pub const BRICK: u32 = 8;
+
+/// Tag bit of an empty brick cell's word (the rest is its distance bound and side).
+pub(crate) const EMPTY: u32 = 1 << 31;
+/// Side bit of an empty brick cell's word: set when the brick cell is inside the solid.
+pub(crate) const INSIDE: u32 = 1 << 30;
+/// Largest distance bound an empty word can hold, in 1/[`BOUND_STEPS`] cells.
+pub(crate) const BOUND_MAX: u32 = INSIDE - 1;
+/// Subdivisions of a cell in an empty word's distance bound (rounded down).
+pub(crate) const BOUND_STEPS: f64 = 16.0;
+
+/// How brick samples are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Quantization {
+    /// 32-bit floats: exact distances (clamped to the band, see [`SparseGrid::clamp`]).
+    #[default]
+    F32,
+    /// 16 bits per sample over `[-clamp, clamp]`: error at most `clamp / 65535`.
+    U16,
+    /// 8 bits per sample over `[-clamp, clamp]`: error at most `clamp / 255` (2% of a cell
+    /// at the default band).
+    U8,
+}
+
+impl Quantization {
+    /// Bytes per stored sample.
+    pub fn bytes(self) -> usize {
+        match self {
+            Quantization::F32 => 4,
+            Quantization::U16 => 2,
+            Quantization::U8 => 1,
+        }
+    }
+
+    /// Largest code (`0` for f32, which is not quantized).
+    pub fn max_code(self) -> u32 {
+        match self {
+            Quantization::F32 => 0,
+            Quantization::U16 => u16::MAX as u32,
+            Quantization::U8 => u8::MAX as u32,
+        }
+    }
+
+    /// Worst-case quantization error for samples clamped to `[-clamp, clamp]` (round to
+    /// nearest: half a step), mesh units.
+    pub fn max_error(self, clamp: f32) -> f32 {
+        match self.max_code() {
+            0 => 0.0,
+            m => clamp / m as f32,
+        }
+    }
+
+    /// Lower-case name (`f32`, `u16`, `u8`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Quantization::F32 => "f32",
+            Quantization::U16 => "u16",
+            Quantization::U8 => "u8",
+        }
+    }
+
+    pub(crate) fn code(self) -> u8 {
+        match self {
+            Quantization::F32 => 0,
+            Quantization::U16 => 1,
+            Quantization::U8 => 2,
+        }
+    }
+
+    pub(crate) fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(Quantization::F32),
+            1 => Some(Quantization::U16),
+            2 => Some(Quantization::U8),
+            _ => None,
+        }
+    }
+}
+
+/// How a brick is interpolated between its samples.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum Reconstruction {
+    /// Trilinear over the 8 surrounding samples: exact for linear fields (flat facets), C0,
+    /// its gradient jumps across cell faces. Error at most half a cell diagonal.
+    #[default]
+    Trilinear,
+    /// Tricubic Catmull-Rom (Catmull & Rom 1974; Keys 1981, `a = -1/2`) over the 4^3
+    /// surrounding samples, within [`TRICUBIC_ZONE_CELLS`] of the surface (trilinear
+    /// elsewhere): interpolating, exact for quadratic fields, C1, so normals are continuous
+    /// across cells. Needs a one-sample apron (11^3 samples per brick instead of 9^3) and 8x
+    /// the sample reads near the surface. Not a strict bound: the kernel overshoots by a few
+    /// percent of the sample differences.
+    Tricubic,
+}
+
+/// Distance (in cells, by the trilinear value) below which [`Reconstruction::Tricubic`]
+/// evaluates the cubic; farther out the trilinear value (a step size) is enough.
+pub const TRICUBIC_ZONE_CELLS: f64 = 1.5;
+
+impl Reconstruction {
+    /// Samples of apron on each side of a brick beyond its `BRICK + 1` own samples.
+    pub fn apron(self) -> u32 {
+        match self {
+            Reconstruction::Trilinear => 0,
+            Reconstruction::Tricubic => 1,
+        }
+    }
+
+    /// Lower-case name (`trilinear`, `tricubic`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Reconstruction::Trilinear => "trilinear",
+            Reconstruction::Tricubic => "tricubic",
+        }
+    }
+
+    pub(crate) fn code(self) -> u8 {
+        match self {
+            Reconstruction::Trilinear => 0,
+            Reconstruction::Tricubic => 1,
+        }
+    }
+
+    pub(crate) fn from_code(c: u8) -> Option<Self> {
+        match c {
+            0 => Some(Reconstruction::Trilinear),
+            1 => Some(Reconstruction::Tricubic),
+            _ => None,
+        }
+    }
+}
+
+/// The samples of every brick, brick after brick (`samples_per_brick` each, x fastest).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Samples {
+    /// Distances, mesh units.
+    F32(Vec<f32>),
+    /// Codes: distance `= -clamp + code * (2 clamp / 65535)`.
+    U16(Vec<u16>),
+    /// Codes: distance `= -clamp + code * (2 clamp / 255)`.
+    U8(Vec<u8>),
+}
+
+impl Samples {
+    /// Number of stored samples.
+    pub fn len(&self) -> usize {
+        match self {
+            Samples::F32(v) => v.len(),
+            Samples::U16(v) => v.len(),
+            Samples::U8(v) => v.len(),
+        }
+    }
+
+    /// True when no sample is stored.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The quantization these samples use.
+    pub fn quantization(&self) -> Quantization {
+        match self {
+            Samples::F32(_) => Quantization::F32,
+            Samples::U16(_) => Quantization::U16,
+            Samples::U8(_) => Quantization::U8,
+        }
+    }
+
+    /// Bytes of the samples.
+    pub fn bytes(&self) -> usize {
+        self.len() * self.quantization().bytes()
+    }
+}
+
+/// A stored sample type and its decoding to a distance (`code * scale + offset`).
+trait Code: Copy {
+    fn get(self) -> f64;
+}
+impl Code for f32 {
+    #[inline(always)]
+    fn get(self) -> f64 {
+        self as f64
+    }
+}
+impl Code for u16 {
+    #[inline(always)]
+    fn get(self) -> f64 {
+        self as f64
+    }
+}
+impl Code for u8 {
+    #[inline(always)]
+    fn get(self) -> f64 {
+        self as f64
+    }
+}
+
+/// Catmull-Rom weights of the samples at `-1, 0, 1, 2` for a point at `t` in `[0, 1]`
+/// (Keys 1981, cubic convolution with `a = -1/2`).
+#[inline(always)]
+fn catmull_rom(t: f64) -> [f64; 4] {
+    let t2 = t * t;
+    let t3 = t2 * t;
+    [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+}
+
+/// A sparse narrow-band signed distance grid (mesh local frame and units).
+///
+/// **Lattice.** Sample `(i, j, k)` sits at `min + cell_size * (i, j, k)`; the lattice has
+/// `BRICK * bricks[a]` cells along axis `a`. Brick cell `(bx, by, bz)` covers lattice cells
+/// `BRICK * b .. BRICK * (b + 1)`; its word in [`SparseGrid::cells`] (x fastest) is either the
+/// index of its brick (`< 2^31`) or an empty word (bit 31 set; bit 30 = inside; bits 0..30 a
+/// lower bound of `|distance|` at the brick cell's centre in 1/16 cells, rounded down).
+///
+/// **Bricks.** Brick `n` holds `s^3` samples, `s = BRICK + 1 + 2 * apron`, at
+/// [`SparseGrid::samples`]`[n * s^3 ..]`, local `(a, b, c)` (x fastest) being lattice sample
+/// `BRICK * brick + (a, b, c) - apron`. Every sample is the exact distance to the closest
+/// triangle with the generalized winding number's sign (as [`crate::DistanceGrid`]), clamped to
+/// `[-clamp, clamp]` and then quantized; bricks whose samples disagree on the side where no
+/// surface can be between them (a winding-number "cap" across a hole of an open mesh) store
+/// unsigned distances minus half a cell instead (see [`crate::bake_sparse`]).
+///
+/// **Values and accuracy.** In a brick: the trilinear (or tricubic) interpolant, within half
+/// a cell diagonal of the true distance where the sign is right, plus the quantization
+/// error ([`Quantization::max_error`]). In an empty brick cell: `side * max(band_voxels *
+/// cell_size, b - |p - c|)` with `b` the stored bound at the centre `c`: a lower bound of the
+/// true distance everywhere in it (the bake keeps every brick cell the surface comes within
+/// `band_voxels` cells of), so sphere tracing never steps through a surface there, and far
+/// from the surface it is within a brick's half diagonal of the true distance. Outside the
+/// lattice box, as [`crate::DistanceGrid`]: `sqrt(a^2 + b^2)` from the value `b` at the
+/// projection onto the box, `a` the distance to it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SparseGrid {
+    /// Position of lattice sample `(0, 0, 0)`, mesh local frame.
+    min: Vec3,
+    /// Edge of the cubic cells, mesh units (> 0).
+    cell_size: f32,
+    /// Brick cells per axis (each >= 1).
+    bricks: [u32; 3],
+    /// Band half-width in cells: every brick cell the surface comes within this many cells
+    /// of holds a brick.
+    band_voxels: u32,
+    /// Stored distances are clamped to `[-clamp, clamp]`, mesh units
+    /// (`(band_voxels + 3) * cell_size`).
+    clamp: f32,
+    /// How bricks are interpolated (sets the apron).
+    reconstruction: Reconstruction,
+    /// One word per brick cell (x fastest): brick index or empty word.
+    cells: Vec<u32>,
+    /// Brick samples.
+    samples: Samples,
+}
+
+impl SparseGrid {
+    /// Assembles a grid from its parts, checking every invariant the sampler relies on
+    /// (positive finite cell and clamp, finite min, `cells` sized for `bricks`, samples a
+    /// whole number of bricks, every brick word a valid brick index, no NaN sample), so
+    /// sampling a grid never panics. `Err` names the first problem.
+    #[allow(clippy::too_many_arguments)]
+    pub fn from_parts(
+        min: Vec3,
+        cell_size: f32,
+        bricks: [u32; 3],
+        band_voxels: u32,
+        clamp: f32,
+        reconstruction: Reconstruction,
+        cells: Vec<u32>,
+        samples: Samples,
+    ) -> Result<SparseGrid, String> {
+        if !(min.is_finite() && cell_size.is_finite() && cell_size > 0.0) {
+            return Err("non-finite min or non-positive cell size".into());
+        }
+        if !(clamp.is_finite() && clamp > 0.0) {
+            return Err(format!("clamp {clamp} is not a positive distance"));
+        }
+        if bricks.iter().any(|&b| b == 0 || b > 1 << 12) {
+            return Err(format!("bad brick cell counts {bricks:?}"));
+        }
+        let n: usize = bricks.iter().map(|&b| b as usize).product();
+        if cells.len() != n {
+            return Err(format!(
+                "{} brick-cell words, {bricks:?} need {n}",
+                cells.len()
+            ));
+        }
+        let per = (BRICK + 1 + 2 * reconstruction.apron()).pow(3) as usize;
+        if !samples.len().is_multiple_of(per) {
+            return Err(format!(
+                "{} samples are not a whole number of {per}-sample bricks",
+                samples.len()
+            ));
+        }
+        let count = samples.len() / per;
+        let mut used = vec![false; count];
+        for &w in &cells {
+            if w & EMPTY == 0 {
+                match used.get_mut(w as usize) {
+                    Some(u) if !*u => *u = true,
+                    Some(_) => return Err(format!("brick {w} is referenced twice")),
+                    None => return Err(format!("brick word {w} >= brick count {count}")),
+                }
+            }
+        }
+        if used.iter().any(|u| !u) {
+            return Err("a stored brick is referenced by no brick cell".into());
+        }
+        if let Samples::F32(v) = &samples
+            && v.iter().any(|x| !x.is_finite())
+        {
+            return Err("non-finite sample".into());
+        }
+        Ok(SparseGrid {
+            min,
+            cell_size,
+            bricks,
+            band_voxels,
+            clamp,
+            reconstruction,
+            cells,
+            samples,
+        })
+    }
+
+    /// Position of lattice sample `(0, 0, 0)`, mesh local frame.
+    pub fn min(&self) -> Vec3 {
+        self.min
+    }
+
+    /// Edge of the cubic cells, mesh units.
+    pub fn cell_size(&self) -> f32 {
+        self.cell_size
+    }
+
+    /// Brick cells per axis.
+    pub fn bricks(&self) -> [u32; 3] {
+        self.bricks
+    }
+
+    /// Band half-width in cells.
+    pub fn band_voxels(&self) -> u32 {
+        self.band_voxels
+    }
+
+    /// Stored distances are clamped to `[-clamp, clamp]`, mesh units.
+    pub fn clamp(&self) -> f32 {
+        self.clamp
+    }
+
+    /// How bricks are interpolated.
+    pub fn reconstruction(&self) -> Reconstruction {
+        self.reconstruction
+    }
+
+    /// The brick-cell words (x fastest).
+    pub fn cells(&self) -> &[u32] {
+        &self.cells
+    }
+
+    /// The brick samples.
+    pub fn samples(&self) -> &Samples {
+        &self.samples
+    }
+
+    /// Samples per brick edge, `BRICK + 1 + 2 * apron`.
+    pub fn brick_edge(&self) -> usize {
+        (BRICK + 1 + 2 * self.reconstruction.apron()) as usize
+    }
+
+    /// Samples per brick.
+    pub fn samples_per_brick(&self) -> usize {
+        self.brick_edge().pow(3)
+    }
+
+    /// Number of bricks stored.
+    pub fn brick_count(&self) -> usize {
+        self.samples.len() / self.samples_per_brick().max(1)
+    }
+
+    /// Lattice cells per axis (`BRICK * bricks`).
+    pub fn lattice_cells(&self) -> [u32; 3] {
+        self.bricks.map(|b| b * BRICK)
+    }
+
+    /// Effective dense resolution: lattice samples per axis.
+    pub fn dims(&self) -> [u32; 3] {
+        self.lattice_cells().map(|c| c + 1)
+    }
+
+    /// Box covered by the lattice: `(min, min + cell_size * cells)`.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let c = self.lattice_cells();
+        (
+            self.min,
+            self.min + self.cell_size * Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32),
+        )
+    }
+
+    /// Exact bytes held: brick samples, brick-cell words and this struct.
+    pub fn memory_bytes(&self) -> u64 {
+        (self.samples.bytes() + self.cells.len() * 4 + std::mem::size_of::<Self>()) as u64
+    }
+
+    /// `(scale, offset)` decoding a stored code to a distance.
+    fn decode(&self) -> (f64, f64) {
+        match self.samples.quantization().max_code() {
+            0 => (1.0, 0.0),
+            m => {
+                let c = self.clamp as f64;
+                (2.0 * c / m as f64, -c)
+            }
+        }
+    }
+
+    /// The stored value of lattice sample `(i, j, k)` (decoded) from a brick holding it (a
+    /// sample on a brick cell face belongs to the bricks on both sides, which hold the same
+    /// value); `None` out of range or when no brick holds it.
+    pub fn value(&self, i: u32, j: u32, k: u32) -> Option<f32> {
+        let c = self.lattice_cells();
+        if i > c[0] || j > c[1] || k > c[2] {
+            return None;
+        }
+        let opts = |v: u32, a: usize| {
+            let hi = (v / BRICK).min(self.bricks[a] - 1);
+            let lo = if v.is_multiple_of(BRICK) && v > 0 {
+                (v - 1) / BRICK
+            } else {
+                hi
+            };
+            [hi, lo]
+        };
+        let a = self.reconstruction.apron();
+        let s = self.brick_edge();
+        let (scale, off) = self.decode();
+        for bz in opts(k, 2) {
+            for by in opts(j, 1) {
+                for bx in opts(i, 0) {
+                    let w = self.cells[(bx + self.bricks[0] * (by + self.bricks[1] * bz)) as usize];
+                    if w & EMPTY != 0 {
+                        continue;
+                    }
+                    let l = [i - BRICK * bx + a, j - BRICK * by + a, k - BRICK * bz + a];
+                    let at = w as usize * s * s * s
+                        + l[0] as usize
+                        + s * (l[1] as usize + s * l[2] as usize);
+                    let v = match &self.samples {
+                        Samples::F32(v) => v.get(at)?.get(),
+                        Samples::U16(v) => v.get(at)?.get(),
+                        Samples::U8(v) => v.get(at)?.get(),
+                    };
+                    return Some((v * scale + off) as f32);
+                }
+            }
+        }
+        None
+    }
+
+    /// Signed distance at `p` (mesh local frame), f32 (computed in f64).
+    #[inline]
+    pub fn sample(&self, p: Vec3) -> f32 {
+        self.sample_f64(p.as_dvec3()) as f32
+    }
+
+    /// Signed distance at `p` (mesh local frame) in f64; see the type's docs for the value
+    /// and its accuracy. A NaN coordinate gives NaN; never panics ([`SparseGrid::from_parts`]
+    /// checked the layout).
+    #[inline]
+    pub fn sample_f64(&self, p: DVec3) -> f64 {
+        let h = self.cell_size as f64;
+        let c = self.lattice_cells();
+        let g = (p - self.min.as_dvec3()) / h;
+        let maxc = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+        let gc = g.clamp(DVec3::ZERO, maxc);
+        let gc = DVec3::select(gc.cmpeq(gc), gc, DVec3::ZERO);
+        let outside = (g - gc).length() * h;
+        let b = self.value_in_box(gc);
+        if outside > 0.0 || outside.is_nan() {
+            if b > 0.0 {
+                outside.hypot(b)
+            } else {
+                b + outside
+            }
+        } else {
+            b
+        }
+    }
+
+    /// The value at lattice coordinates `g` (cells, inside the box).
+    #[inline]
+    fn value_in_box(&self, g: DVec3) -> f64 {
+        let [bx, by, _] = self.bricks;
+        let bs = BRICK as f64;
+        let bi = [
+            ((g.x / bs) as u32).min(self.bricks[0] - 1),
+            ((g.y / bs) as u32).min(self.bricks[1] - 1),
+            ((g.z / bs) as u32).min(self.bricks[2] - 1),
+        ];
+        let w = self.cells[(bi[0] + bx * (bi[1] + by * bi[2])) as usize];
+        let h = self.cell_size as f64;
+        if w & EMPTY != 0 {
+            let bound = (w & BOUND_MAX) as f64 / BOUND_STEPS;
+            let centre = DVec3::new(
+                bi[0] as f64 * bs + 0.5 * bs,
+                bi[1] as f64 * bs + 0.5 * bs,
+                bi[2] as f64 * bs + 0.5 * bs,
+            );
+            let d = (bound - (g - centre).length()).max(self.band_voxels as f64) * h;
+            return if w & INSIDE != 0 { -d } else { d };
+        }
+        let local = g - DVec3::new(bi[0] as f64, bi[1] as f64, bi[2] as f64) * bs;
+        let i = (local.x as usize).min(BRICK as usize - 1);
+        let j = (local.y as usize).min(BRICK as usize - 1);
+        let k = (local.z as usize).min(BRICK as usize - 1);
+        let f = local - DVec3::new(i as f64, j as f64, k as f64);
+        let s = self.brick_edge();
+        let a = self.reconstruction.apron() as usize;
+        let base = w as usize * s * s * s + (i + a) + s * ((j + a) + s * (k + a));
+        let (scale, off) = self.decode();
+        let cubic = self.reconstruction == Reconstruction::Tricubic;
+        let zone = TRICUBIC_ZONE_CELLS * h;
+        match &self.samples {
+            Samples::F32(v) => interp(v, base, s, f, scale, off, cubic, zone),
+            Samples::U16(v) => interp(v, base, s, f, scale, off, cubic, zone),
+            Samples::U8(v) => interp(v, base, s, f, scale, off, cubic, zone),
+        }
+    }
+}
+
+/// Trilinear at `f` in the cell whose `(0, 0, 0)` sample is `v[base]` (row stride `s`), then
+/// tricubic when `cubic` and the trilinear value is within `zone`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn interp<T: Code>(
+    v: &[T],
+    base: usize,
+    s: usize,
+    f: DVec3,
+    scale: f64,
+    off: f64,
+    cubic: bool,
+    zone: f64,
+) -> f64 {
+    let (sy, sz) = (s, s * s);
+    let g = |o: usize| v[base + o].get();
+    let x00 = g(0) + (g(1) - g(0)) * f.x;
+    let x10 = g(sy) + (g(sy + 1) - g(sy)) * f.x;
+    let x01 = g(sz) + (g(sz + 1) - g(sz)) * f.x;
+    let x11 = g(sz + sy) + (g(sz + sy + 1) - g(sz + sy)) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    let tri = (y0 + (y1 - y0) * f.z) * scale + off;
+    if !cubic || tri.abs() >= zone {
+        return tri;
+    }
+    // The 4^3 stencil starts one sample below the cell in every axis (the apron).
+    let o = base - 1 - sy - sz;
+    let (wx, wy, wz) = (catmull_rom(f.x), catmull_rom(f.y), catmull_rom(f.z));
+    let mut acc = 0.0;
+    for (c, wzc) in wz.iter().enumerate() {
+        let mut plane = 0.0;
+        for (b, wyb) in wy.iter().enumerate() {
+            let r = o + b * sy + c * sz;
+            let row = wx[0] * v[r].get()
+                + wx[1] * v[r + 1].get()
+                + wx[2] * v[r + 2].get()
+                + wx[3] * v[r + 3].get();
+            plane += wyb * row;
+        }
+        acc += wzc * plane;
+    }
+    acc * scale + off
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A grid of `f(p) = p.x - 2.3` on 2x1x1 brick cells, brick 0 present, brick 1 empty.
+    fn linear(recon: Reconstruction, q: Quantization) -> SparseGrid {
+        let a = recon.apron() as i32;
+        let s = (BRICK as i32 + 1 + 2 * a) as usize;
+        let h = 0.5f32;
+        let clamp = 8.0;
+        let mut vals = Vec::new();
+        for _c in 0..s {
+            for _b in 0..s {
+                for i in 0..s {
+                    let x = (i as i32 - a) as f32 * h;
+                    vals.push((x - 2.3f32).clamp(-clamp, clamp));
+                }
+            }
+        }
+        let m = q.max_code() as f32;
+        let samples = match q {
+            Quantization::F32 => Samples::F32(vals),
+            Quantization::U16 => Samples::U16(
+                vals.iter()
+                    .map(|v| ((v + clamp) / (2.0 * clamp) * m).round() as u16)
+                    .collect(),
+            ),
+            Quantization::U8 => Samples::U8(
+                vals.iter()
+                    .map(|v| ((v + clamp) / (2.0 * clamp) * m).round() as u8)
+                    .collect(),
+            ),
+        };
+        // Brick cell 1 spans x in [4, 8]: its centre is 3.7 units (7.4 cells) from x = 2.3.
+        let empty = EMPTY | ((7.4 * BOUND_STEPS) as u32 - 1);
+        SparseGrid::from_parts(
+            Vec3::ZERO,
+            h,
+            [2, 1, 1],
+            2,
+            clamp,
+            recon,
+            vec![0, empty],
+            samples,
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn reconstructions_reproduce_linear_fields_in_bricks() {
+        for recon in [Reconstruction::Trilinear, Reconstruction::Tricubic] {
+            for q in [Quantization::F32, Quantization::U16, Quantization::U8] {
+                let g = linear(recon, q);
+                let tol = q.max_error(g.clamp) as f64 + 1e-5;
+                for p in [
+                    DVec3::new(0.3, 1.7, 0.2),
+                    DVec3::new(2.31, 0.0, 3.9),
+                    DVec3::new(3.99, 4.0, 4.0),
+                    DVec3::new(2.2, 2.2, 2.2),
+                ] {
+                    let d = g.sample_f64(p);
+                    assert!((d - (p.x - 2.3)).abs() < tol, "{recon:?} {q:?} {p}: {d}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn empty_cells_are_lower_bounds_with_the_band_floor() {
+        let g = linear(Reconstruction::Trilinear, Quantization::F32);
+        for x in [4.0, 4.5, 6.0, 7.9, 8.0] {
+            for y in [0.0, 2.0, 4.0] {
+                let p = DVec3::new(x, y, 1.0);
+                let d = g.sample_f64(p);
+                assert!(d <= p.x - 2.3 + 1e-9, "{p}: {d}");
+                assert!(d >= 2.0 * 0.5 - 1e-9, "{p}: {d}");
+            }
+        }
+        // Outside the box: never above the true distance to the plane x = 2.3.
+        let p = DVec3::new(10.0, 1.0, 1.0);
+        assert!(g.sample_f64(p) <= 7.7 + 1e-9);
+        assert!(g.sample_f64(DVec3::splat(f64::NAN)).is_nan());
+        assert!(g.sample(Vec3::splat(1e30)).is_finite());
+    }
+
+    #[test]
+    fn lattice_values_and_addressing() {
+        let g = linear(Reconstruction::Tricubic, Quantization::F32);
+        assert_eq!(g.brick_edge(), 11);
+        assert_eq!(g.brick_count(), 1);
+        assert_eq!(g.dims(), [17, 9, 9]);
+        for i in 0..=8 {
+            let v = g.value(i, 3, 5).unwrap();
+            assert!((v - (i as f32 * 0.5 - 2.3)).abs() < 1e-6);
+        }
+        assert_eq!(g.value(9, 0, 0), None); // brick cell 1 is empty
+        assert!(g.value(8, 0, 0).is_some()); // on the face: brick 0 holds it
+        assert_eq!(g.value(17, 0, 0), None);
+        assert_eq!(
+            g.memory_bytes(),
+            (11usize.pow(3) * 4 + 8 + std::mem::size_of::<SparseGrid>()) as u64
+        );
+    }
+
+    #[test]
+    fn malformed_parts_are_refused() {
+        let g = linear(Reconstruction::Trilinear, Quantization::U8);
+        let parts = |cells: Vec<u32>, samples: Samples, recon: Reconstruction| {
+            SparseGrid::from_parts(
+                g.min,
+                g.cell_size,
+                g.bricks,
+                2,
+                g.clamp,
+                recon,
+                cells,
+                samples,
+            )
+        };
+        let t = Reconstruction::Trilinear;
+        assert!(parts(g.cells.clone(), g.samples.clone(), t).is_ok());
+        assert!(parts(vec![0], g.samples.clone(), t).is_err());
+        assert!(parts(vec![5, EMPTY], g.samples.clone(), t).is_err());
+        assert!(parts(vec![0, 0], g.samples.clone(), t).is_err());
+        assert!(parts(vec![EMPTY, EMPTY], g.samples.clone(), t).is_err());
+        assert!(parts(g.cells.clone(), Samples::U8(vec![0; 700]), t).is_err());
+        assert!(parts(g.cells.clone(), g.samples.clone(), Reconstruction::Tricubic).is_err());
+        assert!(parts(vec![0, EMPTY], Samples::F32(vec![f32::NAN; 729]), t).is_err());
+        assert!(
+            SparseGrid::from_parts(
+                Vec3::NAN,
+                1.0,
+                [1, 1, 1],
+                2,
+                1.0,
+                t,
+                vec![EMPTY],
+                Samples::U8(vec![])
+            )
+            .is_err()
+        );
+        assert!(
+            SparseGrid::from_parts(
+                Vec3::ZERO,
+                1.0,
+                [1, 1, 1],
+                2,
+                0.0,
+                t,
+                vec![EMPTY],
+                Samples::U8(vec![])
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn catmull_rom_weights_sum_to_one_and_interpolate() {
+        for t in [0.0, 0.25, 0.5, 0.9, 1.0] {
+            let w = catmull_rom(t);
+            assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            // Reproduces linear data: sum w_i * (i - 1) = t.
+            let lin: f64 = w
+                .iter()
+                .enumerate()
+                .map(|(i, w)| w * (i as f64 - 1.0))
+                .sum();
+            assert!((lin - t).abs() < 1e-12);
+        }
+        assert_eq!(catmull_rom(0.0), [0.0, 1.0, 0.0, 0.0]);
+    }
+}
