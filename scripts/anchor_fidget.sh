@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# The fidget anchor (issue 14): builds crates/anchor-fidget (its own workspace, excluded from
+# the root build) in release mode and runs it on the committed anchor scenes: marchmesh's sdf
+# backend and fidget 0.4 on the same camera rays, interleaved, 1 thread, depth errors against
+# the exact reference.
+#
+#   scripts/anchor_fidget.sh [extra anchor-fidget flags, e.g. --threads 2 --repeats 5]
+#
+# Writes into bench-results/anchors/:
+#   fidget-<UTC stamp>.json        every scene at fidget's default depth (512 voxels a column)
+#   fidget-<UTC stamp>-depth.json  seed-slab and sphere at 2048 and 8192 voxels a column
+#   fidget-<UTC stamp>.md          both tables
+# and prints the load average at start and end. CARGO_TARGET_DIR is honoured (default:
+# crates/anchor-fidget/target).
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+crate="$root/crates/anchor-fidget"
+target="${CARGO_TARGET_DIR:-$crate/target}"
+out="$root/bench-results/anchors"
+stamp="$(date -u +%Y%m%dT%H%M%SZ)"
+
+echo "load at start: $(uptime)"
+# Not --locked: the committed Cargo.lock pins fidget; a dependency added to a marchmesh crate
+# since then is added to it rather than failing the build.
+(cd "$crate" && CARGO_TARGET_DIR="$target" cargo build --release --quiet)
+mkdir -p "$out"
+bin="$target/release/anchor-fidget"
+# Scene paths in the results are relative to the repository root.
+cd "$root"
+s=crates/anchor-fidget/scenes
+"$bin" "$s/seed-slab.json" "$s/sphere.json" "$s/spheres-1.json" "$s/spheres-10.json" \
+    "$s/spheres-100.json" "$s/spheres-1000.json" \
+    --json "$out/fidget-$stamp.json" --markdown "$out/fidget-$stamp.main.md.tmp" "$@"
+echo "load between runs: $(uptime)"
+# What fidget's depth resolution costs: its error is one voxel's quantisation.
+"$bin" "$s/seed-slab.json" "$s/sphere.json" --depth 2048,8192 \
+    --json "$out/fidget-$stamp-depth.json" --markdown "$out/fidget-$stamp.depth.md.tmp" "$@"
+{
+    echo "# fidget anchor, $stamp"
+    echo
+    echo "Command: scripts/anchor_fidget.sh $*"
+    echo
+    echo "## All scenes, fidget at 512 voxels a column"
+    echo
+    cat "$out/fidget-$stamp.main.md.tmp"
+    echo
+    echo "## Depth resolution (fidget-$stamp-depth.json)"
+    echo
+    cat "$out/fidget-$stamp.depth.md.tmp"
+} >"$out/fidget-$stamp.md"
+rm -f "$out/fidget-$stamp.main.md.tmp" "$out/fidget-$stamp.depth.md.tmp"
+echo "load at end: $(uptime)"
+echo "wrote $out/fidget-$stamp.json, $out/fidget-$stamp-depth.json and $out/fidget-$stamp.md"
