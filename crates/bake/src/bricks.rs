@@ -199,34 +199,26 @@ pub fn bake_sparse(
         .cache_dir
         .as_ref()
         .map(|d| cache::sparse_cache_path(d, hash, opts));
-    if let Some(file) = &cache_file {
-        match std::fs::read(file) {
-            Ok(bytes) => match cache::decode_sparse(&bytes, hash, opts) {
-                Ok(grid) => {
-                    notes.push(format!(
-                        "sparse grid ({} bricks) read from cache {}",
-                        grid.brick_count(),
-                        file.display()
-                    ));
-                    let baked = BakedSparse {
-                        grid,
-                        from_cache: true,
-                        bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-                        notes,
-                    };
-                    return Ok((baked, SparseBakeStats::default()));
-                }
-                Err(why) => notes.push(format!(
-                    "cache file {} rejected ({why}); re-baked",
-                    file.display()
-                )),
-            },
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => notes.push(format!(
-                "cache file {} unreadable ({e}); re-baked",
-                file.display()
-            )),
-        }
+    if let Some(file) = &cache_file
+        && let Some(grid) = cache::read_cached(
+            file,
+            "sparse grid",
+            |b| cache::decode_sparse(b, hash, opts),
+            &mut notes,
+        )
+    {
+        notes.push(format!(
+            "sparse grid ({} bricks) read from cache {}",
+            grid.brick_count(),
+            file.display()
+        ));
+        let baked = BakedSparse {
+            grid,
+            from_cache: true,
+            bake_ms: t0.elapsed().as_secs_f64() * 1e3,
+            notes,
+        };
+        return Ok((baked, SparseBakeStats::default()));
     }
     let closed = mesh.is_closed();
     let (grid, stats) = bake_bricks(tris, opts, closed, &path)?;
@@ -264,13 +256,8 @@ pub fn bake_sparse(
         ));
     }
     if let Some(file) = &cache_file {
-        match cache::write_atomic(file, &cache::encode_sparse(&grid, hash, opts)) {
-            Ok(()) => notes.push(format!("sparse grid cached as {}", file.display())),
-            Err(e) => notes.push(format!(
-                "could not cache sparse grid at {}: {e}",
-                file.display()
-            )),
-        }
+        let bytes = cache::encode_sparse(&grid, hash, opts);
+        cache::write_cached(file, "sparse grid", &bytes, &mut notes);
     }
     let baked = BakedSparse {
         grid,

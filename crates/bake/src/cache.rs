@@ -343,6 +343,41 @@ pub fn decode(bytes: &[u8], hash: u64, resolution: u32) -> Result<DistanceGrid, 
     })
 }
 
+/// Reads and decodes the cached grid at `file`: `Some` when it is there and valid; otherwise
+/// `None`, with a note saying why it was not used (none when the file does not exist).
+/// `what` names the grid kind in the notes.
+pub(crate) fn read_cached<T>(
+    file: &Path,
+    what: &str,
+    decode: impl FnOnce(&[u8]) -> Result<T, String>,
+    notes: &mut Vec<String>,
+) -> Option<T> {
+    match std::fs::read(file) {
+        Ok(bytes) => match decode(&bytes) {
+            Ok(grid) => return Some(grid),
+            Err(why) => notes.push(format!(
+                "{what} cache file {} rejected ({why}); re-baked",
+                file.display()
+            )),
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => notes.push(format!(
+            "{what} cache file {} unreadable ({e}); re-baked",
+            file.display()
+        )),
+    }
+    None
+}
+
+/// Writes `bytes` to `file` ([`write_atomic`]) and notes the outcome; a failure to cache is
+/// never an error (the grid is still returned).
+pub(crate) fn write_cached(file: &Path, what: &str, bytes: &[u8], notes: &mut Vec<String>) {
+    match write_atomic(file, bytes) {
+        Ok(()) => notes.push(format!("{what} cached as {}", file.display())),
+        Err(e) => notes.push(format!("could not cache {what} at {}: {e}", file.display())),
+    }
+}
+
 /// Writes `bytes` to `path` atomically (unique temp file in the same directory, then
 /// rename). Creates the directory if needed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {

@@ -190,36 +190,28 @@ pub fn bake_with_stats(
         .cache_dir
         .as_ref()
         .map(|d| cache::cache_path(d, hash, res));
-    if let Some(file) = &cache_file {
-        match std::fs::read(file) {
-            Ok(bytes) => match cache::decode(&bytes, hash, res) {
-                Ok(grid) => {
-                    notes.push(format!(
-                        "distance grid {}x{}x{} read from cache {}",
-                        grid.dims[0],
-                        grid.dims[1],
-                        grid.dims[2],
-                        file.display()
-                    ));
-                    let baked = Baked {
-                        grid,
-                        from_cache: true,
-                        bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-                        notes,
-                    };
-                    return Ok((baked, BakeStats::default()));
-                }
-                Err(why) => notes.push(format!(
-                    "cache file {} rejected ({why}); re-baked",
-                    file.display()
-                )),
-            },
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => notes.push(format!(
-                "cache file {} unreadable ({e}); re-baked",
-                file.display()
-            )),
-        }
+    if let Some(file) = &cache_file
+        && let Some(grid) = cache::read_cached(
+            file,
+            "distance grid",
+            |b| cache::decode(b, hash, res),
+            &mut notes,
+        )
+    {
+        notes.push(format!(
+            "distance grid {}x{}x{} read from cache {}",
+            grid.dims[0],
+            grid.dims[1],
+            grid.dims[2],
+            file.display()
+        ));
+        let baked = Baked {
+            grid,
+            from_cache: true,
+            bake_ms: t0.elapsed().as_secs_f64() * 1e3,
+            notes,
+        };
+        return Ok((baked, BakeStats::default()));
     }
     let (grid, stats) = bake_grid(tris, res, &path)?;
     notes.push(format!(
@@ -245,10 +237,8 @@ pub fn bake_with_stats(
         ));
     }
     if let Some(file) = &cache_file {
-        match cache::write_atomic(file, &cache::encode(&grid, hash, res)) {
-            Ok(()) => notes.push(format!("distance grid cached as {}", file.display())),
-            Err(e) => notes.push(format!("could not cache grid at {}: {e}", file.display())),
-        }
+        let bytes = cache::encode(&grid, hash, res);
+        cache::write_cached(file, "distance grid", &bytes, &mut notes);
     }
     let baked = Baked {
         grid,
