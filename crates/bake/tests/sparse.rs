@@ -10,38 +10,11 @@ use marchmesh_bake::{
     brute_force_signed_distance, cache,
 };
 use marchmesh_meshio::{TriangleMesh, load_mesh};
+
+mod common;
+use common::cube;
 use proptest::prelude::*;
 
-/// Axis-aligned cube `[-1, 1]^3`, outward counter-clockwise, optionally without its top.
-fn cube(with_top: bool) -> TriangleMesh {
-    let positions: Vec<Vec3> = (0..8)
-        .map(|i| {
-            Vec3::new(
-                if i & 1 == 0 { -1.0 } else { 1.0 },
-                if i & 2 == 0 { -1.0 } else { 1.0 },
-                if i & 4 == 0 { -1.0 } else { 1.0 },
-            )
-        })
-        .collect();
-    let quads = [
-        [0, 4, 6, 2],
-        [1, 3, 7, 5],
-        [0, 1, 5, 4],
-        [0, 2, 3, 1],
-        [4, 5, 7, 6],
-        [2, 6, 7, 3],
-    ];
-    let n = if with_top { 6 } else { 5 };
-    TriangleMesh {
-        positions,
-        normals: None,
-        triangles: quads[..n]
-            .iter()
-            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-            .collect(),
-        report: Default::default(),
-    }
-}
 
 fn bunny() -> TriangleMesh {
     load_mesh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj")).unwrap()
