@@ -129,12 +129,8 @@ impl DistanceGrid {
         if nx < 2 || ny < 2 || nz < 2 || self.values.len() < n {
             return f64::INFINITY;
         }
-        let h = self.cell_size as f64;
-        let g = (p - self.min.as_dvec3()) / h;
         let maxc = DVec3::new((nx - 1) as f64, (ny - 1) as f64, (nz - 1) as f64);
-        let gc = g.clamp(DVec3::ZERO, maxc);
-        let gc = DVec3::select(gc.cmpeq(gc), gc, DVec3::ZERO);
-        let outside = (g - gc).length() * h;
+        let (gc, outside) = clamp_to_lattice(p, self.min, self.cell_size as f64, maxc);
         let i = (gc.x as u32).min(nx - 2);
         let j = (gc.y as u32).min(ny - 2);
         let k = (gc.z as u32).min(nz - 2);
@@ -150,15 +146,34 @@ impl DistanceGrid {
         let y0 = x00 + (x10 - x00) * f.y;
         let y1 = x01 + (x11 - x01) * f.y;
         let b = y0 + (y1 - y0) * f.z;
-        if outside > 0.0 || outside.is_nan() {
-            if b > 0.0 {
-                outside.hypot(b)
-            } else {
-                b + outside
-            }
+        extend_outside(b, outside)
+    }
+}
+
+/// Lattice coordinates of `p` for a lattice with sample 0 at `min` and cell `h`, clamped into
+/// `[0, max_cell]` (NaN coordinates to 0), and the distance from `p` to that box in world
+/// units (NaN for a NaN point).
+#[inline]
+pub(crate) fn clamp_to_lattice(p: DVec3, min: Vec3, h: f64, max_cell: DVec3) -> (DVec3, f64) {
+    let g = (p - min.as_dvec3()) / h;
+    let gc = g.clamp(DVec3::ZERO, max_cell);
+    let gc = DVec3::select(gc.cmpeq(gc), gc, DVec3::ZERO);
+    (gc, (g - gc).length() * h)
+}
+
+/// The grid value at a point `outside` away from the box, given the value `b` at the nearest
+/// point of the box: `hypot(outside, b)` outside a positive surface distance, `b + outside`
+/// otherwise; `b` itself inside the box. Never above the true distance where `b` is not.
+#[inline]
+pub(crate) fn extend_outside(b: f64, outside: f64) -> f64 {
+    if outside > 0.0 || outside.is_nan() {
+        if b > 0.0 {
+            outside.hypot(b)
         } else {
-            b
+            b + outside
         }
+    } else {
+        b
     }
 }
 

@@ -16,6 +16,8 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::grid::{clamp_to_lattice, extend_outside};
+
 /// Cells along each edge of a brick.
 pub const BRICK: u32 = 8;
 
@@ -488,23 +490,10 @@ impl SparseGrid {
     /// checked the layout).
     #[inline]
     pub fn sample_f64(&self, p: DVec3) -> f64 {
-        let h = self.cell_size as f64;
         let c = self.lattice_cells();
-        let g = (p - self.min.as_dvec3()) / h;
         let maxc = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-        let gc = g.clamp(DVec3::ZERO, maxc);
-        let gc = DVec3::select(gc.cmpeq(gc), gc, DVec3::ZERO);
-        let outside = (g - gc).length() * h;
-        let b = self.value_in_box(gc);
-        if outside > 0.0 || outside.is_nan() {
-            if b > 0.0 {
-                outside.hypot(b)
-            } else {
-                b + outside
-            }
-        } else {
-            b
-        }
+        let (gc, outside) = clamp_to_lattice(p, self.min, self.cell_size as f64, maxc);
+        extend_outside(self.value_in_box(gc), outside)
     }
 
     /// The value at lattice coordinates `g` (cells, inside the box).

@@ -12,7 +12,6 @@ use marchmesh_meshio::load_mesh;
 mod common;
 use common::cube;
 
-
 fn mesh_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../../scenes/meshes")

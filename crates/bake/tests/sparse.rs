@@ -15,7 +15,6 @@ mod common;
 use common::cube;
 use proptest::prelude::*;
 
-
 fn bunny() -> TriangleMesh {
     load_mesh(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj")).unwrap()
 }
