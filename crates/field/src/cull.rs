@@ -184,12 +184,7 @@ impl Field {
     /// field (same interpreter as [`Field::distance_x8`]; an empty restriction is 1e30).
     #[inline]
     pub fn restricted_distance_x8(&self, r: &Restricted, p: [Vec3; 8]) -> [f32; 8] {
-        let v = V3::new(
-            F32x8(p.map(|v| v.x)),
-            F32x8(p.map(|v| v.y)),
-            F32x8(p.map(|v| v.z)),
-        );
-        self.eval::<F32x8, false>(&r.prog, v).0.0
+        self.restricted_distance_lanes(r, V3::from_points(p)).0
     }
 
     /// Distances of eight points given as SoA lanes under a restriction (per lane the same

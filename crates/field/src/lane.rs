@@ -355,6 +355,18 @@ pub struct V3<T> {
     pub z: T,
 }
 
+impl V3<F32x8> {
+    /// Eight points as lanes (structure of arrays), lane `k` = `p[k]`.
+    #[inline(always)]
+    pub fn from_points(p: [glam::Vec3; 8]) -> Self {
+        V3::new(
+            F32x8(p.map(|v| v.x)),
+            F32x8(p.map(|v| v.y)),
+            F32x8(p.map(|v| v.z)),
+        )
+    }
+}
+
 impl<T: Lane> V3<T> {
     /// From components.
     #[inline(always)]

@@ -422,24 +422,14 @@ impl Field {
     /// per lane).
     #[inline]
     pub fn distance_x8(&self, p: [Vec3; 8]) -> [f32; 8] {
-        let v = V3::new(
-            F32x8(p.map(|v| v.x)),
-            F32x8(p.map(|v| v.y)),
-            F32x8(p.map(|v| v.z)),
-        );
-        self.eval::<F32x8, false>(&self.p32, v).0.0
+        self.distance_lanes(V3::from_points(p)).0
     }
 
     /// Distances and materials at eight points evaluated in lockstep (per lane the same as
     /// [`Field::distance_material`]).
     #[inline]
     pub fn distance_material_x8(&self, p: [Vec3; 8]) -> ([f32; 8], [MaterialId; 8]) {
-        let v = V3::new(
-            F32x8(p.map(|v| v.x)),
-            F32x8(p.map(|v| v.y)),
-            F32x8(p.map(|v| v.z)),
-        );
-        let (d, m) = self.eval::<F32x8, true>(&self.p32, v);
+        let (d, m) = self.eval::<F32x8, true>(&self.p32, V3::from_points(p));
         (d.0, m)
     }
 

@@ -521,16 +521,11 @@ impl SdfGeometry {
         // Every lane starts on the first ray's point, so empty lanes evaluate finite points.
         for k in 0..8 {
             soa.load(k, &first.1);
-            soa.clear(k);
         }
-        soa.load(0, &first.1);
         lanes[0] = Some(first);
         for (k, lane) in lanes.iter_mut().enumerate().skip(1) {
             *lane = load(&mut next, done);
-            match lane {
-                Some((_, m)) => soa.load(k, m),
-                None => soa.clear(k),
-            }
+            soa.seat(k, lane.as_ref().map(|l| &l.1));
         }
         while lanes.iter().any(Option::is_some) {
             let d = distance(soa.points());
@@ -548,10 +543,7 @@ impl SdfGeometry {
                     Next::Done(t) => {
                         done(*i, Some(m), t);
                         *lane = load(&mut next, done);
-                        match lane {
-                            Some((_, m)) => soa.load(k, m),
-                            None => soa.clear(k),
-                        }
+                        soa.seat(k, lane.as_ref().map(|l| &l.1));
                     }
                 }
             }

@@ -638,11 +638,14 @@ impl Lanes8 {
         }
     }
 
-    /// Lane `k` is empty: it keeps evaluating its last point (finite) and is never handed
-    /// out again.
+    /// Lane `k` now traces `m` ([`Lanes8::load`]), or with `None` is empty: it keeps
+    /// evaluating its last point (finite) and is never handed to a scalar step again.
     #[inline]
-    pub fn clear(&mut self, k: usize) {
-        self.fast.0[k] = 0;
+    pub fn seat(&mut self, k: usize, m: Option<&March>) {
+        match m {
+            Some(m) => self.load(k, m),
+            None => self.fast.0[k] = 0,
+        }
     }
 
     /// Writes lane `k`'s plain state back into its ray before a scalar step.
