@@ -64,3 +64,29 @@ fn sparse_bricks_beat_the_dense_grid_on_the_bunny() {
     );
     assert!(cubic.psnr_db >= bricks.psnr_db - 0.5);
 }
+
+#[test]
+fn sparse_grid_options_out_of_range_are_refused_by_name_before_baking() {
+    let scene = marchmesh_scene::load(&scenes_dir().join("generated/mesh_bunny.json"))
+        .expect("committed scene")
+        .with_image_size(16, 12)
+        .expect("size");
+    let sparse = |band_voxels, res| SdfOptions {
+        mesh_grid: MeshGrid::Sparse {
+            band_voxels,
+            quantization: Quantization::U8,
+            reconstruction: Reconstruction::Trilinear,
+        },
+        mesh_grid_resolution: res,
+        ..SdfOptions::DEFAULT
+    };
+    for (opts, name) in [
+        (sparse(0, 128), "band"),
+        (sparse(99, 128), "band"),
+        (sparse(2, 100_000), "mesh_grid_resolution"),
+        (sparse(2, 1), "mesh_grid_resolution"),
+    ] {
+        let err = build(&scene, &opts).expect_err("refused").to_string();
+        assert!(err.contains(name), "{err}");
+    }
+}
