@@ -194,6 +194,19 @@ impl Field {
         self.eval::<F32x8, false>(&r.prog, p).0
     }
 
+    /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this
+    /// field (only for rays of the restricted bundle).
+    #[inline]
+    pub fn restricted_segment_step(
+        &self,
+        r: &Restricted,
+        p: Vec3,
+        dir: Vec3,
+        len: f32,
+    ) -> (f32, f32) {
+        self.segment_in(&r.prog, p, dir, len)
+    }
+
     /// The scalar distance under a restriction (same values per point as
     /// [`Field::restricted_distance_x8`]).
     #[inline]

@@ -418,6 +418,36 @@ impl Field {
         self.eval::<f64, true>(&self.p64, V3::new(p.x, p.y, p.z))
     }
 
+    /// The distance at `p` (as [`Field::distance`]) and a safe step along `dir` from local
+    /// directional Lipschitz bounds over the segment `[p, p + len dir]` (segment tracing,
+    /// see [`program::segment`]): for a distance `d != 0` the field keeps the sign of `d` at
+    /// `p + s dir` for every `s` in `[0, step)`. Never below `|d| / |dir|`; 0 when `d` is 0 or
+    /// NaN. `len` must be positive (a longer segment gives looser bounds).
+    #[inline]
+    pub fn segment_step(&self, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
+        self.segment_in(&self.p32, p, dir, len)
+    }
+
+    /// [`Field::segment_step`] in f64 (same formulas).
+    pub fn segment_step_f64(&self, p: DVec3, dir: DVec3, len: f64) -> (f64, f64) {
+        let v = |a: DVec3| V3::new(a.x, a.y, a.z);
+        if self.grids.is_empty() {
+            self.p64.segment(v(p), v(dir), len, &[])
+        } else {
+            self.p64.segment(v(p), v(dir), len, &self.grid_refs())
+        }
+    }
+
+    #[inline]
+    fn segment_in(&self, prog: &Program<f32>, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
+        let v = |a: Vec3| V3::new(a.x, a.y, a.z);
+        if self.grids.is_empty() {
+            prog.segment(v(p), v(dir), len, &[])
+        } else {
+            prog.segment(v(p), v(dir), len, &self.grid_refs())
+        }
+    }
+
     /// Distances at eight points evaluated in lockstep (same values as [`Field::distance`]
     /// per lane).
     #[inline]

@@ -28,6 +28,8 @@
 use crate::lane::{Lane, Scalar, V3};
 use crate::shapes::{self, TriData};
 
+pub mod segment;
+
 /// Most copies evaluated per repeated axis.
 pub const MAX_WINDOW: usize = 5;
 
@@ -53,6 +55,22 @@ impl<S: Scalar> Affine<S> {
                     s(3) * p.x + s(4) * p.y + s(5) * p.z,
                     s(6) * p.x + s(7) * p.y + s(8) * p.z,
                 ) + t
+            }
+        }
+    }
+
+    /// The linear part alone (directions: `lin * d`).
+    #[inline(always)]
+    fn apply_linear<T: Lane<S = S>>(&self, d: V3<T>) -> V3<T> {
+        match &self.lin {
+            None => d,
+            Some(m) => {
+                let s = |i: usize| T::splat(m[i]);
+                V3::new(
+                    s(0) * d.x + s(1) * d.y + s(2) * d.z,
+                    s(3) * d.x + s(4) * d.y + s(5) * d.z,
+                    s(6) * d.x + s(7) * d.y + s(8) * d.z,
+                )
             }
         }
     }
