@@ -6,9 +6,9 @@
 //! issue 14 is measured (the image stays the same size and similar in coverage).
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
-//! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [versus=KEY=VALUE]`
+//! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false] [versus=KEY=VALUE]`
 //!
-//! `versus=cull=false` (or `lockstep=false`) builds a second geometry with that option
+//! `versus=cull=false` (or `lockstep=false`, `segment=false`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.
@@ -48,6 +48,7 @@ fn run() -> Result<(), String> {
     let flag = |v: Option<&str>| v.is_none_or(|v| v != "false");
     let lockstep = flag(kv("lockstep"));
     let cull = flag(kv("cull"));
+    let segment = flag(kv("segment"));
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -58,6 +59,7 @@ fn run() -> Result<(), String> {
     let options = SdfOptions {
         lockstep,
         cull,
+        segment,
         ..SdfOptions::DEFAULT
     };
     let g = build(&scene, &options).map_err(|e| e.to_string())?;
@@ -70,9 +72,11 @@ fn run() -> Result<(), String> {
                 "cull=true" => other.cull = true,
                 "lockstep=false" => other.lockstep = false,
                 "lockstep=true" => other.lockstep = true,
+                "segment=false" => other.segment = false,
+                "segment=true" => other.segment = true,
                 _ => {
                     return Err(format!(
-                        "versus: {spec}: expected cull=BOOL or lockstep=BOOL"
+                        "versus: {spec}: expected cull=BOOL, lockstep=BOOL or segment=BOOL"
                     ));
                 }
             }

@@ -289,6 +289,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
             refine_steps: opts.refine_steps,
             max_distance: max_distance as f32,
             bounds,
+            segment: opts.segment,
         },
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
@@ -408,15 +409,45 @@ impl SdfGeometry {
     }
 
     fn run(&self, m: &mut March) -> Termination {
-        Self::run_with(m, &self.params, |p| self.field.distance(p))
+        Self::run_with(
+            m,
+            &self.params,
+            |p| self.field.distance(p),
+            |p, d, len| self.field.segment_step(p, d, len),
+        )
     }
 
-    /// Marches `m` to its end with the distance function `distance`.
-    fn run_with(m: &mut March, params: &Params, distance: impl Fn(Vec3) -> f32) -> Termination {
+    /// Marches `m` to its end with the distance function `distance` and, while it is
+    /// segment tracing, the safe-step function `segment(point, direction, length)`.
+    fn run_with(
+        m: &mut March,
+        params: &Params,
+        distance: impl Fn(Vec3) -> f32,
+        segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
+    ) -> Termination {
         loop {
-            if let Next::Done(t) = m.feed(distance(m.point()), params) {
+            if let Next::Done(t) = Self::advance(m, params, None, &distance, &segment) {
                 return t;
             }
+        }
+    }
+
+    /// One scalar step of `m`: a segment-tracing sample when it asks for one, else the plain
+    /// distance (`known` when the caller already evaluated it at [`March::point`]).
+    #[inline]
+    fn advance(
+        m: &mut March,
+        params: &Params,
+        known: Option<f32>,
+        distance: &impl Fn(Vec3) -> f32,
+        segment: &impl Fn(Vec3, Vec3, f32) -> (f32, f32),
+    ) -> Next {
+        match m.segment_len() {
+            Some(len) => {
+                let (d, step) = segment(m.point(), m.dir(), len);
+                m.feed_segment(d, step, params)
+            }
+            None => m.feed(known.unwrap_or_else(|| distance(m.point())), params),
         }
     }
 
@@ -433,7 +464,16 @@ impl SdfGeometry {
             Ok(m) => m,
             Err(why) => return TraceResult::not_found(why, RayWork::default()),
         };
-        let term = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
+        let term = Self::run_with(
+            &mut m,
+            &self.params,
+            |p| inside.nearest(p).0,
+            |p, _, _| {
+                // No directional bounds for the per-object fields: plain steps.
+                let d = inside.nearest(p).0;
+                (d, d.abs())
+            },
+        );
         self.finish_with(&m, term, |p, dir, h| {
             inside.normal_material(inside.nearest(p).1, p, dir, h)
         })
@@ -449,8 +489,16 @@ impl SdfGeometry {
         refine: bool,
         mut done: impl FnMut(usize, Option<&March>, Termination),
     ) {
+        let full = |p, d, len| self.field.segment_step(p, d, len);
         if !self.cull || self.field.node_count() < CULL_MIN_NODES {
-            self.lockstep_with(rays, 0, refine, &mut done, |p| self.field.distance_lanes(p));
+            self.lockstep_with(
+                rays,
+                0,
+                refine,
+                &mut done,
+                |p| self.field.distance_lanes(p),
+                full,
+            );
             return;
         }
         let mut restricted = Restricted::default();
@@ -458,13 +506,23 @@ impl SdfGeometry {
             match self.cone_of(bundle) {
                 Some(cone) => {
                     self.field.restrict_to(&cone, &mut restricted);
-                    self.lockstep_with(bundle, k * CULL_BUNDLE, refine, &mut done, |p| {
-                        self.field.restricted_distance_lanes(&restricted, p)
-                    });
+                    self.lockstep_with(
+                        bundle,
+                        k * CULL_BUNDLE,
+                        refine,
+                        &mut done,
+                        |p| self.field.restricted_distance_lanes(&restricted, p),
+                        |p, d, len| self.field.restricted_segment_step(&restricted, p, d, len),
+                    );
                 }
-                None => self.lockstep_with(bundle, k * CULL_BUNDLE, refine, &mut done, |p| {
-                    self.field.distance_lanes(p)
-                }),
+                None => self.lockstep_with(
+                    bundle,
+                    k * CULL_BUNDLE,
+                    refine,
+                    &mut done,
+                    |p| self.field.distance_lanes(p),
+                    full,
+                ),
             }
         }
     }
@@ -492,7 +550,8 @@ impl SdfGeometry {
 
     /// The lockstep loop over `rays` (indices reported from `first_index`) with the 8-lane
     /// distance function `distance`: plain marching steps run on all lanes at once
-    /// ([`Lanes8::step`]), every other decision in the lane's scalar [`March`].
+    /// ([`Lanes8::step`]), every other decision in the lane's scalar [`March`], which takes
+    /// its segment-tracing samples from `segment` (scalar).
     fn lockstep_with(
         &self,
         rays: &[Ray],
@@ -500,7 +559,9 @@ impl SdfGeometry {
         refine: bool,
         done: &mut impl FnMut(usize, Option<&March>, Termination),
         distance: impl Fn(V3<F32x8>) -> F32x8,
+        segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
     ) {
+        let no_scalar = |_: Vec3| f32::NAN;
         let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
         let mut soa = Lanes8::default();
         let mut next = 0usize;
@@ -538,7 +599,7 @@ impl SdfGeometry {
                     continue;
                 };
                 soa.store(k, m);
-                match m.feed(d.0[k], &self.params) {
+                match Self::advance(m, &self.params, Some(d.0[k]), &no_scalar, &segment) {
                     Next::Continue => soa.load(k, m),
                     Next::Done(t) => {
                         done(*i, Some(m), t);
@@ -574,7 +635,16 @@ impl Geometry for SdfGeometry {
                     work: RayWork::default(),
                 },
                 Ok(mut m) => {
-                    let t = Self::run_with(&mut m, &self.params, |p| inside.nearest(p).0);
+                    let t = Self::run_with(
+                        &mut m,
+                        &self.params,
+                        |p| inside.nearest(p).0,
+                        |p, _, _| {
+                            // No directional bounds for the per-object fields: plain steps.
+                            let d = inside.nearest(p).0;
+                            (d, d.abs())
+                        },
+                    );
                     Self::occ(&m, t)
                 }
             };

@@ -24,6 +24,20 @@
 //!   prediction's; a distance below the fine threshold there is a hit, reaching the
 //!   prediction's sphere clears the gap.
 //! * `Bracket`: regula falsi (Illinois) on a sign change, to the fine threshold.
+//! * `Segment`: segment tracing (Galin et al. 2020, "Segment Tracing Using Local Lipschitz
+//!   Bounds"): the step is the field's safe step along the ray from local directional
+//!   Lipschitz bounds ([`marchmesh_field::Field::segment_step`], `|f| / lambda` with
+//!   `lambda` a bound of `|df/dt|` over the next segment), which the caller supplies through
+//!   [`March::feed_segment`]. Sphere tracing a ray at angle `theta` over a plane shrinks the
+//!   distance by `1 - sin(theta)` per step (at 0.01 degree every ray exhausted 512 steps);
+//!   with `lambda = sin(theta)` the step reaches the surface at once. Entered from `March`
+//!   only when progress is slow (after [`SEGMENT_MIN_EVALS`] evaluations, a distance that
+//!   shrank by less than [`SEGMENT_RATIO`]), so ordinary rays stay on the 8-lane plain path;
+//!   left for `March` again when the bound gains nothing, for the shell logic below when it
+//!   gains nothing within `eps` of a surface. Every step is a safe step (never past a sign
+//!   change), so a sheet or a thin feature is not skipped; a hit is a sample below `thr`
+//!   whose safe step is below `thr` too, so grazing hits are not called `thr / sin(theta)`
+//!   early.
 //! * `Escape`: a ray starting on a surface (secondary rays) first leaves that surface's shell
 //!   stepping by the (safe) distance; a hit there is a distance below half the starting
 //!   clearance (another surface closing in, e.g. at a contact).
@@ -49,6 +63,8 @@ pub(crate) struct Params {
     pub max_distance: f32,
     /// Scene bounds (render space), if finite.
     pub bounds: Option<(Vec3, Vec3)>,
+    /// Switch slowly progressing rays to segment tracing (`Phase::Segment`).
+    pub segment: bool,
 }
 
 /// Field evaluations one visit to the shell may spend deciding hit or near miss.
@@ -56,6 +72,29 @@ const FINE_BUDGET: u32 = 24;
 
 /// Field evaluations one sweep of a gap before a prediction may spend.
 const SWEEP_BUDGET: u32 = 32;
+
+/// Evaluations a ray spends sphere tracing before slow progress switches it to segment
+/// tracing: rays that hit or leave within that many pay nothing for the mechanism.
+pub(crate) const SEGMENT_MIN_EVALS: u32 = 8;
+
+/// Slow progress: a distance shrinking to more than this fraction of the previous one. A ray
+/// at angle `theta` to a plane keeps `1 - omega sin(theta)` per step (0.979 at 1 degree with
+/// omega 1.2), so this engages below about 5 degrees.
+pub(crate) const SEGMENT_RATIO: f32 = 0.9;
+
+/// Each segment is this many times the last step (Galin et al. grow the segment by a
+/// constant factor): long enough that a bound valid far ahead lets the step grow
+/// geometrically, short enough that bounds of curved surfaces stay tight.
+const SEGMENT_GROWTH: f32 = 4.0;
+
+/// A segment step shorter than this many plain steps (`|f|`) gains nothing: marching
+/// returns to the 8-lane plain path (or, within `eps` of a surface, to the shell logic).
+const SEGMENT_GAIN: f32 = 1.5;
+
+/// Steps with a sample below `thr` whose safe step is still above `thr` (approaching a
+/// surface at a grazing angle, where `thr` on the field is `thr / sin(theta)` along the ray)
+/// before the sample is called a hit anyway.
+const SEGMENT_EXTRA: u32 = 8;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Phase {
@@ -83,6 +122,12 @@ enum Phase {
         left: u32,
         evals: u32,
     },
+    /// Segment tracing: the caller evaluates [`Field::segment_step`] over `len` at the
+    /// current point. `extra` counts samples below `thr` stepped past (see
+    /// [`SEGMENT_EXTRA`]).
+    ///
+    /// [`Field::segment_step`]: marchmesh_field::Field::segment_step
+    Segment { len: f32, extra: u32 },
     /// A crossing between `lo` (outside) and `hi` (inside); `side` for Illinois.
     Bracket {
         lo: f32,
@@ -198,6 +243,17 @@ impl March {
         self.evals = s.evals;
     }
 
+    /// When the ray is segment tracing: the segment length over which the next sample's
+    /// safe step is wanted ([`March::feed_segment`]); `None` when [`March::feed`] wants a
+    /// plain distance.
+    #[inline]
+    pub fn segment_len(&self) -> Option<f32> {
+        match self.phase {
+            Phase::Segment { len, .. } => Some(len),
+            _ => None,
+        }
+    }
+
     /// The point whose distance [`March::feed`] needs next.
     #[inline]
     pub fn point(&self) -> Vec3 {
@@ -259,9 +315,33 @@ impl March {
         }
     }
 
-    /// Consumes the field value `d` at [`March::point`].
+    /// Consumes the field value `d` at [`March::point`]. In the segment phase the safe step
+    /// is taken as `|d|` (plain sphere tracing); use [`March::feed_segment`] there.
     #[inline]
     pub fn feed(&mut self, d: f32, p: &Params) -> Next {
+        self.feed_with(d, d.abs(), p)
+    }
+
+    /// Consumes the field value `d` at [`March::point`] and the safe step `step` along the
+    /// ray over [`March::segment_len`] (`Field::segment_step`: the field keeps its sign on
+    /// `[t, t + step)`; at least `|d|`).
+    #[inline]
+    pub fn feed_segment(&mut self, d: f32, step: f32, p: &Params) -> Next {
+        self.feed_with(d, step, p)
+    }
+
+    /// Slow progress in `March`: the switch to segment tracing (the same test as in
+    /// [`Lanes8::step`]). `s` is the new sample, `evals` already counts it.
+    #[inline]
+    fn slow(&self, s: f32, p: &Params) -> bool {
+        p.segment
+            && self.evals >= SEGMENT_MIN_EVALS
+            && s < self.r_prev
+            && s > SEGMENT_RATIO * self.r_prev
+    }
+
+    #[inline]
+    fn feed_with(&mut self, d: f32, seg_step: f32, p: &Params) -> Next {
         self.evals += 1;
         if d.is_nan() {
             return Next::Done(Termination::Miss);
@@ -326,8 +406,23 @@ impl March {
                 if s < self.eps(p) {
                     return self.enter_shell(s, p);
                 }
+                if self.slow(s, p) {
+                    // A plain (unrelaxed) step, so no overlap check is owed, then segments.
+                    self.t_prev = self.t;
+                    self.r_prev = s;
+                    if self.t + s > self.t_end {
+                        return self.end();
+                    }
+                    self.t += s;
+                    self.phase = Phase::Segment {
+                        len: SEGMENT_GROWTH * s,
+                        extra: 0,
+                    };
+                    return self.budget(p);
+                }
                 self.step_from(s, p)
             }
+            Phase::Segment { len: _, extra } => self.segment(s, seg_step, extra, p),
             Phase::Fine {
                 ta,
                 sa,
@@ -393,6 +488,43 @@ impl March {
                 }
             }
         }
+    }
+
+    /// A segment-tracing sample `s` at `self.t` with safe step `step`.
+    #[inline]
+    fn segment(&mut self, s: f32, step: f32, extra: u32, p: &Params) -> Next {
+        if s < 0.0 {
+            // Rounding put the step just past the surface: the last sample is outside.
+            return self.crossing(self.t_prev, self.r_prev, self.t, s, p);
+        }
+        let thr = self.thr(p);
+        if s <= thr && (step <= thr || extra >= SEGMENT_EXTRA) {
+            return Next::Done(Termination::Hit);
+        }
+        let gains = step >= SEGMENT_GAIN * s;
+        if !gains {
+            if s < self.eps(p) {
+                // Near a surface the bound is no better than the distance: decide hit or
+                // near miss as plain marching does.
+                return self.enter_shell(s, p);
+            }
+            self.phase = Phase::March;
+            return self.step_from(s, p);
+        }
+        // The field keeps its sign on [t, t + step): step slightly short of it, so rounding
+        // of the bound cannot carry the ray past a surface.
+        let adv = (step * (1.0 - 1.0 / 1024.0)).max(s);
+        self.t_prev = self.t;
+        self.r_prev = s;
+        if self.t + adv > self.t_end {
+            return self.end();
+        }
+        self.t += adv;
+        self.phase = Phase::Segment {
+            len: SEGMENT_GROWTH * adv,
+            extra: extra + u32::from(s <= thr),
+        };
+        self.budget(p)
     }
 
     /// A sample `s < eps` while marching.
@@ -691,8 +823,16 @@ impl Lanes8 {
             F32x8::lt(c(1.0), self.omega),
             F32x8::lt(r + self.r_prev, (t - self.t_prev) + thr),
         );
+        // Lanes whose progress is slow switch to segment tracing in their scalar `March`
+        // (`March::slow`): they leave the fast path like an exhausted budget does.
+        let slow_progress = F32x8::and(
+            F32x8::lt(s, self.r_prev),
+            F32x8::lt(self.r_prev * c(SEGMENT_RATIO), s),
+        );
         let budget = M8(std::array::from_fn(|k| {
-            if self.evals[k] + 1 < p.max_steps {
+            let segment =
+                p.segment && self.evals[k] + 1 >= SEGMENT_MIN_EVALS && slow_progress.0[k] != 0;
+            if self.evals[k] + 1 < p.max_steps && !segment {
                 !0
             } else {
                 0

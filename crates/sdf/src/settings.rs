@@ -38,6 +38,9 @@ pub struct SdfSettings {
     /// In lockstep batches, trace bundles of primary rays through only the objects their
     /// cone can reach (false: the whole field for every ray).
     pub cull: bool,
+    /// Switch slowly progressing (grazing) rays to segment tracing with local directional
+    /// Lipschitz bounds (false: plain sphere tracing throughout).
+    pub segment: bool,
     /// Skip subtrees by their bounding boxes and clip rays to the scene box (false: every
     /// node at every step, the naive cost).
     pub bounds: bool,
@@ -140,6 +143,7 @@ impl SdfSettings {
             normal_step: o.normal_step,
             lockstep: o.lockstep,
             cull: o.cull,
+            segment: o.segment,
             bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
             grid: match o.mesh_grid {
@@ -176,6 +180,7 @@ impl SdfSettings {
             normal_step: self.normal_step,
             lockstep: self.lockstep,
             cull: self.cull,
+            segment: self.segment,
             bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,
             mesh_grid: match self.grid {
