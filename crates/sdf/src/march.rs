@@ -91,6 +91,13 @@ const SEGMENT_GROWTH: f32 = 4.0;
 /// returns to the 8-lane plain path (or, within `eps` of a surface, to the shell logic).
 const SEGMENT_GAIN: f32 = 1.5;
 
+/// A segment longer than this many distances whose bound gains nothing is retried at the
+/// same point over [`SEGMENT_RETRY_LEN`] distances.
+const SEGMENT_RETRY: f32 = 8.0;
+
+/// The retried segment, in distances: short enough for the bound to be the local one.
+const SEGMENT_RETRY_LEN: f32 = 2.0;
+
 /// Steps with a sample below `thr` whose safe step is still above `thr` (approaching a
 /// surface at a grazing angle, where `thr` on the field is `thr / sin(theta)` along the ray)
 /// before the sample is called a hit anyway.
@@ -422,7 +429,7 @@ impl March {
                 }
                 self.step_from(s, p)
             }
-            Phase::Segment { len: _, extra } => self.segment(s, seg_step, extra, p),
+            Phase::Segment { len, extra } => self.segment(s, seg_step, len, extra, p),
             Phase::Fine {
                 ta,
                 sa,
@@ -490,9 +497,9 @@ impl March {
         }
     }
 
-    /// A segment-tracing sample `s` at `self.t` with safe step `step`.
+    /// A segment-tracing sample `s` at `self.t` with safe step `step` over `len`.
     #[inline]
-    fn segment(&mut self, s: f32, step: f32, extra: u32, p: &Params) -> Next {
+    fn segment(&mut self, s: f32, step: f32, len: f32, extra: u32, p: &Params) -> Next {
         if s < 0.0 {
             // Rounding put the step just past the surface: the last sample is outside.
             return self.crossing(self.t_prev, self.r_prev, self.t, s, p);
@@ -502,6 +509,17 @@ impl March {
             return Next::Done(Termination::Hit);
         }
         let gains = step >= SEGMENT_GAIN * s;
+        if !gains && len > SEGMENT_RETRY * s {
+            // The segment reached far past the distance, e.g. beyond a box's far edge, where
+            // the bound is 1: ask again here over a short one (one evaluation), whose bound
+            // is the local one. Without this, grazing rays near a box top's far end fell back
+            // to the shell logic and its 24-evaluation limit (depth error 1e-3).
+            self.phase = Phase::Segment {
+                len: (SEGMENT_RETRY_LEN * s).max(thr),
+                extra,
+            };
+            return self.budget(p);
+        }
         if !gains {
             if s < self.eps(p) {
                 // Near a surface the bound is no better than the distance: decide hit or
