@@ -20,6 +20,8 @@ pub mod keys {
     pub const SDF_MAX_STEPS: &str = "max_steps";
     /// SDF: over-relaxation factor in [1, 2).
     pub const SDF_RELAXATION: &str = "relaxation";
+    /// SDF: segment tracing of slowly progressing (grazing) rays, `true` or `false`.
+    pub const SDF_SEGMENT: &str = "segment";
     /// SDF: mesh bake grid resolution (cells on the longest side).
     pub const SDF_GRID: &str = "grid_res";
     /// SDF: mesh grid kind, `dense` or `sparse`.
@@ -267,13 +269,15 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
             )],
             far,
         );
-        out.push(case(
-            "grazing_plane",
-            "angle_deg",
-            a,
-            plane,
-            1.0 / a.to_radians().sin(),
-        ));
+        // Each case also runs plain sphere tracing (`segment=false`), what the sdf backend
+        // did before segment tracing: 100% step exhaustion at 0.1 and 0.01 degree.
+        let grazing = |family, json| {
+            let mut c = case(family, "angle_deg", a, json, 1.0 / a.to_radians().sin());
+            c.variants
+                .insert(1, Variant::with(BackendKind::Sdf, keys::SDF_SEGMENT, false));
+            c
+        };
+        out.push(grazing("grazing_plane", plane));
         let half = far;
         let slab = scene(
             cam,
@@ -284,13 +288,7 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
             )],
             far,
         );
-        out.push(case(
-            "grazing_box",
-            "angle_deg",
-            a,
-            slab,
-            1.0 / a.to_radians().sin(),
-        ));
+        out.push(grazing("grazing_box", slab));
     }
 
     // Thin features: slabs, rods and a torus tube down to 1e-5 thick.
