@@ -1,5 +1,5 @@
 //! Grazing rays (issue 14 item 3): segment tracing makes rays at 5 ... 0.001 degree over a
-//! plane or a box top hit exactly within a few dozen evaluations (plain sphere tracing
+//! plane or a box top hit exactly within 64 evaluations (plain sphere tracing
 //! exhausts 512 steps below 0.1 degree), and random rays at small angles over planes,
 //! boxes, spheres and CSG find the exact reference's hits (no surface skipped).
 
@@ -56,7 +56,7 @@ fn grazing_rays_over_a_plane_and_a_box_top_hit_exactly() {
                     "{objects} at {deg}: t {t} exact {exact}"
                 );
                 assert!(
-                    out.work.steps <= 48,
+                    out.work.steps <= 64,
                     "{objects} at {deg}: {} steps",
                     out.work.steps
                 );

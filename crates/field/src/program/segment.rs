@@ -270,7 +270,9 @@ fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
     let mut l2 = zero;
     for a in 0..3 {
         let (_, hi) = r[a];
-        if zero < hi || !(hi < floor) {
+        // Active when it may be positive or the largest; NaN counts as active (safe).
+        let never_largest = hi < floor;
+        if zero < hi || !never_largest {
             l2 = l2 + da[a] * da[a];
         }
     }
@@ -282,7 +284,8 @@ fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
 /// the derivative is `|d| |u| / sqrt(u^2 + w^2)`, increasing in `|u|`, so largest at an end.
 fn sphere_lambda<S: Scalar>(a: V3<S>, d: V3<S>, len: S) -> S {
     let dn = d.len();
-    if !(dn > S::c(0.0)) {
+    let positive = dn > S::c(0.0);
+    if !positive {
         return S::c(0.0);
     }
     let e = d.scale(S::c(1.0) / dn);
