@@ -28,7 +28,9 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-EXAMPLE = os.path.join(ROOT, "target", "release", "examples", "anchor_rays")
+# Honour CARGO_TARGET_DIR (relative paths are relative to the repository root, as cargo's).
+TARGET = os.path.join(ROOT, os.environ.get("CARGO_TARGET_DIR", "target"))
+EXAMPLE = os.path.join(TARGET, "release", "examples", "anchor_rays")
 
 
 def run_example(*args):
