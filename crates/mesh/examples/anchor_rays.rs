@@ -4,8 +4,10 @@
 //!
 //! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
 //! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
-//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|raw; `wide1` traces single rays, `wide`
-//! row batches with packets) and prints
+//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|wide4x2|raw;
+//! `wide1` traces single rays, `wide` row batches with packets of 8 consecutive pixels of a
+//! row, `wide4x2` the same rays reordered into 4x2-pixel tiles, handed over a tile row at a
+//! time) and prints
 //! one Mrays/s figure per timed repeat after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
 
@@ -57,6 +59,23 @@ fn write_f32(path: std::path::PathBuf, values: impl Iterator<Item = f32>) -> Res
     Ok(())
 }
 
+/// `rays` (row-major, `side` wide) reordered tile by tile: each run of `tw * th` rays is one
+/// `tw x th` tile (row-major inside), tiles row-major; a ragged edge keeps what fits.
+fn tiled<T: Copy>(rays: &[T], side: usize, tw: usize, th: usize) -> Vec<T> {
+    let height = rays.len() / side;
+    let mut out = Vec::with_capacity(rays.len());
+    for ty in (0..height).step_by(th) {
+        for tx in (0..side).step_by(tw) {
+            for y in ty..(ty + th).min(height) {
+                for x in tx..(tx + tw).min(side) {
+                    out.push(rays[y * side + x]);
+                }
+            }
+        }
+    }
+    out
+}
+
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS";
@@ -90,14 +109,14 @@ fn main() -> Res<()> {
             let kind = match bvh {
                 "bvh2" | "raw" => BvhKind::Bvh2,
                 "cwbvh" => BvhKind::CwBvh,
-                "wide" | "wide1" => BvhKind::Wide,
+                "wide" | "wide1" | "wide4x2" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
             let g = build(
                 &scene,
                 &MeshOptions {
                     bvh: kind,
-                    packets: bvh == "wide",
+                    packets: bvh == "wide" || bvh == "wide4x2",
                     ..MeshOptions::DEFAULT
                 },
             )?;
@@ -108,8 +127,14 @@ fn main() -> Res<()> {
                 report.memory_bytes as f64 / tris.len() as f64
             );
             let raw = raw_build(kind, &tris);
-            let mut out = vec![TraceResult::default(); rays.len()];
             let side = scene.camera.width as usize;
+            // One batch per image row, or per row of tiles.
+            let (rays, batch) = if bvh == "wide4x2" {
+                (tiled(&rays, side, 4, 2), side * 2)
+            } else {
+                (rays, side)
+            };
+            let mut out = vec![TraceResult::default(); rays.len()];
             let mut trace = || {
                 let t = Instant::now();
                 let mut hits = 0usize;
@@ -127,7 +152,7 @@ fn main() -> Res<()> {
                 } else {
                     pool.install(|| {
                         // Row batches, as the integrator hands them over.
-                        for (r, o) in rays.chunks(side).zip(out.chunks_mut(side)) {
+                        for (r, o) in rays.chunks(batch).zip(out.chunks_mut(batch)) {
                             g.closest_hits(r, o);
                         }
                     });

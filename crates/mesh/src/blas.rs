@@ -287,7 +287,8 @@ fn traverse_cwbvh(
 /// A bottom-level structure.
 #[derive(Clone)]
 pub(crate) struct Blas {
-    /// Triangles in BVH slot order (`tris[slot]` is triangle `primitive_indices[slot]`).
+    /// Triangles in BVH slot order (`tris[slot]` is triangle `primitive_indices[slot]`);
+    /// empty for a wide tree, whose triangle blocks hold the same data.
     pub tris: Vec<RtTriangle>,
     /// The BVH.
     pub tree: Tree,
@@ -314,6 +315,9 @@ pub(crate) struct BlasInput {
 pub(crate) struct BlasHit {
     pub slot: u32,
     pub t: f32,
+    /// Where the triangle is stored: `slot` for Bvh2/CwBvh, the block reference of a wide
+    /// tree ([`WideBvh::triangle`]).
+    pub prim: u32,
 }
 
 impl Blas {
@@ -331,11 +335,15 @@ impl Blas {
             })
             .collect();
         let tree = Tree::build(kind, &tris, params);
-        let rt: Vec<RtTriangle> = tree
-            .primitive_indices()
-            .iter()
-            .map(|&i| RtTriangle::from(&tris[i as usize]))
-            .collect();
+        // A wide tree keeps its triangles in its blocks (shading reads them there).
+        let rt: Vec<RtTriangle> = if matches!(tree, Tree::Wide(_)) {
+            Vec::new()
+        } else {
+            tree.primitive_indices()
+                .iter()
+                .map(|&i| RtTriangle::from(&tris[i as usize]))
+                .collect()
+        };
         // Per-triangle shading data in slot order too: one indirection less per hit.
         let slots = tree.primitive_indices();
         let indices = if input.normals.is_some() {
@@ -365,10 +373,9 @@ impl Blas {
     #[inline(always)]
     pub(crate) fn closest(&self, ray: &mut Ray, work: &mut RayWork) -> Option<BlasHit> {
         if let Tree::Wide(w) = &self.tree {
-            return w
-                .wide
-                .closest(ray, work)
-                .map(|(slot, t)| BlasHit { slot, t });
+            let (prim, t) = w.wide.closest(ray, work)?;
+            let slot = w.wide.triangle(prim).map_or(0, |(slot, _)| slot);
+            return Some(BlasHit { slot, t, prim });
         }
         let mut best: Option<BlasHit> = None;
         let tris = &self.tris;
@@ -379,7 +386,11 @@ impl Blas {
                 let t = tri.intersect(ray);
                 if t < ray.tmax {
                     ray.tmax = t;
-                    best = Some(BlasHit { slot, t });
+                    best = Some(BlasHit {
+                        slot,
+                        t,
+                        prim: slot,
+                    });
                 }
             }
             true
@@ -411,10 +422,21 @@ impl Blas {
         hit
     }
 
+    /// The triangle of a hit: from the wide tree's blocks, else `tris[slot]`.
+    #[inline]
+    fn hit_triangle(&self, hit: &BlasHit) -> Option<RtTriangle> {
+        match &self.tree {
+            Tree::Wide(w) => w.wide.triangle(hit.prim).map(|(_, tri)| tri),
+            Tree::Bvh2(_) | Tree::CwBvh(_) => self.tris.get(hit.slot as usize).copied(),
+        }
+    }
+
     /// Shading normal (this BLAS's frame, unit) at a hit: interpolated vertex normals if
     /// present (barycentrics from `RtTriangle::compute_barycentric`), else geometric.
-    pub(crate) fn normal(&self, ray: &Ray, slot: u32) -> Vec3 {
-        let Some(tri) = self.tris.get(slot as usize) else {
+    /// `+Z` for a hit that names no triangle of this BLAS.
+    pub(crate) fn normal(&self, ray: &Ray, hit: &BlasHit) -> Vec3 {
+        let slot = hit.slot;
+        let Some(tri) = self.hit_triangle(hit) else {
             return Vec3::Z;
         };
         let geometric = Vec3::from(tri.compute_normal());

@@ -179,6 +179,31 @@ impl WideBvh {
         Some(LEAF | n_blocks << LEAF_FIRST_BITS | first_block)
     }
 
+    /// The BVH slot and the triangle (obvhs form, bit-identical to the `RtTriangle` it was
+    /// converted from) behind a hit reference `prim = block * 4 + lane`; `None` for a
+    /// reference outside the blocks or on a padding lane. Read from the block the hit test
+    /// just loaded, so shading a hit costs no extra cache miss and no per-slot copy of the
+    /// triangles is kept.
+    #[inline]
+    pub(crate) fn triangle(&self, prim: u32) -> Option<(u32, RtTriangle)> {
+        let b = self.blocks.get((prim / BLOCK as u32) as usize)?;
+        let lane = (prim % BLOCK as u32) as usize;
+        let slot = b.slot[lane];
+        if slot == EMPTY {
+            return None;
+        }
+        let v = |a: &[[f32; BLOCK]; 3]| glam::Vec3A::new(a[0][lane], a[1][lane], a[2][lane]);
+        Some((
+            slot,
+            RtTriangle {
+                v0: v(&b.v0),
+                e1: v(&b.e1),
+                e2: v(&b.e2),
+                ng: v(&b.ng),
+            },
+        ))
+    }
+
     /// Node count.
     pub(crate) fn node_count(&self) -> usize {
         self.nodes.len()
@@ -190,8 +215,9 @@ impl WideBvh {
             as u64
     }
 
-    /// Closest triangle along `ray` before `ray.tmax` as `(slot, t)`; shrinks `ray.tmax`.
-    /// Counts one node visit per wide node and 4 primitive tests per block.
+    /// Closest triangle along `ray` before `ray.tmax` as `(prim, t)`, `prim` a
+    /// [`WideBvh::triangle`] reference (`block * 4 + lane`); shrinks `ray.tmax`. Counts one
+    /// node visit per wide node and 4 primitive tests per block.
     #[inline]
     pub(crate) fn closest(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         #[cfg(target_arch = "x86_64")]
@@ -223,7 +249,7 @@ impl WideBvh {
         work: &mut RayWork,
         mut leaf: impl FnMut(&mut Ray, u32) -> bool,
     ) {
-        self.traverse::<Portable, false>(ray, work, |ray, blocks| {
+        self.traverse::<Portable, false>(ray, work, |ray, _, blocks| {
             for b in blocks {
                 for &slot in &b.slot {
                     if slot != EMPTY && !leaf(ray, slot) {
@@ -239,14 +265,14 @@ impl WideBvh {
     fn closest_with<N: NodeTest>(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         let mut best = None;
         let mut tests = 0u32;
-        self.traverse::<N, false>(ray, work, |ray, blocks| {
-            for b in blocks {
+        self.traverse::<N, false>(ray, work, |ray, first, blocks| {
+            for (i, b) in blocks.iter().enumerate() {
                 tests += BLOCK as u32;
                 let t = block_hits(b, ray);
                 for lane in 0..BLOCK {
                     if t[lane] < ray.tmax {
                         ray.tmax = t[lane];
-                        best = Some((b.slot[lane], t[lane]));
+                        best = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
                     }
                 }
             }
@@ -260,7 +286,7 @@ impl WideBvh {
     fn any_with<N: NodeTest>(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
         let mut hit = false;
         let mut tests = 0u32;
-        self.traverse::<N, true>(ray, work, |ray, blocks| {
+        self.traverse::<N, true>(ray, work, |ray, _, blocks| {
             for b in blocks {
                 tests += BLOCK as u32;
                 if block_hits(b, ray).iter().any(|&t| t < ray.tmax) {
@@ -282,7 +308,7 @@ impl WideBvh {
         &self,
         ray: &mut Ray,
         work: &mut RayWork,
-        mut leaf: impl FnMut(&mut Ray, &[TriBlock]) -> bool,
+        mut leaf: impl FnMut(&mut Ray, usize, &[TriBlock]) -> bool,
     ) {
         if self.root == EMPTY {
             return;
@@ -296,7 +322,7 @@ impl WideBvh {
                 let first = (cur & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
                 let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
                 if let Some(blocks) = self.blocks.get(first..first + count)
-                    && !leaf(ray, blocks)
+                    && !leaf(ray, first, blocks)
                 {
                     break 'walk;
                 }
