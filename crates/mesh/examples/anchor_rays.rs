@@ -8,7 +8,7 @@
 //! `wide1` traces single rays, `wide` row batches with packets of 8 consecutive pixels of a
 //! row, `wide4x2` the same rays reordered into 4x2-pixel tiles, handed over a tile row at a
 //! time) and prints
-//! one Mrays/s figure per timed repeat after one warm-up (`raw` is obvhs' own Bvh2
+//! one Mrays/s figure per timed repeat (CPU time of the tracing thread) after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
 
 #[path = "../benches/support/mod.rs"]
@@ -57,6 +57,16 @@ fn write_f32(path: std::path::PathBuf, values: impl Iterator<Item = f32>) -> Res
     }
     out.flush()?;
     Ok(())
+}
+
+/// Seconds the calling thread has run on a CPU (Linux `/proc/thread-self/schedstat`, first
+/// field, ns): on a loaded machine it leaves out the time the tracer waits descheduled,
+/// which wall time would count. Wall seconds since `start` where that file is missing.
+fn thread_seconds(start: Instant) -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .map_or_else(|| start.elapsed().as_secs_f64(), |ns| ns * 1e-9)
 }
 
 /// `rays` (row-major, `side` wide) reordered tile by tile: each run of `tw * th` rays is one
@@ -112,10 +122,21 @@ fn main() -> Res<()> {
                 "wide" | "wide1" | "wide4x2" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
+            use marchmesh_mesh::BuildQuality as Q;
+            let build_quality = match args.get(5).map(String::as_str) {
+                None | Some("medium") => Q::Medium,
+                Some("fastest") => Q::Fastest,
+                Some("very_fast") => Q::VeryFast,
+                Some("fast") => Q::Fast,
+                Some("slow") => Q::Slow,
+                Some("very_slow") => Q::VerySlow,
+                Some(other) => return Err(format!("unknown quality `{other}`").into()),
+            };
             let g = build(
                 &scene,
                 &MeshOptions {
                     bvh: kind,
+                    build_quality,
                     packets: bvh == "wide" || bvh == "wide4x2",
                     ..MeshOptions::DEFAULT
                 },
@@ -135,8 +156,10 @@ fn main() -> Res<()> {
                 (rays, side)
             };
             let mut out = vec![TraceResult::default(); rays.len()];
-            let mut trace = || {
-                let t = Instant::now();
+            let start = Instant::now();
+            let trace = |out: &mut [TraceResult]| {
+                let t0 = thread_seconds(start);
+                let mut seconds = 0.0;
                 let mut hits = 0usize;
                 if bvh == "wide1" {
                     // Single rays only (no packets).
@@ -150,19 +173,46 @@ fn main() -> Res<()> {
                         .filter(|r| raw_closest(&raw, r).is_finite())
                         .count();
                 } else {
-                    pool.install(|| {
-                        // Row batches, as the integrator hands them over.
+                    seconds = pool.install(|| {
+                        // Row (or tile-row) batches, as the integrator hands them over,
+                        // timed on the pool's thread.
+                        let t0 = thread_seconds(start);
                         for (r, o) in rays.chunks(batch).zip(out.chunks_mut(batch)) {
                             g.closest_hits(r, o);
                         }
+                        thread_seconds(start) - t0
                     });
                     hits += out.iter().filter(|o| o.hit().is_some()).count();
                 }
-                (rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6, hits)
+                if seconds == 0.0 {
+                    seconds = thread_seconds(start) - t0;
+                }
+                (rays.len() as f64 / seconds / 1e6, hits)
             };
-            trace();
+            trace(&mut out);
+            if bvh == "wide1" {
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    *o = g.closest_hit(r);
+                }
+            }
+            if bvh != "raw" {
+                let mean = |hit: bool, f: fn(&TraceResult) -> u32| {
+                    let sel = out.iter().filter(|o| o.hit().is_some() == hit);
+                    let (n, sum) = sel.fold((0.0, 0.0), |(n, s), o| (n + 1.0, s + f64::from(f(o))));
+                    sum / f64::max(n, 1.0)
+                };
+                let visits = |o: &TraceResult| o.work.node_visits;
+                let tests = |o: &TraceResult| o.work.primitive_tests;
+                eprintln!(
+                    "{bvh}: per hit ray {:.2} node visits, {:.2} triangle tests; per missing ray {:.2}, {:.2}",
+                    mean(true, visits),
+                    mean(true, tests),
+                    mean(false, visits),
+                    mean(false, tests)
+                );
+            }
             for _ in 0..repeats {
-                let (mrays, hits) = trace();
+                let (mrays, hits) = trace(&mut out);
                 println!("{mrays:.4} {hits}");
             }
         }
