@@ -313,10 +313,10 @@ pub(crate) struct BlasInput {
 /// A closest-hit candidate inside one BLAS.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct BlasHit {
-    pub slot: u32,
     pub t: f32,
-    /// Where the triangle is stored: `slot` for Bvh2/CwBvh, the block reference of a wide
-    /// tree ([`WideBvh::triangle`]).
+    /// Where the triangle is stored: its BVH slot for Bvh2/CwBvh, the block reference of a
+    /// wide tree ([`WideBvh::triangle`]); [`Blas::slot`] resolves it, only when shading
+    /// needs per-slot data (one cache miss less per hit otherwise).
     pub prim: u32,
 }
 
@@ -374,8 +374,7 @@ impl Blas {
     pub(crate) fn closest(&self, ray: &mut Ray, work: &mut RayWork) -> Option<BlasHit> {
         if let Tree::Wide(w) = &self.tree {
             let (prim, t) = w.wide.closest(ray, work)?;
-            let slot = w.wide.triangle(prim).map_or(0, |(slot, _)| slot);
-            return Some(BlasHit { slot, t, prim });
+            return Some(BlasHit { t, prim });
         }
         let mut best: Option<BlasHit> = None;
         let tris = &self.tris;
@@ -386,11 +385,7 @@ impl Blas {
                 let t = tri.intersect(ray);
                 if t < ray.tmax {
                     ray.tmax = t;
-                    best = Some(BlasHit {
-                        slot,
-                        t,
-                        prim: slot,
-                    });
+                    best = Some(BlasHit { t, prim: slot });
                 }
             }
             true
@@ -426,8 +421,18 @@ impl Blas {
     #[inline]
     fn hit_triangle(&self, hit: &BlasHit) -> Option<RtTriangle> {
         match &self.tree {
-            Tree::Wide(w) => w.wide.triangle(hit.prim).map(|(_, tri)| tri),
-            Tree::Bvh2(_) | Tree::CwBvh(_) => self.tris.get(hit.slot as usize).copied(),
+            Tree::Wide(w) => w.wide.triangle(hit.prim),
+            Tree::Bvh2(_) | Tree::CwBvh(_) => self.tris.get(hit.prim as usize).copied(),
+        }
+    }
+
+    /// The BVH slot of a hit (index into the per-slot shading data); `None` if the hit names
+    /// no triangle of this BLAS.
+    #[inline]
+    pub(crate) fn slot(&self, hit: &BlasHit) -> Option<u32> {
+        match &self.tree {
+            Tree::Wide(w) => w.wide.slot(hit.prim),
+            Tree::Bvh2(_) | Tree::CwBvh(_) => Some(hit.prim),
         }
     }
 
@@ -435,13 +440,12 @@ impl Blas {
     /// present (barycentrics from `RtTriangle::compute_barycentric`), else geometric.
     /// `+Z` for a hit that names no triangle of this BLAS.
     pub(crate) fn normal(&self, ray: &Ray, hit: &BlasHit) -> Vec3 {
-        let slot = hit.slot;
         let Some(tri) = self.hit_triangle(hit) else {
             return Vec3::Z;
         };
         let geometric = Vec3::from(tri.compute_normal());
         if let Some(normals) = &self.normals
-            && let Some(idx) = self.indices.get(slot as usize)
+            && let Some(idx) = self.slot(hit).and_then(|s| self.indices.get(s as usize))
         {
             let b: Vec2 = tri.compute_barycentric(ray);
             let n = |k: usize| normals.get(idx[k] as usize).copied().unwrap_or(geometric);
@@ -461,9 +465,13 @@ impl Blas {
         }
     }
 
-    /// Material of the triangle behind `slot`, if this BLAS carries materials.
-    pub(crate) fn material(&self, slot: u32) -> Option<MaterialId> {
-        self.materials.get(slot as usize).copied()
+    /// Material of the triangle of a hit, if this BLAS carries materials.
+    #[inline]
+    pub(crate) fn material(&self, hit: &BlasHit) -> Option<MaterialId> {
+        if self.materials.is_empty() {
+            return None;
+        }
+        self.materials.get(self.slot(hit)? as usize).copied()
     }
 
     /// Exact bytes held (lengths).

@@ -1024,14 +1024,13 @@ impl MeshGeometry {
             };
             out[k] = match best[k] {
                 Some((prim, t)) => {
-                    let slot = wide.triangle(prim).map_or(0, |(slot, _)| slot);
-                    let hit = BlasHit { slot, t, prim };
+                    let hit = BlasHit { t, prim };
                     TraceResult::found(
                         Hit {
                             t,
                             position: rays8[k].origin + rays8[k].dir * t,
                             normal: flat.normal(&r[k], &hit),
-                            material: flat.material(slot).unwrap_or(self.flat_materials_default),
+                            material: flat.material(&hit).unwrap_or(self.flat_materials_default),
                         },
                         work,
                     )
@@ -1102,8 +1101,7 @@ impl Geometry for MeshGeometry {
             HitSource::Flat => match &self.flat {
                 Some(flat) => (
                     flat.normal(&r, &hit),
-                    flat.material(hit.slot)
-                        .unwrap_or(self.flat_materials_default),
+                    flat.material(&hit).unwrap_or(self.flat_materials_default),
                 ),
                 None => (Vec3::Z, 0),
             },
@@ -1115,7 +1113,7 @@ impl Geometry for MeshGeometry {
                 let n = inst.to_local.matrix3.transpose() * n_local;
                 (
                     Vec3::from(n).try_normalize().unwrap_or(Vec3::Z),
-                    blas.material(hit.slot).unwrap_or(inst.material),
+                    blas.material(&hit).unwrap_or(inst.material),
                 )
             }
         };

@@ -117,14 +117,14 @@ pub(crate) fn closest8(
     let bounds = Bounds::of(rays)?;
     #[cfg(target_arch = "x86_64")]
     if bvh.avx {
-        // SAFETY: `avx` is set only when the CPU reports AVX.
+        // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
         return Some(unsafe { closest8_avx(bvh, &bounds, rays, visits, tests) });
     }
     Some(closest8_with(bvh, &bounds, rays, visits, tests))
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,popcnt")]
 unsafe fn closest8_avx(
     bvh: &WideBvh,
     bounds: &Bounds,
