@@ -711,6 +711,60 @@ mod tests {
     }
 
     #[test]
+    fn hit_references_give_back_the_converted_triangle_and_slot() {
+        let tris = random_tris(2000, 11);
+        let plain: Vec<Triangle> = tris
+            .iter()
+            .map(|t| {
+                let (v0, e1, e2) = (t.v0, t.e1, t.e2);
+                Triangle {
+                    v0,
+                    v1: v0 - e1,
+                    v2: v0 + e2,
+                }
+            })
+            .collect();
+        let mut time = std::time::Duration::default();
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+            &plain,
+            obvhs::BvhBuildParams::medium_build(),
+            &mut time,
+        );
+        let slot_tris: Vec<RtTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&plain[i as usize]))
+            .collect();
+        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        assert_eq!(w.blocks.len(), w.slots.len());
+        let mut seen = vec![false; slot_tris.len()];
+        for prim in 0..(w.blocks.len() * BLOCK) as u32 {
+            let Some(slot) = w.slot(prim) else { continue };
+            assert!(
+                !std::mem::replace(&mut seen[slot as usize], true),
+                "slot twice"
+            );
+            let (got, want) = (
+                w.triangle(prim).expect("in range"),
+                slot_tris[slot as usize],
+            );
+            for (a, b) in [
+                (got.v0, want.v0),
+                (got.e1, want.e1),
+                (got.e2, want.e2),
+                (got.ng, want.ng),
+            ] {
+                assert_eq!(
+                    a.to_array().map(f32::to_bits),
+                    b.to_array().map(f32::to_bits)
+                );
+            }
+        }
+        assert!(seen.iter().all(|&s| s), "every slot in some block");
+        assert!(w.triangle((w.blocks.len() * BLOCK) as u32).is_none());
+    }
+
+    #[test]
     fn node_tests_agree_with_obvhs_slab_test() {
         let tris = random_tris(300, 3);
         let boxes: Vec<_> = tris.iter().map(|t| t.aabb()).collect();
