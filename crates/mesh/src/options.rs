@@ -16,7 +16,8 @@ pub enum BvhKind {
     CwBvh,
     /// 8-wide BVH converted from the Bvh2 build (`crate::wide`): 224-byte nodes with SoA
     /// child boxes tested 8 at a time (AVX, runtime-detected, portable fallback), triangles
-    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`].
+    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`]. Its Bvh2 build
+    /// caps leaves at 4 triangles (one block), whatever the preset says.
     Wide,
 }
 
