@@ -683,7 +683,8 @@ mod tests {
 
     #[test]
     fn block_test_is_bit_identical_to_obvhs_intersect() {
-        let tris = random_tris(400, 7);
+        // 399: the last block has a padding lane, which must never hit.
+        let tris = random_tris(399, 7);
         let mut s = 99u64;
         for chunk in tris.chunks(BLOCK) {
             let mut w = WideBvh {
