@@ -4,9 +4,11 @@
 //!
 //! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
 //! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
-//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|raw; `wide1` traces single rays, `wide`
-//! row batches with packets) and prints
-//! one Mrays/s figure per timed repeat after one warm-up (`raw` is obvhs' own Bvh2
+//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|wide4x2|raw;
+//! `wide1` traces single rays, `wide` row batches with packets of 8 consecutive pixels of a
+//! row, `wide4x2` the same rays reordered into 4x2-pixel tiles, handed over a tile row at a
+//! time) and prints
+//! one Mrays/s figure per timed repeat (CPU time of the tracing thread) after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
 
 #[path = "../benches/support/mod.rs"]
@@ -57,6 +59,33 @@ fn write_f32(path: std::path::PathBuf, values: impl Iterator<Item = f32>) -> Res
     Ok(())
 }
 
+/// Seconds the calling thread has run on a CPU (Linux `/proc/thread-self/schedstat`, first
+/// field, ns): on a loaded machine it leaves out the time the tracer waits descheduled,
+/// which wall time would count. Wall seconds since `start` where that file is missing.
+fn thread_seconds(start: Instant) -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .map_or_else(|| start.elapsed().as_secs_f64(), |ns| ns * 1e-9)
+}
+
+/// `rays` (row-major, `side` wide) reordered tile by tile: each run of `tw * th` rays is one
+/// `tw x th` tile (row-major inside), tiles row-major; a ragged edge keeps what fits.
+fn tiled<T: Copy>(rays: &[T], side: usize, tw: usize, th: usize) -> Vec<T> {
+    let height = rays.len() / side;
+    let mut out = Vec::with_capacity(rays.len());
+    for ty in (0..height).step_by(th) {
+        for tx in (0..side).step_by(tw) {
+            for y in ty..(ty + th).min(height) {
+                for x in tx..(tx + tw).min(side) {
+                    out.push(rays[y * side + x]);
+                }
+            }
+        }
+    }
+    out
+}
+
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().collect();
     let usage = "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS";
@@ -90,14 +119,25 @@ fn main() -> Res<()> {
             let kind = match bvh {
                 "bvh2" | "raw" => BvhKind::Bvh2,
                 "cwbvh" => BvhKind::CwBvh,
-                "wide" | "wide1" => BvhKind::Wide,
+                "wide" | "wide1" | "wide4x2" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
+            };
+            use marchmesh_mesh::BuildQuality as Q;
+            let build_quality = match args.get(5).map(String::as_str) {
+                None | Some("medium") => Q::Medium,
+                Some("fastest") => Q::Fastest,
+                Some("very_fast") => Q::VeryFast,
+                Some("fast") => Q::Fast,
+                Some("slow") => Q::Slow,
+                Some("very_slow") => Q::VerySlow,
+                Some(other) => return Err(format!("unknown quality `{other}`").into()),
             };
             let g = build(
                 &scene,
                 &MeshOptions {
                     bvh: kind,
-                    packets: bvh == "wide",
+                    build_quality,
+                    packets: bvh == "wide" || bvh == "wide4x2",
                     ..MeshOptions::DEFAULT
                 },
             )?;
@@ -108,10 +148,18 @@ fn main() -> Res<()> {
                 report.memory_bytes as f64 / tris.len() as f64
             );
             let raw = raw_build(kind, &tris);
-            let mut out = vec![TraceResult::default(); rays.len()];
             let side = scene.camera.width as usize;
-            let mut trace = || {
-                let t = Instant::now();
+            // One batch per image row, or per row of tiles.
+            let (rays, batch) = if bvh == "wide4x2" {
+                (tiled(&rays, side, 4, 2), side * 2)
+            } else {
+                (rays, side)
+            };
+            let mut out = vec![TraceResult::default(); rays.len()];
+            let start = Instant::now();
+            let trace = |out: &mut [TraceResult]| {
+                let t0 = thread_seconds(start);
+                let mut seconds = 0.0;
                 let mut hits = 0usize;
                 if bvh == "wide1" {
                     // Single rays only (no packets).
@@ -125,19 +173,46 @@ fn main() -> Res<()> {
                         .filter(|r| raw_closest(&raw, r).is_finite())
                         .count();
                 } else {
-                    pool.install(|| {
-                        // Row batches, as the integrator hands them over.
-                        for (r, o) in rays.chunks(side).zip(out.chunks_mut(side)) {
+                    seconds = pool.install(|| {
+                        // Row (or tile-row) batches, as the integrator hands them over,
+                        // timed on the pool's thread.
+                        let t0 = thread_seconds(start);
+                        for (r, o) in rays.chunks(batch).zip(out.chunks_mut(batch)) {
                             g.closest_hits(r, o);
                         }
+                        thread_seconds(start) - t0
                     });
                     hits += out.iter().filter(|o| o.hit().is_some()).count();
                 }
-                (rays.len() as f64 / t.elapsed().as_secs_f64() / 1e6, hits)
+                if seconds == 0.0 {
+                    seconds = thread_seconds(start) - t0;
+                }
+                (rays.len() as f64 / seconds / 1e6, hits)
             };
-            trace();
+            trace(&mut out);
+            if bvh == "wide1" {
+                for (r, o) in rays.iter().zip(out.iter_mut()) {
+                    *o = g.closest_hit(r);
+                }
+            }
+            if bvh != "raw" {
+                let mean = |hit: bool, f: fn(&TraceResult) -> u32| {
+                    let sel = out.iter().filter(|o| o.hit().is_some() == hit);
+                    let (n, sum) = sel.fold((0.0, 0.0), |(n, s), o| (n + 1.0, s + f64::from(f(o))));
+                    sum / f64::max(n, 1.0)
+                };
+                let visits = |o: &TraceResult| o.work.node_visits;
+                let tests = |o: &TraceResult| o.work.primitive_tests;
+                eprintln!(
+                    "{bvh}: per hit ray {:.2} node visits, {:.2} triangle tests; per missing ray {:.2}, {:.2}",
+                    mean(true, visits),
+                    mean(true, tests),
+                    mean(false, visits),
+                    mean(false, tests)
+                );
+            }
             for _ in 0..repeats {
-                let (mrays, hits) = trace();
+                let (mrays, hits) = trace(&mut out);
                 println!("{mrays:.4} {hits}");
             }
         }

@@ -45,7 +45,7 @@ use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh};
 use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 use obvhs::ray::Ray as ObRay;
 
-use blas::{Blas, BlasInput, Tree};
+use blas::{Blas, BlasHit, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
 pub use options::{
@@ -1023,15 +1023,18 @@ impl MeshGeometry {
                 ..RayWork::default()
             };
             out[k] = match best[k] {
-                Some((slot, t)) => TraceResult::found(
-                    Hit {
-                        t,
-                        position: rays8[k].origin + rays8[k].dir * t,
-                        normal: flat.normal(&r[k], slot),
-                        material: flat.material(slot).unwrap_or(self.flat_materials_default),
-                    },
-                    work,
-                ),
+                Some((prim, t)) => {
+                    let hit = BlasHit { t, prim };
+                    TraceResult::found(
+                        Hit {
+                            t,
+                            position: rays8[k].origin + rays8[k].dir * t,
+                            normal: flat.normal(&r[k], &hit),
+                            material: flat.material(&hit).unwrap_or(self.flat_materials_default),
+                        },
+                        work,
+                    )
+                }
                 None => TraceResult::not_found(NoHit::Miss, work),
             };
         }
@@ -1066,11 +1069,11 @@ impl Geometry for MeshGeometry {
         if r.tmax.is_nan() || r.tmax < r.tmin {
             return TraceResult::not_found(NoHit::Miss, work);
         }
-        let mut best: Option<(HitSource, u32)> = None;
+        let mut best: Option<(HitSource, BlasHit)> = None;
         if let Some(flat) = &self.flat
             && let Some(h) = flat.closest(&mut r, &mut work)
         {
-            best = Some((HitSource::Flat, h.slot));
+            best = Some((HitSource::Flat, h));
         }
         if let Some(tlas) = &self.tlas {
             let mut inner = RayWork::default();
@@ -1083,22 +1086,22 @@ impl Geometry for MeshGeometry {
                 let mut local = Self::local_ray(inst, r);
                 if let Some(h) = self.blases[inst.blas as usize].closest(&mut local, &mut inner) {
                     r.tmax = h.t;
-                    best = Some((HitSource::Instance(i), h.slot));
+                    best = Some((HitSource::Instance(i), h));
                 }
                 true
             });
             work.node_visits += inner.node_visits;
             work.primitive_tests += inner.primitive_tests;
         }
-        let Some((source, slot)) = best else {
+        let Some((source, hit)) = best else {
             return TraceResult::not_found(NoHit::Miss, work);
         };
         let t = r.tmax;
         let (normal, material) = match source {
             HitSource::Flat => match &self.flat {
                 Some(flat) => (
-                    flat.normal(&r, slot),
-                    flat.material(slot).unwrap_or(self.flat_materials_default),
+                    flat.normal(&r, &hit),
+                    flat.material(&hit).unwrap_or(self.flat_materials_default),
                 ),
                 None => (Vec3::Z, 0),
             },
@@ -1106,11 +1109,11 @@ impl Geometry for MeshGeometry {
                 let inst = &self.instances[i as usize];
                 let blas = &self.blases[inst.blas as usize];
                 let local = Self::local_ray(inst, &r);
-                let n_local = Vec3A::from(blas.normal(&local, slot));
+                let n_local = Vec3A::from(blas.normal(&local, &hit));
                 let n = inst.to_local.matrix3.transpose() * n_local;
                 (
                     Vec3::from(n).try_normalize().unwrap_or(Vec3::Z),
-                    blas.material(slot).unwrap_or(inst.material),
+                    blas.material(&hit).unwrap_or(inst.material),
                 )
             }
         };

@@ -16,7 +16,8 @@ pub enum BvhKind {
     CwBvh,
     /// 8-wide BVH converted from the Bvh2 build (`crate::wide`): 224-byte nodes with SoA
     /// child boxes tested 8 at a time (AVX, runtime-detected, portable fallback), triangles
-    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`].
+    /// in SoA blocks of 4 tested with SSE; same hits as [`BvhKind::Bvh2`]. Its Bvh2 build
+    /// caps leaves at 4 triangles (one block), whatever the preset says.
     Wide,
 }
 
@@ -79,11 +80,11 @@ pub enum Tessellation {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MeshOptions {
     /// BVH layout. Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1
-    /// thread, 500x500 primary rays, interleaved rounds, load 2.3-2.8) it traced 1.9x (bunny),
-    /// 1.6x (dragon_res3) and 1.35x (871k-triangle dragon) as many rays per second as Bvh2,
-    /// for about 1.65x its memory (156 vs 94 bytes per triangle). Earlier, Bvh2 rendered
-    /// seed-spheres 1.84x and the bunny 1.24x faster than CwBvh
-    /// (bench-results/20261122T222119Z-default).
+    /// thread, 500x500 primary rays, interleaved rounds, thread CPU time, load ~12) it traced
+    /// 1.8x (bunny), 1.55x (dragon_res3) and 1.9x (871k-triangle dragon) as many rays per
+    /// second as Bvh2 (1.51x, 1.08x, 0.84x Embree 4's rtcIntersect1), for about 1.1x its
+    /// memory (100-104 vs 93-95 bytes per triangle). Earlier, Bvh2 rendered seed-spheres
+    /// 1.84x and the bunny 1.24x faster than CwBvh (bench-results/20261122T222119Z-default).
     pub bvh: BvhKind,
     /// Build preset. Default [`BuildQuality::Medium`].
     pub build_quality: BuildQuality,
@@ -95,8 +96,9 @@ pub struct MeshOptions {
     /// Trace the rays of a `closest_hits` batch 8 at a time as packets (interval culling,
     /// `crate::packet`) when the BVH is [`BvhKind::Wide`] and nothing is instanced; same
     /// hits as single rays. Default `false`: measured (1 thread, 500x500 primary rays, load
-    /// ~2.8) about 1.0-1.2x single-ray speed on the bunny and dragon_res3 but 0.7x on the
-    /// 871k-triangle dragon, whose sub-pixel triangles make an 8-pixel interval loose.
+    /// ~12) 1.03x single-ray speed on the bunny and 1.15x on dragon_res3 (row packets) but
+    /// 0.73x on the 871k-triangle dragon, whose sub-pixel triangles make an 8-pixel interval
+    /// loose; 4x2-pixel tiles measured no better than rows.
     pub packets: bool,
     /// Instance shapes used more than once (repetition, a mesh placed twice) from one BLAS
     /// under a TLAS. `false` flattens everything into one BVH (same image, more memory).

@@ -105,7 +105,7 @@ fn enters(node: &WideNode, lane: usize, ray: &Ray) -> bool {
     t_out >= t_in && t_out >= 0.0 && t_in < ray.tmax
 }
 
-/// Closest hits of 8 rays as `(slot, t)` each, shrinking each `tmax`; `None` (nothing
+/// Closest hits of 8 rays as `(prim, t)` each (`prim` a [`WideBvh::triangle`] reference), shrinking each `tmax`; `None` (nothing
 /// done) when the rays do not share an origin and `tmin`: trace them one by one then.
 /// Adds the packet's node visits to `visits` and block tests per ray to `tests`.
 pub(crate) fn closest8(
@@ -117,14 +117,14 @@ pub(crate) fn closest8(
     let bounds = Bounds::of(rays)?;
     #[cfg(target_arch = "x86_64")]
     if bvh.avx {
-        // SAFETY: `avx` is set only when the CPU reports AVX.
+        // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
         return Some(unsafe { closest8_avx(bvh, &bounds, rays, visits, tests) });
     }
     Some(closest8_with(bvh, &bounds, rays, visits, tests))
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,popcnt")]
 unsafe fn closest8_avx(
     bvh: &WideBvh,
     bounds: &Bounds,
@@ -160,13 +160,13 @@ fn closest8_with(
             let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
             if let Some(blocks) = bvh.blocks.get(first..first + count) {
                 for (k, ray) in rays.iter_mut().enumerate() {
-                    for b in blocks {
+                    for (i, b) in blocks.iter().enumerate() {
                         tests[k] += BLOCK as u32;
                         let t = block_hits(b, ray);
                         for lane in 0..BLOCK {
                             if t[lane] < ray.tmax {
                                 ray.tmax = t[lane];
-                                best[k] = Some((b.slot[lane], t[lane]));
+                                best[k] = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
                             }
                         }
                     }
@@ -193,13 +193,13 @@ fn closest8_with(
                     if !enters(node, lane, ray) {
                         continue;
                     }
-                    for b in blocks {
+                    for (i, b) in blocks.iter().enumerate() {
                         tests[k] += BLOCK as u32;
                         let t = block_hits(b, ray);
                         for l in 0..BLOCK {
                             if t[l] < ray.tmax {
                                 ray.tmax = t[l];
-                                best[k] = Some((b.slot[l], t[l]));
+                                best[k] = Some((((first + i) * BLOCK + l) as u32, t[l]));
                             }
                         }
                     }

@@ -56,16 +56,16 @@ const EMPTY_NODE: WideNode = WideNode {
 };
 
 /// Four triangles as structure of arrays in obvhs' `RtTriangle` form (`e1 = v0 - v1`,
-/// `e2 = v2 - v0`, `ng = e1 x e2`) with their BVH slots; padding lanes have slot `EMPTY`
-/// and zero geometry (they never report a hit). 208 bytes.
+/// `e2 = v2 - v0`, `ng = e1 x e2`). Padding lanes hold zero geometry, whose test computes
+/// `t = 0 * inf = NaN` and so never reports a hit. 192 bytes, cache-line aligned: a block
+/// is exactly 3 lines (the BVH slots live apart in [`WideBvh::slots`], read only on a hit).
 #[derive(Clone, Copy)]
-#[repr(C, align(16))]
+#[repr(C, align(64))]
 pub(crate) struct TriBlock {
     v0: [[f32; BLOCK]; 3],
     e1: [[f32; BLOCK]; 3],
     e2: [[f32; BLOCK]; 3],
     ng: [[f32; BLOCK]; 3],
-    pub(crate) slot: [u32; BLOCK],
 }
 
 const EMPTY_BLOCK: TriBlock = TriBlock {
@@ -73,7 +73,6 @@ const EMPTY_BLOCK: TriBlock = TriBlock {
     e1: [[0.0; BLOCK]; 3],
     e2: [[0.0; BLOCK]; 3],
     ng: [[0.0; BLOCK]; 3],
-    slot: [EMPTY; BLOCK],
 };
 
 /// The 8-wide BVH with its triangle blocks.
@@ -81,6 +80,8 @@ const EMPTY_BLOCK: TriBlock = TriBlock {
 pub(crate) struct WideBvh {
     pub(crate) nodes: Vec<WideNode>,
     pub(crate) blocks: Vec<TriBlock>,
+    /// BVH slots of each block's lanes (`EMPTY` on padding lanes), parallel to `blocks`.
+    pub(crate) slots: Vec<[u32; BLOCK]>,
     /// Reference of the root (node 0, or a leaf when the whole tree is one leaf).
     pub(crate) root: u32,
     /// Whether this CPU runs the 256-bit AVX node test (detected at build).
@@ -95,6 +96,7 @@ impl WideBvh {
         let mut out = Self {
             nodes: Vec::new(),
             blocks: Vec::new(),
+            slots: Vec::new(),
             root: EMPTY,
             avx: detect_avx(),
         };
@@ -152,6 +154,7 @@ impl WideBvh {
         }
         out.nodes.shrink_to_fit();
         out.blocks.shrink_to_fit();
+        out.slots.shrink_to_fit();
         Some(out)
     }
 
@@ -164,6 +167,7 @@ impl WideBvh {
         }
         for chunk in (first..first + count).collect::<Vec<u32>>().chunks(BLOCK) {
             let mut block = EMPTY_BLOCK;
+            let mut slots = [EMPTY; BLOCK];
             for (lane, &slot) in chunk.iter().enumerate() {
                 let t = tris.get(slot as usize)?;
                 for axis in 0..3 {
@@ -172,11 +176,36 @@ impl WideBvh {
                     block.e2[axis][lane] = t.e2[axis];
                     block.ng[axis][lane] = t.ng[axis];
                 }
-                block.slot[lane] = slot;
+                slots[lane] = slot;
             }
             self.blocks.push(block);
+            self.slots.push(slots);
         }
         Some(LEAF | n_blocks << LEAF_FIRST_BITS | first_block)
+    }
+
+    /// The triangle (obvhs form, bit-identical to the `RtTriangle` it was converted from)
+    /// behind a hit reference `prim = block * 4 + lane`; `None` for a reference outside the
+    /// blocks. Read from the block the hit test just loaded, so shading a hit costs no
+    /// extra cache miss and no per-slot copy of the triangles is kept.
+    #[inline]
+    pub(crate) fn triangle(&self, prim: u32) -> Option<RtTriangle> {
+        let b = self.blocks.get((prim / BLOCK as u32) as usize)?;
+        let lane = (prim % BLOCK as u32) as usize;
+        let v = |a: &[[f32; BLOCK]; 3]| glam::Vec3A::new(a[0][lane], a[1][lane], a[2][lane]);
+        Some(RtTriangle {
+            v0: v(&b.v0),
+            e1: v(&b.e1),
+            e2: v(&b.e2),
+            ng: v(&b.ng),
+        })
+    }
+
+    /// The BVH slot behind a hit reference; `None` outside the blocks or on a padding lane.
+    #[inline]
+    pub(crate) fn slot(&self, prim: u32) -> Option<u32> {
+        let slot = self.slots.get((prim / BLOCK as u32) as usize)?[(prim % BLOCK as u32) as usize];
+        (slot != EMPTY).then_some(slot)
     }
 
     /// Node count.
@@ -186,17 +215,19 @@ impl WideBvh {
 
     /// Bytes of nodes and triangle blocks (lengths).
     pub(crate) fn memory_bytes(&self) -> u64 {
-        (self.nodes.len() * size_of::<WideNode>() + self.blocks.len() * size_of::<TriBlock>())
+        (self.nodes.len() * size_of::<WideNode>()
+            + self.blocks.len() * (size_of::<TriBlock>() + size_of::<[u32; BLOCK]>()))
             as u64
     }
 
-    /// Closest triangle along `ray` before `ray.tmax` as `(slot, t)`; shrinks `ray.tmax`.
-    /// Counts one node visit per wide node and 4 primitive tests per block.
+    /// Closest triangle along `ray` before `ray.tmax` as `(prim, t)`, `prim` a
+    /// [`WideBvh::triangle`] reference (`block * 4 + lane`); shrinks `ray.tmax`. Counts one
+    /// node visit per wide node and 4 primitive tests per block.
     #[inline]
     pub(crate) fn closest(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             return unsafe { closest_avx(self, ray, work) };
         }
         self.closest_with::<Portable>(ray, work)
@@ -207,7 +238,7 @@ impl WideBvh {
     pub(crate) fn any(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
-            // SAFETY: `avx` is set only when the CPU reports AVX.
+            // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             return unsafe { any_avx(self, ray, work) };
         }
         self.any_with::<Portable>(ray, work)
@@ -223,9 +254,13 @@ impl WideBvh {
         work: &mut RayWork,
         mut leaf: impl FnMut(&mut Ray, u32) -> bool,
     ) {
-        self.traverse::<Portable, false>(ray, work, |ray, blocks| {
-            for b in blocks {
-                for &slot in &b.slot {
+        self.traverse::<Portable, false>(ray, work, |ray, first, blocks| {
+            let slots = self
+                .slots
+                .get(first..first + blocks.len())
+                .unwrap_or_default();
+            for s in slots {
+                for &slot in s {
                     if slot != EMPTY && !leaf(ray, slot) {
                         return false;
                     }
@@ -239,14 +274,14 @@ impl WideBvh {
     fn closest_with<N: NodeTest>(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         let mut best = None;
         let mut tests = 0u32;
-        self.traverse::<N, false>(ray, work, |ray, blocks| {
-            for b in blocks {
+        self.traverse::<N, false>(ray, work, |ray, first, blocks| {
+            for (i, b) in blocks.iter().enumerate() {
                 tests += BLOCK as u32;
                 let t = block_hits(b, ray);
                 for lane in 0..BLOCK {
                     if t[lane] < ray.tmax {
                         ray.tmax = t[lane];
-                        best = Some((b.slot[lane], t[lane]));
+                        best = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
                     }
                 }
             }
@@ -260,7 +295,7 @@ impl WideBvh {
     fn any_with<N: NodeTest>(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
         let mut hit = false;
         let mut tests = 0u32;
-        self.traverse::<N, true>(ray, work, |ray, blocks| {
+        self.traverse::<N, true>(ray, work, |ray, _, blocks| {
             for b in blocks {
                 tests += BLOCK as u32;
                 if block_hits(b, ray).iter().any(|&t| t < ray.tmax) {
@@ -282,7 +317,7 @@ impl WideBvh {
         &self,
         ray: &mut Ray,
         work: &mut RayWork,
-        mut leaf: impl FnMut(&mut Ray, &[TriBlock]) -> bool,
+        mut leaf: impl FnMut(&mut Ray, usize, &[TriBlock]) -> bool,
     ) {
         if self.root == EMPTY {
             return;
@@ -296,13 +331,20 @@ impl WideBvh {
                 let first = (cur & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
                 let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
                 if let Some(blocks) = self.blocks.get(first..first + count)
-                    && !leaf(ray, blocks)
+                    && !leaf(ray, first, blocks)
                 {
                     break 'walk;
                 }
             } else if let Some(node) = self.nodes.get(cur as usize) {
                 visits += 1;
                 let (mut mask, dist) = N::test(node, ray);
+                if PREFETCH {
+                    let mut m = mask;
+                    while m != 0 {
+                        self.prefetch(node.child[m.trailing_zeros() as usize]);
+                        m &= m - 1;
+                    }
+                }
                 match mask.count_ones() {
                     0 => {}
                     1 => {
@@ -359,11 +401,44 @@ impl WideBvh {
     }
 }
 
-/// Whether the 256-bit node test can run.
+const PREFETCH: bool = true;
+
+impl WideBvh {
+    /// Starts loading child `c` (a node's 4 cache lines, or a leaf's first two blocks) so
+    /// the misses of all children a ray enters overlap (memory-level parallelism).
+    #[inline(always)]
+    fn prefetch(&self, c: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            let (base, lines): (*const i8, usize) = if c & LEAF != 0 {
+                let first = (c & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
+                let count = ((c & !LEAF) >> LEAF_FIRST_BITS) as usize;
+                (
+                    self.blocks.as_ptr().wrapping_add(first).cast(),
+                    count.min(2) * size_of::<TriBlock>() / 64,
+                )
+            } else {
+                (
+                    self.nodes.as_ptr().wrapping_add(c as usize).cast(),
+                    size_of::<WideNode>().div_ceil(64),
+                )
+            };
+            for k in 0..lines {
+                // SAFETY: a prefetch is a hint and never faults, whatever the address.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(k * 64)) };
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        let _ = c;
+    }
+}
+
+/// Whether the 256-bit node test can run (AVX with POPCNT, which every AVX CPU has).
 fn detect_avx() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx")
+        std::arch::is_x86_feature_detected!("avx") && std::arch::is_x86_feature_detected!("popcnt")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
@@ -372,13 +447,13 @@ fn detect_avx() -> bool {
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,popcnt")]
 unsafe fn closest_avx(bvh: &WideBvh, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
     bvh.closest_with::<Avx>(ray, work)
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
+#[target_feature(enable = "avx,popcnt")]
 unsafe fn any_avx(bvh: &WideBvh, ray: &mut Ray, work: &mut RayWork) -> bool {
     bvh.any_with::<Avx>(ray, work)
 }
@@ -416,7 +491,7 @@ impl NodeTest for Portable {
     }
 }
 
-/// 256-bit AVX node test; only called from `#[target_feature(enable = "avx")]` functions
+/// 256-bit AVX node test; only called from `#[target_feature(enable = "avx,popcnt")]` functions
 /// after runtime detection.
 #[cfg(target_arch = "x86_64")]
 struct Avx;
@@ -457,7 +532,7 @@ impl NodeTest for Avx {
 
 /// Möller-Trumbore (1997) on the 4 lanes of a block, exactly obvhs'
 /// `RtTriangle::intersect`: each lane's `t` if it hits within `[ray.tmin, ray.tmax]`, else
-/// `+inf` (padding lanes never hit).
+/// `+inf` (padding lanes, all zero, compute `t = NaN` and never hit).
 #[inline(always)]
 pub(crate) fn block_hits(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     #[cfg(target_arch = "x86_64")]
@@ -477,9 +552,6 @@ fn block_hits_portable(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     let (o, d) = (ray.origin, ray.direction);
     let mut out = [f32::INFINITY; BLOCK];
     for lane in 0..BLOCK {
-        if b.slot[lane] == EMPTY {
-            continue;
-        }
         let c = [
             b.v0[0][lane] - o.x,
             b.v0[1][lane] - o.y,
@@ -560,15 +632,7 @@ fn block_hits_sse(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
                 _mm_cmple_ps(t, _mm_set1_ps(ray.tmax)),
             ),
         );
-        let not_padding = _mm_castsi128_ps(_mm_cmpeq_epi32(
-            _mm_cmpeq_epi32(_mm_loadu_si128(b.slot.as_ptr().cast()), _mm_set1_epi32(-1)),
-            _mm_setzero_si128(),
-        ));
-        let hit_t = select_ps(
-            _mm_set1_ps(f32::INFINITY),
-            t,
-            _mm_and_ps(valid, not_padding),
-        );
+        let hit_t = select_ps(_mm_set1_ps(f32::INFINITY), t, valid);
         let mut out = [0.0f32; BLOCK];
         _mm_storeu_ps(out.as_mut_ptr(), hit_t);
         out
@@ -619,12 +683,14 @@ mod tests {
 
     #[test]
     fn block_test_is_bit_identical_to_obvhs_intersect() {
-        let tris = random_tris(400, 7);
+        // 399: the last block has a padding lane, which must never hit.
+        let tris = random_tris(399, 7);
         let mut s = 99u64;
         for chunk in tris.chunks(BLOCK) {
             let mut w = WideBvh {
                 nodes: Vec::new(),
                 blocks: Vec::new(),
+                slots: Vec::new(),
                 root: EMPTY,
                 avx: false,
             };
@@ -643,6 +709,60 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn hit_references_give_back_the_converted_triangle_and_slot() {
+        let tris = random_tris(2000, 11);
+        let plain: Vec<Triangle> = tris
+            .iter()
+            .map(|t| {
+                let (v0, e1, e2) = (t.v0, t.e1, t.e2);
+                Triangle {
+                    v0,
+                    v1: v0 - e1,
+                    v2: v0 + e2,
+                }
+            })
+            .collect();
+        let mut time = std::time::Duration::default();
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+            &plain,
+            obvhs::BvhBuildParams::medium_build(),
+            &mut time,
+        );
+        let slot_tris: Vec<RtTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&plain[i as usize]))
+            .collect();
+        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        assert_eq!(w.blocks.len(), w.slots.len());
+        let mut seen = vec![false; slot_tris.len()];
+        for prim in 0..(w.blocks.len() * BLOCK) as u32 {
+            let Some(slot) = w.slot(prim) else { continue };
+            assert!(
+                !std::mem::replace(&mut seen[slot as usize], true),
+                "slot twice"
+            );
+            let (got, want) = (
+                w.triangle(prim).expect("in range"),
+                slot_tris[slot as usize],
+            );
+            for (a, b) in [
+                (got.v0, want.v0),
+                (got.e1, want.e1),
+                (got.e2, want.e2),
+                (got.ng, want.ng),
+            ] {
+                assert_eq!(
+                    a.to_array().map(f32::to_bits),
+                    b.to_array().map(f32::to_bits)
+                );
+            }
+        }
+        assert!(seen.iter().all(|&s| s), "every slot in some block");
+        assert!(w.triangle((w.blocks.len() * BLOCK) as u32).is_none());
     }
 
     #[test]
@@ -681,7 +801,7 @@ mod tests {
     }
 
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx")]
+    #[target_feature(enable = "avx,popcnt")]
     unsafe fn avx_test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
         Avx::test(node, ray)
     }
