@@ -44,7 +44,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (baked, s) = bake_sparse(&mesh, &opts)?;
     let g = &baked.grid;
     println!(
-        "{path}: {} triangles, closed {}, sparse res {res} band {band} {} {}: {} bytes, {} bricks of {} brick cells ({} candidates, {} unsigned), bake {:.1} ms",
+        "{path}: {} triangles, closed {}, sparse res {res} band {band} {} {}: {} bytes, {} bricks of {} brick cells ({} candidates, {} signed by winding numbers), bake {:.1} ms",
         mesh.triangles.len(),
         mesh.is_closed(),
         quantization.name(),
@@ -53,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         s.bricks,
         s.brick_cells,
         s.candidates,
-        s.unsigned_bricks,
+        s.winding_bricks,
         baked.bake_ms
     );
     println!(

@@ -240,10 +240,8 @@ fn catmull_rom(t: f64) -> [f64; 4] {
 /// **Bricks.** Brick `n` holds `s^3` samples, `s = BRICK + 1 + 2 * apron`, at
 /// [`SparseGrid::samples`]`[n * s^3 ..]`, local `(a, b, c)` (x fastest) being lattice sample
 /// `BRICK * brick + (a, b, c) - apron`. Every sample is the exact distance to the closest
-/// triangle with the generalized winding number's sign (as [`crate::DistanceGrid`]), clamped to
-/// `[-clamp, clamp]` and then quantized; bricks whose samples disagree on the side where no
-/// surface can be between them (a winding-number "cap" across a hole of an open mesh) store
-/// unsigned distances minus half a cell instead (see [`crate::bake_sparse`]).
+/// triangle, signed by the closest face's side or the generalized winding number (see
+/// [`crate::bake_sparse`]), clamped to `[-clamp, clamp]` and then quantized.
 ///
 /// **Values and accuracy.** In a brick: the trilinear (or tricubic) interpolant, within half
 /// a cell diagonal of the true distance where the sign is right, plus the quantization

@@ -62,7 +62,7 @@ fn brick_samples_are_exact_signed_distances_and_trilinear_matches_the_dense_latt
     .unwrap();
     let g = &baked.grid;
     assert!(stats.bricks > 0 && stats.bricks < stats.brick_cells);
-    assert_eq!(stats.unsigned_bricks, 0, "a closed cube has no caps");
+    assert_eq!(stats.winding_bricks, 0, "a closed cube has no caps");
     // A dense grid on the same lattice from brute force, clamped like the bricks.
     let dims = g.dims();
     let mut values = Vec::new();
@@ -242,17 +242,18 @@ fn tricubic_is_closer_to_the_surface_than_trilinear_on_a_sphere_like_mesh() {
 }
 
 #[test]
-fn open_meshes_mark_cap_bricks_unsigned() {
-    // The cube without its top: the winding number crosses 0.5 across the opening, away
-    // from any triangle. Bricks whose neighbouring samples change sign with no room for a
-    // surface between them are stored unsigned; the walls are still found.
+fn open_meshes_resign_contradicting_bricks_by_winding_number() {
+    // The cube without its top: face sides and the winding number disagree near the
+    // opening's rim. Bricks whose neighbouring samples change sign with no room for a
+    // surface between them take the winding number's sides; the walls are still found
+    // from outside, at the right distance and sign.
     let mesh = cube(false);
     let (b, s) = bake_sparse(
         &mesh,
         &opts(16, Quantization::F32, Reconstruction::Trilinear),
     )
     .unwrap();
-    assert!(s.unsigned_bricks > 0, "{s:?}");
+    assert!(s.winding_bricks > 0, "{s:?}");
     assert!(b.notes.iter().any(|n| n.contains("not closed")));
     let d = b.grid.sample_f64(DVec3::new(1.05, 0.0, 0.0));
     assert!(d > 0.0 && d < 0.2, "{d}");
@@ -262,7 +263,7 @@ fn open_meshes_mark_cap_bricks_unsigned() {
         &opts(16, Quantization::F32, Reconstruction::Trilinear),
     )
     .unwrap();
-    assert_eq!(s.unsigned_bricks, 0);
+    assert_eq!(s.winding_bricks, 0);
 }
 
 #[test]

@@ -280,7 +280,7 @@ impl MeshResolver for Meshes<'_> {
                     if mesh.is_closed() {
                         ""
                     } else {
-                        "; open mesh: sign-contradicting bricks (caps across holes) are unsigned shells half a cell thick"
+                        "; open mesh: signs from face sides, bricks whose sides contradict their distances from the winding number (caps across large holes possible)"
                     }
                 ));
                 (Grid::Sparse(baked.grid), baked.notes)

@@ -28,6 +28,8 @@ pub mod keys {
     pub const SDF_GRID_KIND: &str = "grid";
     /// SDF: sparse grid sample storage, `f32`, `u16` or `u8`.
     pub const SDF_QUANTIZE: &str = "quantize";
+    /// SDF: sparse grid reconstruction, `trilinear` or `tricubic`.
+    pub const SDF_RECON: &str = "recon";
     /// Mesh: fixed tessellation level.
     pub const MESH_TESS_LEVEL: &str = "tess_level";
     /// Mesh: screen-space chord budget, pixels.
@@ -482,21 +484,34 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 (keys::SDF_GRID.to_string(), res.to_string()),
             ],
         };
-        let sparse = |res: u32| Variant {
+        let sparse = |res: u32, recon: &str| Variant {
             backend: BackendKind::Sdf,
             options: vec![
                 (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
                 (keys::SDF_GRID.to_string(), res.to_string()),
                 (keys::SDF_QUANTIZE.to_string(), "u8".to_string()),
+                (keys::SDF_RECON.to_string(), recon.to_string()),
             ],
         };
-        for (res, is_sparse, variant) in [
-            (32u32, false, dense(32)),
-            (64, false, dense(64)),
-            (128, false, dense(128)),
-            (128, true, sparse(128)),
-            (256, true, sparse(256)),
-            (512, true, sparse(512)),
+        for (res, is_sparse, variants) in [
+            (32u32, false, vec![dense(32)]),
+            (64, false, vec![dense(64)]),
+            (128, false, vec![dense(128)]),
+            (
+                128,
+                true,
+                vec![sparse(128, "trilinear"), sparse(128, "tricubic")],
+            ),
+            (
+                256,
+                true,
+                vec![sparse(256, "trilinear"), sparse(256, "tricubic")],
+            ),
+            (
+                512,
+                true,
+                vec![sparse(512, "trilinear"), sparse(512, "tricubic")],
+            ),
         ] {
             let obj = json!({ "shape": { "mesh": { "path": path } },
                               "transform": { "translate": translate, "scale": scale },
@@ -515,7 +530,7 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 scene_json: scene(cam.clone(), vec![obj], 100.0),
                 truth_json: None,
                 scene_size: 2.0,
-                variants: vec![variant],
+                variants,
                 judge_by_image: false,
                 self_truth: false,
                 base_dir: ctx.scenes_dir.clone(),
