@@ -199,7 +199,6 @@ impl TileRays {
 
     /// Appends the rays of `tile`'s pixels at sub-pixel `offset`, row-major.
     /// `tile.width` must not exceed [`MAX_TILE_WIDTH`].
-    #[inline]
     pub(crate) fn push(&self, tile: Tile, offset: DVec2, out: &mut Vec<Ray>) {
         let tw = tile.width as usize;
         assert!(tw <= MAX_TILE_WIDTH, "tile wider than MAX_TILE_WIDTH");
@@ -209,18 +208,48 @@ impl TileRays {
             let x = (2.0 * px / self.width - 1.0) * self.half_w;
             *c = self.forward + x * self.right;
         }
+        out.reserve(tw * tile.height as usize);
         for row in tile.y..tile.y + tile.height {
             let py = row as f64 + offset.y;
             let y = (1.0 - 2.0 * py / self.height) * self.half_h;
             let up = y * self.up;
-            out.extend(columns[..tw].iter().map(|&c| Ray {
-                origin: glam::Vec3::ZERO,
-                dir: (c + up).normalize().as_vec3().normalize(),
-                t_min: 0.0,
-                t_max: self.t_max,
-            }));
+            for chunk in columns[..tw].chunks(LANES) {
+                let d = directions(chunk, up);
+                out.extend((0..chunk.len()).map(|i| Ray {
+                    origin: glam::Vec3::ZERO,
+                    dir: glam::Vec3::new(d[0][i], d[1][i], d[2][i]),
+                    t_min: 0.0,
+                    t_max: self.t_max,
+                }));
+            }
         }
     }
+}
+
+/// Columns whose directions [`directions`] computes together.
+const LANES: usize = 8;
+
+/// `(column + up).normalize().as_vec3().normalize()` for up to [`LANES`] columns, written
+/// lane by lane (structure of arrays) so the compiler can use SIMD; the same IEEE operations
+/// in the same order as glam's `normalize` (`v * (1 / sqrt(x*x + y*y + z*z))`), so the same
+/// bits. Lanes past `columns.len()` are unspecified.
+#[inline(always)]
+fn directions(columns: &[DVec3], up: DVec3) -> [[f32; LANES]; 3] {
+    let (mut x, mut y, mut z) = ([1.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    for (i, c) in columns.iter().enumerate().take(LANES) {
+        let v = *c + up;
+        (x[i], y[i], z[i]) = (v.x, v.y, v.z);
+    }
+    let mut out = [[0.0f32; LANES]; 3];
+    for i in 0..LANES {
+        let r = 1.0 / (x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
+        let (a, b, c) = ((x[i] * r) as f32, (y[i] * r) as f32, (z[i] * r) as f32);
+        let s = 1.0 / (a * a + b * b + c * c).sqrt();
+        out[0][i] = a * s;
+        out[1][i] = b * s;
+        out[2][i] = c * s;
+    }
+    out
 }
 
 #[cfg(test)]
@@ -332,7 +361,11 @@ mod tests {
             let grid = TileRays::new(&cam, 123.25);
             for s in [0, 1, 5] {
                 let off = sample_offset(s);
-                for (x, y, w, h) in [(0, 0, 8, 8), (3, 2, 16, 4), (0, 0, cam.width.min(MAX_TILE_WIDTH as u32), 1)] {
+                for (x, y, w, h) in [
+                    (0, 0, 8, 8),
+                    (3, 2, 16, 4),
+                    (0, 0, cam.width.min(MAX_TILE_WIDTH as u32), 1),
+                ] {
                     let tile = Tile {
                         x,
                         y,

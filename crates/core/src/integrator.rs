@@ -210,8 +210,12 @@ fn run_bands<S: Default + Send>(
     on_row: &(dyn Fn() + Sync),
     trace: impl Fn(&mut S, &mut Band<'_>) -> RenderStats + Sync,
 ) -> RenderStats {
-    let one = |scratch: &mut S, mut band: Band<'_>| {
-        let stats = trace(scratch, &mut band);
+    // Tiles write a band's pixels into a worker's own planes (which stay in cache from
+    // band to band), copied into the framebuffer row-contiguously once the band is done:
+    // scattered tile-row stores straight into the framebuffer cost more than the copy.
+    let one = |(scratch, planes): &mut (S, Planes), mut band: Band<'_>| {
+        let stats = trace(scratch, &mut band.staged(planes));
+        band.copy_from(planes);
         for _ in 0..band.rows {
             on_row();
         }
@@ -220,7 +224,7 @@ fn run_bands<S: Default + Send>(
     let mut total = RenderStats::default();
     match pool {
         None => {
-            let mut scratch = S::default();
+            let mut scratch = Default::default();
             for band in bands {
                 total.merge(&one(&mut scratch, band));
             }
@@ -230,7 +234,7 @@ fn run_bands<S: Default + Send>(
                 bands
                     .into_par_iter()
                     .with_max_len(1)
-                    .map_init(S::default, one)
+                    .map_init(Default::default, one)
                     .collect()
             });
             for s in &per_band {
@@ -239,6 +243,17 @@ fn run_bands<S: Default + Send>(
         }
     }
     total
+}
+
+/// One worker's copy of a band's pixel planes (see [`run_bands`]).
+#[derive(Default)]
+struct Planes {
+    color: Vec<Vec3>,
+    depth: Vec<f32>,
+    normal: Vec<Vec3>,
+    material: Vec<u32>,
+    termination: Vec<Termination>,
+    work: Vec<RayWork>,
 }
 
 /// What every tile of one render reads.
@@ -300,6 +315,39 @@ impl<'a> Band<'a> {
         bands
     }
 
+    /// A band of the same rows over `planes` (resized to the band's pixels).
+    fn staged<'p>(&self, planes: &'p mut Planes) -> Band<'p> {
+        let n = self.color.len();
+        planes.color.resize(n, Vec3::ZERO);
+        planes.depth.resize(n, NO_HIT_DEPTH);
+        planes.normal.resize(n, Vec3::ZERO);
+        planes.material.resize(n, u32::MAX);
+        planes.termination.resize(n, Termination::Miss);
+        planes.work.resize(n, RayWork::default());
+        Band {
+            width: self.width,
+            y: self.y,
+            rows: self.rows,
+            color: &mut planes.color[..n],
+            depth: &mut planes.depth[..n],
+            normal: &mut planes.normal[..n],
+            material: &mut planes.material[..n],
+            termination: &mut planes.termination[..n],
+            work: &mut planes.work[..n],
+        }
+    }
+
+    /// Copies the pixels [`Band::staged`] traced into `planes` into this band.
+    fn copy_from(&mut self, planes: &Planes) {
+        let n = self.color.len();
+        self.color.copy_from_slice(&planes.color[..n]);
+        self.depth.copy_from_slice(&planes.depth[..n]);
+        self.normal.copy_from_slice(&planes.normal[..n]);
+        self.material.copy_from_slice(&planes.material[..n]);
+        self.termination.copy_from_slice(&planes.termination[..n]);
+        self.work.copy_from_slice(&planes.work[..n]);
+    }
+
     /// The tiles of the band, left to right.
     pub(crate) fn tiles(&self) -> impl Iterator<Item = Tile> + use<> {
         let (width, y, rows) = (self.width as u32, self.y, self.rows);
@@ -311,10 +359,11 @@ impl<'a> Band<'a> {
         })
     }
 
-    /// Band indices of `tile`'s pixels, row-major (the order of its camera rays).
-    pub(crate) fn pixels_of(&self, tile: Tile) -> impl Iterator<Item = u32> + use<> {
+    /// Band indices of `tile`'s pixels, row-major (the order of its camera rays), as one
+    /// range per tile row.
+    pub(crate) fn rows_of(&self, tile: Tile) -> impl Iterator<Item = std::ops::Range<u32>> + use<> {
         let (w, x, y0) = (self.width as u32, tile.x, tile.y - self.y);
-        (y0..y0 + tile.height).flat_map(move |r| r * w + x..r * w + x + tile.width)
+        (y0..y0 + tile.height).map(move |r| r * w + x..r * w + x + tile.width)
     }
 
     /// Pixels in the band.
@@ -527,6 +576,7 @@ pub(crate) enum Vertex {
 /// Classifies one closest-hit result of a wavefront: counts its work and termination, drops a
 /// non-finite hit (counted), records the AOVs of band pixel `aov` (sample 0 of a camera ray),
 /// and decides whether the ray met an area light, the background or a surface.
+#[inline(always)]
 pub(crate) fn resolve_vertex(
     stats: &mut RenderStats,
     aov: Option<(&mut Band<'_>, usize)>,
@@ -647,14 +697,16 @@ fn trace_tile(
     rays.clear();
     for sample in 0..sh.spp {
         f.camera.push(tile, sample_offset(sample), rays);
-        paths.extend(band.pixels_of(tile).map(|pixel| Path {
-            pixel,
-            sample,
-            throughput: 1.0,
-        }));
+        for pixels in band.rows_of(tile) {
+            paths.extend(pixels.map(|pixel| Path {
+                pixel,
+                sample,
+                throughput: 1.0,
+            }));
+        }
     }
-    for i in band.pixels_of(tile) {
-        sum[i as usize] = Vec3::ZERO;
+    for pixels in band.rows_of(tile) {
+        sum[pixels.start as usize..pixels.end as usize].fill(Vec3::ZERO);
     }
     stats.primary_rays += paths.len() as u64;
 
@@ -676,7 +728,12 @@ fn trace_tile(
         ao_point_pending.clear();
         next.clear();
         next_rays.clear();
-        for (pi, ((path, ray), res)) in paths.iter().zip(rays.iter()).zip(results.iter()).enumerate() {
+        for (pi, ((path, ray), res)) in paths
+            .iter()
+            .zip(rays.iter())
+            .zip(results.iter())
+            .enumerate()
+        {
             let px = path.pixel as usize;
             let aov = (depth == 0 && pi < pixels).then_some((&mut *band, px));
             let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
@@ -875,10 +932,9 @@ fn trace_tile(
         }
         if !ao_points.is_empty() {
             let distance = sh.ambient_occlusion.map_or(0.0, |a| a.1);
-            stats.trace_time.ambient_occlusion_ns +=
-                timed(visibility, ao_points.len(), |v| {
-                    geometry.ambient_openness(ao_points, distance, v)
-                });
+            stats.trace_time.ambient_occlusion_ns += timed(visibility, ao_points.len(), |v| {
+                geometry.ambient_openness(ao_points, distance, v)
+            });
             stats.ao_rays += ao_points.len() as u64;
             for (p, v) in ao_point_pending.iter().zip(visibility.iter()) {
                 stats.add_work(&v.work);
@@ -887,10 +943,9 @@ fn trace_tile(
             }
         }
         if !ao_rays.is_empty() {
-            stats.trace_time.ambient_occlusion_ns +=
-                timed(occlusion, ao_rays.len(), |o| {
-                    geometry.occluded_many(ao_rays, o)
-                });
+            stats.trace_time.ambient_occlusion_ns += timed(occlusion, ao_rays.len(), |o| {
+                geometry.occluded_many(ao_rays, o)
+            });
             stats.ao_rays += ao_rays.len() as u64;
             for (p, o) in ao_pending.iter().zip(occlusion.iter()) {
                 stats.add_work(&o.work);
@@ -905,8 +960,10 @@ fn trace_tile(
         std::mem::swap(rays, next_rays);
         depth += 1;
     }
-    for i in band.pixels_of(tile) {
-        band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+    for pixels in band.rows_of(tile) {
+        for i in pixels {
+            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+        }
     }
 }
 

@@ -32,8 +32,8 @@ use crate::geometry::{OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
     Band, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
 };
-use crate::stats::RenderStats;
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
+use crate::stats::RenderStats;
 
 /// Most paths of one image row traced together: sets the samples per chunk (module docs).
 pub const PATHS_PER_WAVEFRONT: usize = 4096;
@@ -116,8 +116,8 @@ fn trace_tile(
     // its contributions in the same order whatever the tile shape.
     let w = f.scene.camera.width as usize;
     let chunk = (PATHS_PER_WAVEFRONT / w.max(1)).max(1) as u32;
-    for i in band.pixels_of(tile) {
-        sum[i as usize] = Vec3::ZERO;
+    for pixels in band.rows_of(tile) {
+        sum[pixels.start as usize..pixels.end as usize].fill(Vec3::ZERO);
     }
     let mut first = 0;
     while first < sh.spp {
@@ -126,20 +126,22 @@ fn trace_tile(
         rays.clear();
         for sample in first..last {
             f.camera.push(tile, sample_offset(sample), rays);
-            paths.extend(band.pixels_of(tile).map(|pixel| PathState {
-                pixel,
-                sample,
-                throughput: Vec3::ONE,
-                count_emission: true,
-                bounce: 0,
-            }));
+            for pixels in band.rows_of(tile) {
+                paths.extend(pixels.map(|pixel| PathState {
+                    pixel,
+                    sample,
+                    throughput: Vec3::ONE,
+                    count_emission: true,
+                    bounce: 0,
+                }));
+            }
         }
         stats.primary_rays += paths.len() as u64;
         while !paths.is_empty() {
             let camera = paths[0].bounce == 0;
             // The chunk's camera rays are ordered sample-major from sample `first`.
-            let samples = camera
-                .then(|| PrimarySamples::tile(&f.scene.camera, tile).starting_at(first));
+            let samples =
+                camera.then(|| PrimarySamples::tile(&f.scene.camera, tile).starting_at(first));
             trace_wavefront(geometry, rays, samples, results, stats);
             next.clear();
             next_rays.clear();
@@ -149,18 +151,18 @@ fn trace_tile(
                 let px = path.pixel as usize;
                 let aov = (camera && path.sample == 0).then_some((&mut *band, px));
                 let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
-                        Vertex::Emitter(emission) => {
-                            if path.count_emission {
-                                sum[px] += path.throughput * emission;
-                            }
-                            continue;
+                    Vertex::Emitter(emission) => {
+                        if path.count_emission {
+                            sum[px] += path.throughput * emission;
                         }
-                        Vertex::Background(radiance) => {
-                            sum[px] += path.throughput * radiance;
-                            continue;
-                        }
-                        Vertex::Surface { hit, normal } => (hit, normal),
-                    };
+                        continue;
+                    }
+                    Vertex::Background(radiance) => {
+                        sum[px] += path.throughput * radiance;
+                        continue;
+                    }
+                    Vertex::Surface { hit, normal } => (hit, normal),
+                };
                 let d = ray.dir;
                 let m = sh.material(hit.material);
                 let albedo = m.color.as_vec3();
@@ -295,7 +297,9 @@ fn trace_tile(
         }
         first = last;
     }
-    for i in band.pixels_of(tile) {
-        band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+    for pixels in band.rows_of(tile) {
+        for i in pixels {
+            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+        }
     }
 }
