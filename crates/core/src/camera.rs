@@ -233,6 +233,8 @@ const LANES: usize = 8;
 /// lane by lane (structure of arrays) so the compiler can use SIMD; the same IEEE operations
 /// in the same order as glam's `normalize` (`v * (1 / sqrt(x*x + y*y + z*z))`), so the same
 /// bits. Lanes past `columns.len()` are unspecified.
+// Lane loops index several arrays by the same lane, mirroring SIMD lanes.
+#[allow(clippy::needless_range_loop)]
 #[inline(always)]
 fn directions(columns: &[DVec3], up: DVec3) -> [[f32; LANES]; 3] {
     let (mut x, mut y, mut z) = ([1.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
