@@ -66,6 +66,7 @@ impl BackgroundSampler {
 
     /// Radiance seen along unit direction `dir` (nearest texel of the equirectangular map:
     /// `u = 0.5 + atan2(x, -z) / 2pi`, `v = acos(y) / pi`).
+    #[inline]
     pub fn sample(&self, dir: Vec3) -> Vec3 {
         match self {
             Self::Color(c) => *c,

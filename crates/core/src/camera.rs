@@ -56,33 +56,69 @@ pub fn primary_ray_on(plane: &ImagePlane, column: u32, row: u32, offset: DVec2, 
     }
 }
 
-/// The camera samples behind one batch of primary rays (one image row), so a backend that
-/// computes in f64 can trace the exact camera ray instead of widening its f32 rounding
+/// A rectangle of image pixels: columns `x..x + width`, rows `y..y + height` (row 0 at the
+/// top). The integrator traces the camera rays of one tile as one batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Tile {
+    /// First column.
+    pub x: u32,
+    /// First row.
+    pub y: u32,
+    /// Columns (>= 1).
+    pub width: u32,
+    /// Rows (>= 1).
+    pub height: u32,
+}
+
+impl Tile {
+    /// Pixels in the tile.
+    pub fn pixels(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+}
+
+/// The camera samples behind one batch of primary rays (one screen [`Tile`]), so a backend
+/// that computes in f64 can trace the exact camera ray instead of widening its f32 rounding
 /// (which turns an off-axis ray by up to ~3e-8 rad: whole silhouette pixels at 1e5 units).
 ///
-/// Ray `i` of the batch is anti-aliasing sample `i / width` ([`sample_offset`]) of pixel
-/// column `i % width` in `row`, and starts at the camera (the render-space origin).
+/// Ray `i` of the batch is anti-aliasing sample `first + i / n` ([`sample_offset`]) of the
+/// tile's pixel `j = i % n` (`n` the tile's pixel count), counted row-major within the tile:
+/// column `x + j % width`, row `y + j / width` ([`PrimarySamples::pixel`]). Every ray starts
+/// at the camera (the render-space origin).
 #[derive(Debug, Clone, Copy)]
 pub struct PrimarySamples<'a> {
     camera: &'a Camera,
     plane: ImagePlane,
-    row: u32,
+    tile: Tile,
     first_sample: u32,
 }
 
 impl<'a> PrimarySamples<'a> {
-    /// The samples of image row `row` of `camera`, ordered as the integrator batches them.
+    /// The samples of image row `row` of `camera` (a tile of the full width, one row high).
     pub fn row(camera: &'a Camera, row: u32) -> Self {
+        Self::tile(
+            camera,
+            Tile {
+                x: 0,
+                y: row,
+                width: camera.width,
+                height: 1,
+            },
+        )
+    }
+
+    /// The samples of `tile` of `camera`, ordered as the integrator batches them.
+    pub fn tile(camera: &'a Camera, tile: Tile) -> Self {
         Self {
             camera,
             plane: camera.image_plane(),
-            row,
+            tile,
             first_sample: 0,
         }
     }
 
-    /// The same row's samples from sample `first` on (a batch holding samples `first..`, as
-    /// the path tracer's chunks do): ray `i` is sample `first + i / width`.
+    /// The same tile's samples from sample `first` on (a batch holding samples `first..`, as
+    /// the path tracer's chunks do): ray `i` is sample `first + i / n`.
     pub fn starting_at(self, first: u32) -> Self {
         Self {
             first_sample: first,
@@ -90,19 +126,132 @@ impl<'a> PrimarySamples<'a> {
         }
     }
 
-    /// Exact unit direction (f64, render space) of ray `index` of the batch; the batch's f32
-    /// ray `index` is its rounding. An index past the row's samples wraps to further samples.
-    pub fn direction(&self, index: usize) -> DVec3 {
-        let width = self.camera.width.max(1) as usize;
-        let sample = u32::try_from(index / width)
+    /// The camera the samples belong to.
+    pub fn camera(&self) -> &'a Camera {
+        self.camera
+    }
+
+    /// The tile the batch covers.
+    pub fn tile_bounds(&self) -> Tile {
+        self.tile
+    }
+
+    /// `(column, row, sample)` of ray `index` of the batch. An index past the tile's samples
+    /// wraps to further samples.
+    pub fn pixel(&self, index: usize) -> (u32, u32, u32) {
+        let width = self.tile.width.max(1) as usize;
+        let n = self.tile.pixels().max(1);
+        let sample = u32::try_from(index / n)
             .unwrap_or(u32::MAX)
             .saturating_add(self.first_sample);
-        let offset = sample_offset(sample);
-        self.plane.direction(
-            (index % width) as f64 + offset.x,
-            self.row as f64 + offset.y,
-        )
+        let j = index % n;
+        // j < n, so both fit the tile's u32 bounds.
+        let column = self.tile.x + (j % width) as u32;
+        let row = self.tile.y + (j / width) as u32;
+        (column, row, sample)
     }
+
+    /// Exact unit direction (f64, render space) of ray `index` of the batch; the batch's f32
+    /// ray `index` is its rounding.
+    pub fn direction(&self, index: usize) -> DVec3 {
+        let (column, row, sample) = self.pixel(index);
+        let offset = sample_offset(sample);
+        self.plane
+            .direction(column as f64 + offset.x, row as f64 + offset.y)
+    }
+}
+
+/// Camera rays of whole tiles, bit for bit the rays of [`primary_ray_on`]: the pinhole
+/// formulas of [`ImagePlane::direction`] with each column's and each row's term computed
+/// once per tile instead of once per pixel (same operations in the same order, so the same
+/// rounding; a test compares every pixel).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TileRays {
+    forward: DVec3,
+    right: DVec3,
+    up: DVec3,
+    width: f64,
+    height: f64,
+    half_w: f64,
+    half_h: f64,
+    t_max: f32,
+}
+
+/// Widest tile [`TileRays::push`] accepts.
+pub(crate) const MAX_TILE_WIDTH: usize = 64;
+
+impl TileRays {
+    /// The camera's rays, ending at `t_max` (the scene's maximum distance).
+    pub(crate) fn new(camera: &Camera, t_max: f64) -> Self {
+        // As `Camera::image_plane`.
+        let half_h = (camera.vfov_rad * 0.5).tan();
+        Self {
+            forward: camera.forward,
+            right: camera.right,
+            up: camera.up,
+            width: camera.width as f64,
+            height: camera.height as f64,
+            half_w: half_h * camera.width as f64 / camera.height as f64,
+            half_h,
+            t_max: t_max as f32,
+        }
+    }
+
+    /// Appends the rays of `tile`'s pixels at sub-pixel `offset`, row-major.
+    /// `tile.width` must not exceed [`MAX_TILE_WIDTH`].
+    pub(crate) fn push(&self, tile: Tile, offset: DVec2, out: &mut Vec<Ray>) {
+        let tw = tile.width as usize;
+        assert!(tw <= MAX_TILE_WIDTH, "tile wider than MAX_TILE_WIDTH");
+        let mut columns = [DVec3::ZERO; MAX_TILE_WIDTH];
+        for (k, c) in columns[..tw].iter_mut().enumerate() {
+            let px = (tile.x + k as u32) as f64 + offset.x;
+            let x = (2.0 * px / self.width - 1.0) * self.half_w;
+            *c = self.forward + x * self.right;
+        }
+        out.reserve(tw * tile.height as usize);
+        for row in tile.y..tile.y + tile.height {
+            let py = row as f64 + offset.y;
+            let y = (1.0 - 2.0 * py / self.height) * self.half_h;
+            let up = y * self.up;
+            for chunk in columns[..tw].chunks(LANES) {
+                let d = directions(chunk, up);
+                out.extend((0..chunk.len()).map(|i| Ray {
+                    origin: glam::Vec3::ZERO,
+                    dir: glam::Vec3::new(d[0][i], d[1][i], d[2][i]),
+                    t_min: 0.0,
+                    t_max: self.t_max,
+                }));
+            }
+        }
+    }
+}
+
+/// Columns whose directions [`directions`] computes together.
+const LANES: usize = 8;
+
+/// `(column + up).normalize().as_vec3().normalize()` for up to [`LANES`] columns, written
+/// lane by lane (structure of arrays) so the compiler can use SIMD; the same IEEE operations
+/// in the same order as glam's `normalize` (`v * (1 / sqrt(x*x + y*y + z*z))`), so the same
+/// bits. Lanes past `columns.len()` are unspecified.
+// Lane loops index several arrays by the same lane, mirroring SIMD lanes.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn directions(columns: &[DVec3], up: DVec3) -> [[f32; LANES]; 3] {
+    let (mut x, mut y, mut z) = ([1.0f64; LANES], [0.0f64; LANES], [0.0f64; LANES]);
+    for (i, c) in columns.iter().enumerate().take(LANES) {
+        let v = *c + up;
+        (x[i], y[i], z[i]) = (v.x, v.y, v.z);
+    }
+    let mut out = [[0.0f32; LANES]; 3];
+    for i in 0..LANES {
+        let r = 1.0 / (x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
+        let (a, b, c) = ((x[i] * r) as f32, (y[i] * r) as f32, (z[i] * r) as f32);
+        let s = 1.0 / (a * a + b * b + c * c).sqrt();
+        out[0][i] = a * s;
+        out[1][i] = b * s;
+        out[2][i] = c * s;
+    }
+    out
 }
 
 #[cfg(test)]
@@ -184,5 +333,82 @@ mod tests {
                 assert!((ray.dir.as_dvec3() - exact).length() < 1e-6);
             }
         }
+    }
+
+    #[test]
+    fn tile_rays_are_bit_identical_to_primary_ray_on() {
+        let cams = [
+            study_camera(),
+            Camera::look_at(
+                DVec3::new(1.0, 2.0, -3.0),
+                DVec3::new(0.3, 0.1, 0.7),
+                DVec3::Y,
+                35.0,
+                37,
+                23,
+            )
+            .unwrap(),
+            Camera::look_at(
+                DVec3::new(1e5, -3.0, 7.0),
+                DVec3::new(1e5 + 0.1, -2.0, 9.0),
+                DVec3::new(0.2, 1.0, 0.1),
+                120.0,
+                19,
+                41,
+            )
+            .unwrap(),
+        ];
+        for cam in cams {
+            let plane = cam.image_plane();
+            let grid = TileRays::new(&cam, 123.25);
+            for s in [0, 1, 5] {
+                let off = sample_offset(s);
+                for (x, y, w, h) in [
+                    (0, 0, 8, 8),
+                    (3, 2, 16, 4),
+                    (0, 0, cam.width.min(MAX_TILE_WIDTH as u32), 1),
+                ] {
+                    let tile = Tile {
+                        x,
+                        y,
+                        width: w.min(cam.width - x),
+                        height: h.min(cam.height - y),
+                    };
+                    let mut rays = Vec::new();
+                    grid.push(tile, off, &mut rays);
+                    assert_eq!(rays.len(), tile.pixels());
+                    let samples = PrimarySamples::tile(&cam, tile).starting_at(s);
+                    for (i, r) in rays.iter().enumerate() {
+                        let (col, row, sample) = samples.pixel(i);
+                        assert_eq!(sample, s);
+                        let want = primary_ray_on(&plane, col, row, off, 123.25);
+                        assert_eq!(
+                            (r.dir.to_array().map(f32::to_bits), r.t_max.to_bits()),
+                            (want.dir.to_array().map(f32::to_bits), want.t_max.to_bits()),
+                            "pixel ({col}, {row}) sample {s}"
+                        );
+                        assert_eq!(r.origin, want.origin);
+                        assert_eq!(samples.direction(i).as_vec3().normalize(), r.dir);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn tile_samples_count_pixels_row_major_then_samples() {
+        let cam = study_camera();
+        let tile = Tile {
+            x: 10,
+            y: 20,
+            width: 4,
+            height: 2,
+        };
+        let s = PrimarySamples::tile(&cam, tile).starting_at(3);
+        assert_eq!(s.pixel(0), (10, 20, 3));
+        assert_eq!(s.pixel(3), (13, 20, 3));
+        assert_eq!(s.pixel(4), (10, 21, 3));
+        assert_eq!(s.pixel(9), (11, 20, 4));
+        assert_eq!(PrimarySamples::row(&cam, 7).pixel(501), (1, 7, 1));
     }
 }

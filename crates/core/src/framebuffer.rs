@@ -47,6 +47,30 @@ impl Framebuffer {
         }
     }
 
+    /// Makes this a `width` x `height` framebuffer, keeping its memory where it suffices;
+    /// pixel values are unspecified until written (the renderer overwrites every pixel).
+    pub fn resize(&mut self, width: u32, height: u32) {
+        let n = width as usize * height as usize;
+        self.width = width;
+        self.height = height;
+        self.color.resize(n, Vec3::ZERO);
+        self.depth.resize(n, NO_HIT_DEPTH);
+        self.normal.resize(n, Vec3::ZERO);
+        self.material.resize(n, u32::MAX);
+        self.termination.resize(n, Termination::Miss);
+        self.work.resize(n, RayWork::default());
+    }
+
+    /// Clears every pixel: background black, no hits.
+    pub fn clear(&mut self) {
+        self.color.fill(Vec3::ZERO);
+        self.depth.fill(NO_HIT_DEPTH);
+        self.normal.fill(Vec3::ZERO);
+        self.material.fill(u32::MAX);
+        self.termination.fill(Termination::Miss);
+        self.work.fill(RayWork::default());
+    }
+
     /// Number of pixels.
     pub fn len(&self) -> usize {
         self.color.len()

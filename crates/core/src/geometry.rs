@@ -257,9 +257,9 @@ pub trait Geometry: Send + Sync {
         }
     }
 
-    /// [`Geometry::closest_hits`] for one row's primary rays, with the camera samples they
-    /// were rounded from: `rays[i]` is the f32 rounding of the exact camera ray
-    /// `samples.direction(i)` from the origin. The default ignores `samples` (an f32 backend
+    /// [`Geometry::closest_hits`] for one screen tile's primary rays, with the camera samples
+    /// they were rounded from: `rays[i]` is the f32 rounding of the exact camera ray
+    /// `samples.direction(i)` from the origin (`samples.pixel(i)` names its pixel and sample). The default ignores `samples` (an f32 backend
     /// pays nothing); a backend that computes in f64 (the reference) overrides it to trace the
     /// exact camera rays, so ground truth is exact for the camera model, not for its rounding.
     fn closest_hits_primary(

@@ -1,6 +1,7 @@
 //! The Whitted-style integrator: Phong shading, hard shadows (soft for area lights), ambient
-//! occlusion, iterative mirror reflections and Halton anti-aliasing, traced as a wavefront per
-//! image row so backends get rays in batches. [`render`] runs the path tracer
+//! occlusion, iterative mirror reflections and Halton anti-aliasing, traced as wavefronts per
+//! screen tile ([`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels) so backends get coherent rays in
+//! batches. [`render`] runs the path tracer
 //! ([`crate::path`]) instead when the scene asks for it.
 //!
 //! Shading follows the source study ("Computer Graphics from Scratch", Gambetta): the local
@@ -24,7 +25,7 @@ use marchmesh_scene::{Integrator, Light, Material, Scene};
 use rayon::prelude::*;
 
 use crate::background::BackgroundSampler;
-use crate::camera::{PrimarySamples, primary_ray_on, sample_offset};
+use crate::camera::{PrimarySamples, Tile, TileRays, sample_offset};
 use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::RenderSpace;
@@ -98,6 +99,24 @@ pub struct RenderOutput {
     pub elapsed: Duration,
 }
 
+impl Default for RenderOutput {
+    /// An empty (0x0) output, for [`render_into`] to fill.
+    fn default() -> Self {
+        Self {
+            framebuffer: Framebuffer::new(0, 0),
+            stats: RenderStats::default(),
+            elapsed: Duration::ZERO,
+        }
+    }
+}
+
+/// Columns of the screen tiles the integrators trace as one batch.
+pub const TILE_WIDTH: u32 = 8;
+
+/// Rows of the screen tiles the integrators trace as one batch (and of the bands of rows
+/// handed to worker threads).
+pub const TILE_HEIGHT: u32 = 8;
+
 /// Renders `scene` with `geometry` (which must have been built for this scene and camera).
 ///
 /// `on_row` is called once per finished image row, from worker threads (for progress bars).
@@ -108,9 +127,31 @@ pub fn render(
     options: &RenderOptions,
     on_row: &(dyn Fn() + Sync),
 ) -> Result<RenderOutput, RenderError> {
+    let mut out = RenderOutput::default();
+    render_into(scene, geometry, background, options, on_row, &mut out)?;
+    Ok(out)
+}
+
+/// [`render`] into an existing output, reusing its framebuffer's memory (resized to the
+/// scene's image; every pixel is overwritten). Repeated renders of one size (benchmarks,
+/// interactive views) then allocate nothing per render.
+///
+/// The image is cut into bands of [`TILE_HEIGHT`] rows, one per worker task, and each band
+/// into tiles of at most [`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels; each tile's rays are
+/// traced as wavefronts (camera rays, then shadow and other secondary rays, then
+/// reflections), so a backend gets coherent batches. Every pixel's result is independent of
+/// the batching and of the thread count.
+pub fn render_into(
+    scene: &Scene,
+    geometry: &dyn Geometry,
+    background: &BackgroundSampler,
+    options: &RenderOptions,
+    on_row: &(dyn Fn() + Sync),
+    out: &mut RenderOutput,
+) -> Result<(), RenderError> {
     let (w, h) = (scene.camera.width, scene.camera.height);
-    // Final buffers plus the per-row copies made while tracing.
-    let needed = 2 * Framebuffer::bytes_for(w, h);
+    // The final buffers; the per-worker scratch is a few tiles' worth.
+    let needed = Framebuffer::bytes_for(w, h);
     if needed > options.memory_limit_bytes {
         return Err(RenderError::TooLarge {
             width: w,
@@ -119,50 +160,253 @@ pub fn render(
             limit_bytes: options.memory_limit_bytes,
         });
     }
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.threads)
-        .build()
-        .map_err(|e| RenderError::ThreadPool {
-            threads: options.threads,
-            reason: e.to_string(),
-        })?;
+    // One thread renders on the caller's thread: no pool to start and join.
+    let pool = match options.threads {
+        1 => None,
+        threads => Some(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .map_err(|e| RenderError::ThreadPool {
+                    threads,
+                    reason: e.to_string(),
+                })?,
+        ),
+    };
     let shading = Shading::new(scene);
-    let start = Instant::now();
-    let rows: Vec<RowOutput> = pool.install(|| {
-        (0..h)
-            .into_par_iter()
-            .with_max_len(1)
-            .map(|row| {
-                let out = match scene.render.integrator {
-                    Integrator::Whitted => trace_row(scene, &shading, geometry, background, row),
-                    Integrator::Path => {
-                        crate::path::trace_row(scene, &shading, geometry, background, row)
-                    }
-                };
-                on_row();
-                out
-            })
-            .collect()
-    });
-    let elapsed = start.elapsed();
-    let mut fb = Framebuffer::new(w, h);
-    let mut stats = RenderStats::default();
-    for (row, r) in rows.into_iter().enumerate() {
-        let base = row * w as usize;
-        let range = base..base + w as usize;
-        fb.color[range.clone()].copy_from_slice(&r.color);
-        fb.depth[range.clone()].copy_from_slice(&r.depth);
-        fb.normal[range.clone()].copy_from_slice(&r.normal);
-        fb.material[range.clone()].copy_from_slice(&r.material);
-        fb.termination[range.clone()].copy_from_slice(&r.termination);
-        fb.work[range].copy_from_slice(&r.work);
-        stats.merge(&r.stats);
+    let frame = Frame {
+        scene,
+        sh: &shading,
+        geometry,
+        background,
+        camera: TileRays::new(&scene.camera, scene.render.max_distance),
+    };
+    let fb = &mut out.framebuffer;
+    fb.resize(w, h);
+    if shading.spp == 0 {
+        // No camera ray writes the pixels: leave them cleared.
+        fb.clear();
     }
-    Ok(RenderOutput {
-        framebuffer: fb,
-        stats,
-        elapsed,
-    })
+    let start = Instant::now();
+    let bands = Band::split(fb, TILE_HEIGHT);
+    let stats = match scene.render.integrator {
+        Integrator::Whitted => run_bands(pool.as_ref(), bands, on_row, |s, b| {
+            trace_band(&frame, s, b)
+        }),
+        Integrator::Path => run_bands(pool.as_ref(), bands, on_row, |s, b| {
+            crate::path::trace_band(&frame, s, b)
+        }),
+    };
+    out.elapsed = start.elapsed();
+    out.stats = stats;
+    Ok(())
+}
+
+/// Traces every band with `trace` (on `pool`'s workers, or in order on this thread) and
+/// sums their counters.
+fn run_bands<S: Default + Send>(
+    pool: Option<&rayon::ThreadPool>,
+    bands: Vec<Band<'_>>,
+    on_row: &(dyn Fn() + Sync),
+    trace: impl Fn(&mut S, &mut Band<'_>) -> RenderStats + Sync,
+) -> RenderStats {
+    // Tiles write a band's pixels into a worker's own planes (which stay in cache from
+    // band to band), copied into the framebuffer row-contiguously once the band is done:
+    // scattered tile-row stores straight into the framebuffer cost more than the copy.
+    let one = |(scratch, planes): &mut (S, Planes), mut band: Band<'_>| {
+        let stats = trace(scratch, &mut band.staged(planes));
+        band.copy_from(planes);
+        for _ in 0..band.rows {
+            on_row();
+        }
+        stats
+    };
+    let mut total = RenderStats::default();
+    match pool {
+        None => {
+            let mut scratch = Default::default();
+            for band in bands {
+                total.merge(&one(&mut scratch, band));
+            }
+        }
+        Some(pool) => {
+            let per_band: Vec<RenderStats> = pool.install(|| {
+                bands
+                    .into_par_iter()
+                    .with_max_len(1)
+                    .map_init(Default::default, one)
+                    .collect()
+            });
+            for s in &per_band {
+                total.merge(s);
+            }
+        }
+    }
+    total
+}
+
+/// One worker's copy of a band's pixel planes (see [`run_bands`]).
+#[derive(Default)]
+struct Planes {
+    color: Vec<Vec3>,
+    depth: Vec<f32>,
+    normal: Vec<Vec3>,
+    material: Vec<u32>,
+    termination: Vec<Termination>,
+    work: Vec<RayWork>,
+}
+
+/// What every tile of one render reads.
+pub(crate) struct Frame<'a> {
+    pub(crate) scene: &'a Scene,
+    pub(crate) sh: &'a Shading,
+    pub(crate) geometry: &'a dyn Geometry,
+    pub(crate) background: &'a BackgroundSampler,
+    pub(crate) camera: TileRays,
+}
+
+/// The framebuffer's pixels of one band of whole image rows, written in place by the tiles
+/// traced in it. Pixel `i` of the band is column `i % width` of row `y + i / width`.
+pub(crate) struct Band<'a> {
+    pub(crate) width: usize,
+    pub(crate) y: u32,
+    pub(crate) rows: u32,
+    color: &'a mut [Vec3],
+    depth: &'a mut [f32],
+    normal: &'a mut [Vec3],
+    material: &'a mut [u32],
+    termination: &'a mut [Termination],
+    work: &'a mut [RayWork],
+}
+
+impl<'a> Band<'a> {
+    /// `fb` cut into bands of `rows` rows (the last may be shorter).
+    fn split(fb: &'a mut Framebuffer, rows: u32) -> Vec<Band<'a>> {
+        let width = fb.width as usize;
+        let n = (width * rows as usize).max(1);
+        let mut depth = fb.depth.chunks_mut(n);
+        let mut normal = fb.normal.chunks_mut(n);
+        let mut material = fb.material.chunks_mut(n);
+        let mut termination = fb.termination.chunks_mut(n);
+        let mut work = fb.work.chunks_mut(n);
+        let mut bands = Vec::new();
+        for (k, color) in fb.color.chunks_mut(n).enumerate() {
+            let (Some(depth), Some(normal), Some(material), Some(termination), Some(work)) = (
+                depth.next(),
+                normal.next(),
+                material.next(),
+                termination.next(),
+                work.next(),
+            ) else {
+                unreachable!("framebuffer planes differ in length");
+            };
+            bands.push(Band {
+                width,
+                y: k as u32 * rows,
+                rows: (color.len() / width.max(1)) as u32,
+                color,
+                depth,
+                normal,
+                material,
+                termination,
+                work,
+            });
+        }
+        bands
+    }
+
+    /// A band of the same rows over `planes` (resized to the band's pixels).
+    fn staged<'p>(&self, planes: &'p mut Planes) -> Band<'p> {
+        let n = self.color.len();
+        planes.color.resize(n, Vec3::ZERO);
+        planes.depth.resize(n, NO_HIT_DEPTH);
+        planes.normal.resize(n, Vec3::ZERO);
+        planes.material.resize(n, u32::MAX);
+        planes.termination.resize(n, Termination::Miss);
+        planes.work.resize(n, RayWork::default());
+        Band {
+            width: self.width,
+            y: self.y,
+            rows: self.rows,
+            color: &mut planes.color[..n],
+            depth: &mut planes.depth[..n],
+            normal: &mut planes.normal[..n],
+            material: &mut planes.material[..n],
+            termination: &mut planes.termination[..n],
+            work: &mut planes.work[..n],
+        }
+    }
+
+    /// Copies the pixels [`Band::staged`] traced into `planes` into this band.
+    fn copy_from(&mut self, planes: &Planes) {
+        let n = self.color.len();
+        self.color.copy_from_slice(&planes.color[..n]);
+        self.depth.copy_from_slice(&planes.depth[..n]);
+        self.normal.copy_from_slice(&planes.normal[..n]);
+        self.material.copy_from_slice(&planes.material[..n]);
+        self.termination.copy_from_slice(&planes.termination[..n]);
+        self.work.copy_from_slice(&planes.work[..n]);
+    }
+
+    /// The tiles of the band, left to right.
+    pub(crate) fn tiles(&self) -> impl Iterator<Item = Tile> + use<> {
+        let (width, y, rows) = (self.width as u32, self.y, self.rows);
+        (0..width).step_by(TILE_WIDTH as usize).map(move |x| Tile {
+            x,
+            y,
+            width: TILE_WIDTH.min(width - x),
+            height: rows,
+        })
+    }
+
+    /// Band indices of `tile`'s pixels, row-major (the order of its camera rays), as one
+    /// range per tile row.
+    pub(crate) fn rows_of(&self, tile: Tile) -> impl Iterator<Item = std::ops::Range<u32>> + use<> {
+        let (w, x, y0) = (self.width as u32, tile.x, tile.y - self.y);
+        (y0..y0 + tile.height).map(move |r| r * w + x..r * w + x + tile.width)
+    }
+
+    /// Pixels in the band.
+    pub(crate) fn color_len(&self) -> usize {
+        self.color.len()
+    }
+
+    /// `(column, row)` of band pixel `i`.
+    pub(crate) fn column_row(&self, i: u32) -> (u32, u32) {
+        let w = self.width as u32;
+        (i % w, self.y + i / w)
+    }
+
+    /// Records band pixel `i`'s AOVs from its sample-0 camera ray: how it ended, its work
+    /// and, for a surface, distance, facing normal and material.
+    fn set_aov(&mut self, i: usize, res: &TraceResult, surface: Option<(&Hit, Vec3)>) {
+        self.termination[i] = res.termination();
+        self.work[i] = res.work;
+        match surface {
+            Some((hit, normal)) => {
+                self.depth[i] = hit.t;
+                self.normal[i] = normal;
+                self.material[i] = hit.material;
+            }
+            None => {
+                self.depth[i] = NO_HIT_DEPTH;
+                self.normal[i] = Vec3::ZERO;
+                self.material[i] = u32::MAX;
+            }
+        }
+    }
+
+    /// Writes the average of `sum` over `samples` into band pixel `i`'s colour, counting
+    /// (and blackening) a non-finite result in `stats`.
+    pub(crate) fn set_color(&mut self, i: usize, sum: Vec3, samples: u32, stats: &mut RenderStats) {
+        let v = sum * (1.0 / samples as f32);
+        self.color[i] = if v.is_finite() {
+            v
+        } else {
+            stats.non_finite_pixels += 1;
+            Vec3::ZERO
+        };
+    }
 }
 
 /// Scene data the shading loops read, converted once to f32 render space.
@@ -276,47 +520,6 @@ impl Shading {
     }
 }
 
-/// One image row's pixels, AOVs and counters.
-pub(crate) struct RowOutput {
-    pub(crate) color: Vec<Vec3>,
-    pub(crate) depth: Vec<f32>,
-    pub(crate) normal: Vec<Vec3>,
-    pub(crate) material: Vec<u32>,
-    pub(crate) termination: Vec<Termination>,
-    pub(crate) work: Vec<RayWork>,
-    pub(crate) stats: RenderStats,
-}
-
-impl RowOutput {
-    /// A row of `width` pixels with nothing hit yet.
-    pub(crate) fn new(width: usize) -> Self {
-        Self {
-            color: vec![Vec3::ZERO; width],
-            depth: vec![NO_HIT_DEPTH; width],
-            normal: vec![Vec3::ZERO; width],
-            material: vec![u32::MAX; width],
-            termination: vec![Termination::Miss; width],
-            work: vec![RayWork::default(); width],
-            stats: RenderStats::default(),
-        }
-    }
-
-    /// Writes the per-pixel average of `sum` over `samples`, counting (and blackening)
-    /// non-finite pixels.
-    pub(crate) fn finish(&mut self, sum: &[Vec3], samples: u32) {
-        let inv = 1.0 / samples as f32;
-        for (c, s) in self.color.iter_mut().zip(sum) {
-            let v = *s * inv;
-            if v.is_finite() {
-                *c = v;
-            } else {
-                self.stats.non_finite_pixels += 1;
-                *c = Vec3::ZERO;
-            }
-        }
-    }
-}
-
 /// Resizes `out` to `len` default results, runs `trace` on it and returns the nanoseconds the
 /// trace took: every batched geometry query of the integrators is timed through this, so the
 /// per-ray-type times in [`RenderStats::trace_time`] measure the geometry alone.
@@ -371,55 +574,55 @@ pub(crate) enum Vertex {
 }
 
 /// Classifies one closest-hit result of a wavefront: counts its work and termination, drops a
-/// non-finite hit (counted), records pixel `px`'s AOVs when `aov` (sample 0 of a camera ray),
+/// non-finite hit (counted), records the AOVs of band pixel `aov` (sample 0 of a camera ray),
 /// and decides whether the ray met an area light, the background or a surface.
+#[inline(always)]
 pub(crate) fn resolve_vertex(
-    out: &mut RowOutput,
+    stats: &mut RenderStats,
+    aov: Option<(&mut Band<'_>, usize)>,
     sh: &Shading,
     background: &BackgroundSampler,
     ray: &Ray,
     res: &TraceResult,
-    px: usize,
-    aov: bool,
 ) -> Vertex {
-    out.stats.add_work(&res.work);
-    out.stats.add_termination(res.termination(), false);
+    stats.add_work(&res.work);
+    stats.add_termination(res.termination(), false);
     let hit = res.hit().filter(|h| {
         let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
         if !ok {
-            out.stats.non_finite_hits += 1;
+            stats.non_finite_hits += 1;
         }
         ok
     });
-    if aov {
-        out.termination[px] = res.termination();
-        out.work[px] = res.work;
-    }
     let t_geometry = hit.map_or(ray.t_max, |h| h.t);
-    if let Some(emission) = sh.emitter_before(ray, t_geometry) {
-        return Vertex::Emitter(emission);
-    }
-    let Some(hit) = hit else {
-        return Vertex::Background(background.sample(ray.dir));
+    let vertex = if let Some(emission) = sh.emitter_before(ray, t_geometry) {
+        Vertex::Emitter(emission)
+    } else if let Some(hit) = hit {
+        let mut normal = hit.normal.normalize_or_zero();
+        if normal.dot(ray.dir) > 0.0 {
+            normal = -normal;
+        }
+        Vertex::Surface { hit, normal }
+    } else {
+        Vertex::Background(background.sample(ray.dir))
     };
-    let mut normal = hit.normal.normalize_or_zero();
-    if normal.dot(ray.dir) > 0.0 {
-        normal = -normal;
+    if let Some((band, px)) = aov {
+        let surface = match &vertex {
+            Vertex::Surface { hit, normal } => Some((hit, *normal)),
+            _ => None,
+        };
+        band.set_aov(px, res, surface);
     }
-    if aov {
-        out.depth[px] = hit.t;
-        out.normal[px] = normal;
-        out.material[px] = hit.material;
-    }
-    Vertex::Surface { hit, normal }
+    vertex
 }
 
-/// One path (one sample of one pixel) in the row's wavefront.
+/// One path (one sample of one pixel) in the tile's wavefront; its ray is at the same index
+/// of the wavefront's rays.
 #[derive(Clone, Copy)]
 struct Path {
+    /// Band index of the pixel.
     pixel: u32,
     sample: u32,
-    ray: Ray,
     throughput: f32,
 }
 
@@ -429,52 +632,92 @@ struct PendingLight {
     amount: Vec3,
 }
 
-fn trace_row(
-    scene: &Scene,
-    sh: &Shading,
-    geometry: &dyn Geometry,
-    background: &BackgroundSampler,
-    row: u32,
-) -> RowOutput {
-    let w = scene.camera.width as usize;
-    let mut out = RowOutput::new(w);
-    let mut sum = vec![Vec3::ZERO; w];
-    let mut paths: Vec<Path> = Vec::with_capacity(w * sh.spp as usize);
-    let plane = scene.camera.image_plane();
-    for s in 0..sh.spp {
-        let off = sample_offset(s);
-        for col in 0..w as u32 {
-            paths.push(Path {
-                pixel: col,
-                sample: s,
-                ray: primary_ray_on(&plane, col, row, off, scene.render.max_distance),
+/// One worker's buffers, reused from tile to tile.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    paths: Vec<Path>,
+    rays: Vec<Ray>,
+    next: Vec<Path>,
+    next_rays: Vec<Ray>,
+    results: Vec<TraceResult>,
+    shadow_rays: Vec<Ray>,
+    pending: Vec<PendingLight>,
+    occlusion: Vec<OcclusionResult>,
+    ao_rays: Vec<Ray>,
+    ao_pending: Vec<PendingLight>,
+    cones: Vec<Cone>,
+    cone_pending: Vec<PendingLight>,
+    ao_points: Vec<SurfacePoint>,
+    ao_point_pending: Vec<PendingLight>,
+    visibility: Vec<Visibility>,
+    /// Colour sums, indexed like the band's pixels.
+    sum: Vec<Vec3>,
+}
+
+/// Traces one band with the Whitted integrator, tile by tile.
+fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
+    let mut stats = RenderStats::default();
+    s.sum.clear();
+    s.sum.resize(band.color_len(), Vec3::ZERO);
+    for tile in band.tiles() {
+        trace_tile(f, s, band, tile, &mut stats);
+    }
+    stats
+}
+
+/// Traces one tile's paths, wavefront by wavefront, into the band's pixels.
+fn trace_tile(
+    f: &Frame<'_>,
+    s: &mut Scratch,
+    band: &mut Band<'_>,
+    tile: Tile,
+    stats: &mut RenderStats,
+) {
+    let Scratch {
+        paths,
+        rays,
+        next,
+        next_rays,
+        results,
+        shadow_rays,
+        pending,
+        occlusion,
+        ao_rays,
+        ao_pending,
+        cones,
+        cone_pending,
+        ao_points,
+        ao_point_pending,
+        visibility,
+        sum,
+    } = s;
+    let (sh, geometry, background) = (f.sh, f.geometry, f.background);
+    let pixels = tile.pixels();
+    paths.clear();
+    rays.clear();
+    for sample in 0..sh.spp {
+        f.camera.push(tile, sample_offset(sample), rays);
+        for pixels in band.rows_of(tile) {
+            paths.extend(pixels.map(|pixel| Path {
+                pixel,
+                sample,
                 throughput: 1.0,
-            });
+            }));
         }
     }
-    out.stats.primary_rays += paths.len() as u64;
+    for pixels in band.rows_of(tile) {
+        sum[pixels.start as usize..pixels.end as usize].fill(Vec3::ZERO);
+    }
+    stats.primary_rays += paths.len() as u64;
 
-    let mut results: Vec<TraceResult> = Vec::new();
-    let mut shadow_rays: Vec<Ray> = Vec::new();
-    let mut pending: Vec<PendingLight> = Vec::new();
-    let mut occlusion: Vec<OcclusionResult> = Vec::new();
-    let mut ao_rays: Vec<Ray> = Vec::new();
-    let mut ao_pending: Vec<PendingLight> = Vec::new();
     // Geometry shortcuts: one cone per shading point and area light, one AO estimate per
     // shading point; their pending amounts are scaled by the visible fraction.
     let shortcuts = geometry.shortcuts();
-    let mut cones: Vec<Cone> = Vec::new();
-    let mut cone_pending: Vec<PendingLight> = Vec::new();
-    let mut ao_points: Vec<SurfacePoint> = Vec::new();
-    let mut ao_point_pending: Vec<PendingLight> = Vec::new();
-    let mut visibility: Vec<Visibility> = Vec::new();
-    let mut next: Vec<Path> = Vec::new();
     let mut depth = 0;
     while !paths.is_empty() {
-        let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
-        // Primary rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
-        let camera = (depth == 0).then(|| PrimarySamples::row(&scene.camera, row));
-        trace_wavefront(geometry, &rays, camera, &mut results, &mut out.stats);
+        // Camera rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
+        let camera = (depth == 0).then(|| PrimarySamples::tile(&f.scene.camera, tile));
+        trace_wavefront(geometry, rays, camera, results, stats);
         shadow_rays.clear();
         pending.clear();
         ao_rays.clear();
@@ -484,17 +727,23 @@ fn trace_row(
         ao_points.clear();
         ao_point_pending.clear();
         next.clear();
-        for (pi, (path, res)) in paths.iter().zip(&results).enumerate() {
+        next_rays.clear();
+        for (pi, ((path, ray), res)) in paths
+            .iter()
+            .zip(rays.iter())
+            .zip(results.iter())
+            .enumerate()
+        {
             let px = path.pixel as usize;
-            let aov = depth == 0 && pi < w;
-            let (hit, n) = match resolve_vertex(&mut out, sh, background, &path.ray, res, px, aov) {
+            let aov = (depth == 0 && pi < pixels).then_some((&mut *band, px));
+            let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
                 Vertex::Emitter(radiance) | Vertex::Background(radiance) => {
                     sum[px] += path.throughput * radiance;
                     continue;
                 }
                 Vertex::Surface { hit, normal } => (hit, normal),
             };
-            let d = path.ray.dir;
+            let d = ray.dir;
             let m = sh.material(hit.material);
             let color = m.color.as_vec3();
             let refl = m.reflectivity as f32;
@@ -506,7 +755,8 @@ fn trace_row(
             };
             let offset = sh.ray_offset * hit.position.length().max(1e-30);
             let origin = hit.position + n * offset;
-            let pixel_key = sample_key(sh.seed, path.pixel, row, path.sample) ^ mix64(depth as u64);
+            let (column, row) = band.column_row(path.pixel);
+            let pixel_key = sample_key(sh.seed, column, row, path.sample) ^ mix64(depth as u64);
             let ambient = local_weight * sh.ambient * color;
             match sh.ambient_occlusion {
                 Some(_) if sh.ambient > 0.0 && shortcuts.ambient_occlusion => {
@@ -646,73 +896,75 @@ fn trace_row(
                 next.push(Path {
                     pixel: path.pixel,
                     sample: path.sample,
-                    ray: Ray {
-                        origin,
-                        dir: (d - 2.0 * d.dot(n) * n).normalize(),
-                        t_min: 0.0,
-                        t_max: sh.max_distance,
-                    },
                     throughput: path.throughput * refl,
+                });
+                next_rays.push(Ray {
+                    origin,
+                    dir: (d - 2.0 * d.dot(n) * n).normalize(),
+                    t_min: 0.0,
+                    t_max: sh.max_distance,
                 });
             }
         }
         if !shadow_rays.is_empty() {
-            out.stats.trace_time.shadow_ns += timed(&mut occlusion, shadow_rays.len(), |o| {
-                geometry.occluded_many(&shadow_rays, o)
+            stats.trace_time.shadow_ns += timed(occlusion, shadow_rays.len(), |o| {
+                geometry.occluded_many(shadow_rays, o)
             });
-            out.stats.shadow_rays += shadow_rays.len() as u64;
-            for (p, o) in pending.iter().zip(&occlusion) {
-                out.stats.add_work(&o.work);
-                out.stats.add_termination(o.termination, true);
+            stats.shadow_rays += shadow_rays.len() as u64;
+            for (p, o) in pending.iter().zip(occlusion.iter()) {
+                stats.add_work(&o.work);
+                stats.add_termination(o.termination, true);
                 if !o.occluded {
                     sum[paths[p.path as usize].pixel as usize] += p.amount;
                 }
             }
         }
         if !cones.is_empty() {
-            out.stats.trace_time.shadow_ns += timed(&mut visibility, cones.len(), |v| {
-                geometry.cone_visibility(&cones, v)
+            stats.trace_time.shadow_ns += timed(visibility, cones.len(), |v| {
+                geometry.cone_visibility(cones, v)
             });
-            out.stats.shadow_rays += cones.len() as u64;
-            for (p, v) in cone_pending.iter().zip(&visibility) {
-                out.stats.add_work(&v.work);
-                out.stats.add_termination(v.termination, true);
+            stats.shadow_rays += cones.len() as u64;
+            for (p, v) in cone_pending.iter().zip(visibility.iter()) {
+                stats.add_work(&v.work);
+                stats.add_termination(v.termination, true);
                 sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
             }
         }
         if !ao_points.is_empty() {
             let distance = sh.ambient_occlusion.map_or(0.0, |a| a.1);
-            out.stats.trace_time.ambient_occlusion_ns +=
-                timed(&mut visibility, ao_points.len(), |v| {
-                    geometry.ambient_openness(&ao_points, distance, v)
-                });
-            out.stats.ao_rays += ao_points.len() as u64;
-            for (p, v) in ao_point_pending.iter().zip(&visibility) {
-                out.stats.add_work(&v.work);
-                out.stats.add_termination(v.termination, true);
+            stats.trace_time.ambient_occlusion_ns += timed(visibility, ao_points.len(), |v| {
+                geometry.ambient_openness(ao_points, distance, v)
+            });
+            stats.ao_rays += ao_points.len() as u64;
+            for (p, v) in ao_point_pending.iter().zip(visibility.iter()) {
+                stats.add_work(&v.work);
+                stats.add_termination(v.termination, true);
                 sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
             }
         }
         if !ao_rays.is_empty() {
-            out.stats.trace_time.ambient_occlusion_ns +=
-                timed(&mut occlusion, ao_rays.len(), |o| {
-                    geometry.occluded_many(&ao_rays, o)
-                });
-            out.stats.ao_rays += ao_rays.len() as u64;
-            for (p, o) in ao_pending.iter().zip(&occlusion) {
-                out.stats.add_work(&o.work);
-                out.stats.add_termination(o.termination, true);
+            stats.trace_time.ambient_occlusion_ns += timed(occlusion, ao_rays.len(), |o| {
+                geometry.occluded_many(ao_rays, o)
+            });
+            stats.ao_rays += ao_rays.len() as u64;
+            for (p, o) in ao_pending.iter().zip(occlusion.iter()) {
+                stats.add_work(&o.work);
+                stats.add_termination(o.termination, true);
                 if !o.occluded {
                     sum[paths[p.path as usize].pixel as usize] += p.amount;
                 }
             }
         }
-        out.stats.reflection_rays += next.len() as u64;
-        std::mem::swap(&mut paths, &mut next);
+        stats.reflection_rays += next.len() as u64;
+        std::mem::swap(paths, next);
+        std::mem::swap(rays, next_rays);
         depth += 1;
     }
-    out.finish(&sum, sh.spp);
-    out
+    for pixels in band.rows_of(tile) {
+        for i in pixels {
+            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+        }
+    }
 }
 
 /// Phong's diffuse plus specular factor of a light of `intensity` in direction `to_light`

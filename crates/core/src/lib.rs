@@ -22,12 +22,13 @@ pub mod tolerance;
 
 pub use backend::Backend;
 pub use background::{BackgroundError, BackgroundSampler};
-pub use camera::PrimarySamples;
+pub use camera::{PrimarySamples, Tile};
 pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{
-    DEFAULT_MEMORY_LIMIT_BYTES, MAX_THREADS, RenderError, RenderOptions, RenderOutput, render,
+    DEFAULT_MEMORY_LIMIT_BYTES, MAX_THREADS, RenderError, RenderOptions, RenderOutput, TILE_HEIGHT,
+    TILE_WIDTH, render, render_into,
 };
 pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};
 pub use tolerance::{INVISIBLE_PSNR_DB, Measured, Tolerance};

@@ -20,21 +20,22 @@
 //! - random numbers are a randomized Halton sequence per pixel ([`halton_dim`]) keyed by the
 //!   scene's seed, the pixel and the sample: the image is the same at any thread count.
 //!
-//! `max_bounces = 0` gives direct lighting only. Samples of a row are traced in chunks of at
-//! most [`PATHS_PER_WAVEFRONT`] paths, so the memory does not grow with the sample count.
+//! `max_bounces = 0` gives direct lighting only. A screen tile's samples are traced in chunks
+//! of `max(1, PATHS_PER_WAVEFRONT / image width)` samples (what one image row's chunk held,
+//! so each pixel sums its contributions in one fixed order), so the memory does not grow with
+//! the sample count.
 
 use glam::Vec3;
-use marchmesh_scene::Scene;
 
-use crate::background::BackgroundSampler;
-use crate::camera::{PrimarySamples, primary_ray_on, sample_offset};
-use crate::geometry::{Geometry, OcclusionResult, Ray, TraceResult};
+use crate::camera::{PrimarySamples, Tile, sample_offset};
+use crate::geometry::{OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
-    RowOutput, Shading, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
+    Band, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
 };
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
+use crate::stats::RenderStats;
 
-/// Most paths traced together in one wavefront of a row.
+/// Most paths of one image row traced together: sets the samples per chunk (module docs).
 pub const PATHS_PER_WAVEFRONT: usize = 4096;
 
 /// Halton dimensions used per bounce: mirror choice, Russian roulette, bounce direction (2),
@@ -43,11 +44,12 @@ const DIMS_PER_BOUNCE_FIXED: u32 = 4;
 
 const INV_PI: f32 = std::f32::consts::FRAC_1_PI;
 
+/// One path in the tile's wavefront; its ray is at the same index of the wavefront's rays.
 #[derive(Clone, Copy)]
 struct PathState {
+    /// Band index of the pixel.
     pixel: u32,
     sample: u32,
-    ray: Ray,
     throughput: Vec3,
     /// Emission met by this ray counts (camera rays and rays after a mirror bounce).
     count_emission: bool,
@@ -60,78 +62,112 @@ struct Pending {
     amount: Vec3,
 }
 
-/// Traces one image row with the path tracer; the caller's [`Shading`] holds the materials,
-/// lights and limits.
-pub(crate) fn trace_row(
-    scene: &Scene,
-    sh: &Shading,
-    geometry: &dyn Geometry,
-    background: &BackgroundSampler,
-    row: u32,
-) -> RowOutput {
-    let w = scene.camera.width as usize;
-    let mut out = RowOutput::new(w);
-    let mut sum = vec![Vec3::ZERO; w];
+/// One worker's buffers, reused from tile to tile.
+#[derive(Default)]
+pub(crate) struct Scratch {
+    paths: Vec<PathState>,
+    rays: Vec<Ray>,
+    next: Vec<PathState>,
+    next_rays: Vec<Ray>,
+    results: Vec<TraceResult>,
+    shadow_rays: Vec<Ray>,
+    pending: Vec<Pending>,
+    occlusion: Vec<OcclusionResult>,
+    /// Colour sums, indexed like the band's pixels.
+    sum: Vec<Vec3>,
+}
+
+/// Traces one band with the path tracer, tile by tile; the frame's [`crate::integrator`]
+/// shading data holds the materials, lights and limits.
+pub(crate) fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
+    let mut stats = RenderStats::default();
+    s.sum.clear();
+    s.sum.resize(band.color_len(), Vec3::ZERO);
+    for tile in band.tiles() {
+        trace_tile(f, s, band, tile, &mut stats);
+    }
+    stats
+}
+
+/// Traces one tile's paths, chunk of samples by chunk, wavefront by wavefront.
+fn trace_tile(
+    f: &Frame<'_>,
+    s: &mut Scratch,
+    band: &mut Band<'_>,
+    tile: Tile,
+    stats: &mut RenderStats,
+) {
+    let Scratch {
+        paths,
+        rays,
+        next,
+        next_rays,
+        results,
+        shadow_rays,
+        pending,
+        occlusion,
+        sum,
+    } = s;
+    let (sh, geometry, background) = (f.sh, f.geometry, f.background);
     // The same render-space lights as the Whitted integrator, read physically (see the module
     // docs): ambient lights are skipped.
     let lights = &sh.lights;
+    // Samples per chunk as when a chunk held one image row's samples: each pixel then adds
+    // its contributions in the same order whatever the tile shape.
+    let w = f.scene.camera.width as usize;
     let chunk = (PATHS_PER_WAVEFRONT / w.max(1)).max(1) as u32;
-    let mut paths: Vec<PathState> = Vec::new();
-    let mut next: Vec<PathState> = Vec::new();
-    let mut results: Vec<TraceResult> = Vec::new();
-    let mut shadow_rays: Vec<Ray> = Vec::new();
-    let mut pending: Vec<Pending> = Vec::new();
-    let mut occlusion: Vec<OcclusionResult> = Vec::new();
+    for pixels in band.rows_of(tile) {
+        sum[pixels.start as usize..pixels.end as usize].fill(Vec3::ZERO);
+    }
     let mut first = 0;
-    let plane = scene.camera.image_plane();
     while first < sh.spp {
         let last = (first + chunk).min(sh.spp);
         paths.clear();
-        for s in first..last {
-            let off = sample_offset(s);
-            for col in 0..w as u32 {
-                paths.push(PathState {
-                    pixel: col,
-                    sample: s,
-                    ray: primary_ray_on(&plane, col, row, off, scene.render.max_distance),
+        rays.clear();
+        for sample in first..last {
+            f.camera.push(tile, sample_offset(sample), rays);
+            for pixels in band.rows_of(tile) {
+                paths.extend(pixels.map(|pixel| PathState {
+                    pixel,
+                    sample,
                     throughput: Vec3::ONE,
                     count_emission: true,
                     bounce: 0,
-                });
+                }));
             }
         }
-        out.stats.primary_rays += paths.len() as u64;
+        stats.primary_rays += paths.len() as u64;
         while !paths.is_empty() {
             let camera = paths[0].bounce == 0;
-            let rays: Vec<Ray> = paths.iter().map(|p| p.ray).collect();
             // The chunk's camera rays are ordered sample-major from sample `first`.
             let samples =
-                camera.then(|| PrimarySamples::row(&scene.camera, row).starting_at(first));
-            trace_wavefront(geometry, &rays, samples, &mut results, &mut out.stats);
+                camera.then(|| PrimarySamples::tile(&f.scene.camera, tile).starting_at(first));
+            trace_wavefront(geometry, rays, samples, results, stats);
             next.clear();
+            next_rays.clear();
             shadow_rays.clear();
             pending.clear();
-            for (path, res) in paths.iter().zip(&results) {
+            for ((path, ray), res) in paths.iter().zip(rays.iter()).zip(results.iter()) {
                 let px = path.pixel as usize;
-                let aov = camera && path.sample == 0;
-                let (hit, n) =
-                    match resolve_vertex(&mut out, sh, background, &path.ray, res, px, aov) {
-                        Vertex::Emitter(emission) => {
-                            if path.count_emission {
-                                sum[px] += path.throughput * emission;
-                            }
-                            continue;
+                let aov = (camera && path.sample == 0).then_some((&mut *band, px));
+                let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
+                    Vertex::Emitter(emission) => {
+                        if path.count_emission {
+                            sum[px] += path.throughput * emission;
                         }
-                        Vertex::Background(radiance) => {
-                            sum[px] += path.throughput * radiance;
-                            continue;
-                        }
-                        Vertex::Surface { hit, normal } => (hit, normal),
-                    };
-                let d = path.ray.dir;
+                        continue;
+                    }
+                    Vertex::Background(radiance) => {
+                        sum[px] += path.throughput * radiance;
+                        continue;
+                    }
+                    Vertex::Surface { hit, normal } => (hit, normal),
+                };
+                let d = ray.dir;
                 let m = sh.material(hit.material);
                 let albedo = m.color.as_vec3();
-                let key = sample_key(sh.seed, path.pixel, row, 0);
+                let (column, row) = band.column_row(path.pixel);
+                let key = sample_key(sh.seed, column, row, 0);
                 let dim0 = path.bounce * (DIMS_PER_BOUNCE_FIXED + 2 * lights.len() as u32);
                 let sample = |k: u32| halton_dim(path.sample, dim0 + k, key);
                 let offset = sh.ray_offset * hit.position.length().max(1e-30);
@@ -140,13 +176,13 @@ pub(crate) fn trace_row(
                 if (m.reflectivity as f32) > sample(0) {
                     // Perfect mirror: the throughput is unchanged (weight r / probability r).
                     if can_bounce {
+                        next_rays.push(Ray {
+                            origin,
+                            dir: (d - 2.0 * d.dot(n) * n).normalize(),
+                            t_min: 0.0,
+                            t_max: sh.max_distance,
+                        });
                         next.push(PathState {
-                            ray: Ray {
-                                origin,
-                                dir: (d - 2.0 * d.dot(n) * n).normalize(),
-                                t_min: 0.0,
-                                t_max: sh.max_distance,
-                            },
                             count_emission: true,
                             bounce: path.bounce + 1,
                             ..*path
@@ -229,13 +265,13 @@ pub(crate) fn trace_row(
                     }
                     throughput /= survive;
                 }
+                next_rays.push(Ray {
+                    origin,
+                    dir: cosine_hemisphere(n, sample(2), sample(3)),
+                    t_min: 0.0,
+                    t_max: sh.max_distance,
+                });
                 next.push(PathState {
-                    ray: Ray {
-                        origin,
-                        dir: cosine_hemisphere(n, sample(2), sample(3)),
-                        t_min: 0.0,
-                        t_max: sh.max_distance,
-                    },
                     throughput,
                     count_emission: false,
                     bounce: path.bounce + 1,
@@ -243,23 +279,27 @@ pub(crate) fn trace_row(
                 });
             }
             if !shadow_rays.is_empty() {
-                out.stats.trace_time.shadow_ns += timed(&mut occlusion, shadow_rays.len(), |o| {
-                    geometry.occluded_many(&shadow_rays, o)
+                stats.trace_time.shadow_ns += timed(occlusion, shadow_rays.len(), |o| {
+                    geometry.occluded_many(shadow_rays, o)
                 });
-                out.stats.shadow_rays += shadow_rays.len() as u64;
-                for (p, o) in pending.iter().zip(&occlusion) {
-                    out.stats.add_work(&o.work);
-                    out.stats.add_termination(o.termination, true);
+                stats.shadow_rays += shadow_rays.len() as u64;
+                for (p, o) in pending.iter().zip(occlusion.iter()) {
+                    stats.add_work(&o.work);
+                    stats.add_termination(o.termination, true);
                     if !o.occluded {
                         sum[p.pixel as usize] += p.amount;
                     }
                 }
             }
-            out.stats.bounce_rays += next.len() as u64;
-            std::mem::swap(&mut paths, &mut next);
+            stats.bounce_rays += next.len() as u64;
+            std::mem::swap(paths, next);
+            std::mem::swap(rays, next_rays);
         }
         first = last;
     }
-    out.finish(&sum, sh.spp);
-    out
+    for pixels in band.rows_of(tile) {
+        for i in pixels {
+            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
+        }
+    }
 }

@@ -242,7 +242,7 @@ fn render_refuses_buffers_over_the_memory_limit() {
 }
 
 /// Checks that each primary batch's `PrimarySamples` are the exact rays the f32 rays round,
-/// in the documented order (sample-major, then column), and counts the primary batches.
+/// in the documented order (sample-major, then the tile's pixels row-major), and counts the primary batches.
 struct PrimaryOrderProbe {
     batches: std::sync::atomic::AtomicUsize,
     rays: std::sync::atomic::AtomicUsize,
@@ -303,6 +303,11 @@ fn primary_batches_carry_their_exact_camera_samples_in_order() {
         ..Default::default()
     };
     render(&scene, &probe, &bg, &opts, &|| {}).unwrap();
-    assert_eq!(probe.batches.into_inner(), 7, "one primary batch per row");
+    // One primary batch per screen tile: 13x7 pixels are an 8x7 and a 5x7 tile.
+    assert_eq!(
+        probe.batches.into_inner(),
+        13usize.div_ceil(marchmesh_core::TILE_WIDTH as usize)
+            * 7usize.div_ceil(marchmesh_core::TILE_HEIGHT as usize)
+    );
     assert_eq!(probe.rays.into_inner(), 13 * 7 * 3);
 }

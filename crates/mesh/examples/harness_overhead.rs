@@ -1,8 +1,10 @@
 //! Share of a 1-thread render of the benchmark's bunny (500x500, scene defaults) spent
 //! outside ray traversal: the same render with the geometry stubbed to a constant miss,
-//! interleaved with the real one, medians of ROUNDS.
+//! interleaved with the real one, medians of ROUNDS. Both render into one reused output
+//! (`render_into`, as benchmarks repeating a render do); `fresh` renders with `render`,
+//! allocating the framebuffer each time; `stub` or `real` times only that one (for profiling).
 //!
-//! `cargo run --release -p marchmesh-mesh --example harness_overhead [-- ROUNDS [BVH]]`
+//! `cargo run --release -p marchmesh-mesh --example harness_overhead [-- ROUNDS [BVH [fresh|stub|real]]]`
 
 #[path = "../benches/support/mod.rs"]
 mod support;
@@ -11,7 +13,7 @@ use std::time::Instant;
 
 use marchmesh_core::{
     BackgroundSampler, Geometry, GeometryReport, NoHit, OcclusionResult, Ray, RenderOptions,
-    Termination, TraceResult, render,
+    RenderOutput, Termination, TraceResult, render, render_into,
 };
 use marchmesh_mesh::{BvhKind, MeshOptions, build};
 use support::*;
@@ -19,16 +21,30 @@ use support::*;
 /// Misses everything at no cost.
 struct Miss;
 
+fn miss() -> TraceResult {
+    TraceResult::not_found(NoHit::Miss, Default::default())
+}
+
+fn clear() -> OcclusionResult {
+    OcclusionResult {
+        occluded: false,
+        termination: Termination::Miss,
+        work: Default::default(),
+    }
+}
+
 impl Geometry for Miss {
     fn closest_hit(&self, _: &Ray) -> TraceResult {
-        TraceResult::not_found(NoHit::Miss, Default::default())
+        miss()
     }
     fn occluded(&self, _: &Ray) -> OcclusionResult {
-        OcclusionResult {
-            occluded: false,
-            termination: Termination::Miss,
-            work: Default::default(),
-        }
+        clear()
+    }
+    fn closest_hits(&self, _: &[Ray], out: &mut [TraceResult]) {
+        out.fill(miss());
+    }
+    fn occluded_many(&self, _: &[Ray], out: &mut [OcclusionResult]) {
+        out.fill(clear());
     }
     fn report(&self) -> GeometryReport {
         GeometryReport::default()
@@ -61,20 +77,38 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         threads: 1,
         ..Default::default()
     };
-    let time = |geometry: &dyn Geometry| -> Result<f64, Box<dyn std::error::Error>> {
+    let mode = args.get(3).map_or("", String::as_str);
+    let fresh = mode == "fresh";
+    let mut out = RenderOutput::default();
+    let mut time = |geometry: &dyn Geometry| -> Result<f64, Box<dyn std::error::Error>> {
         let t = Instant::now();
-        render(&case.scene, geometry, &bg, &opts, &|| {})?;
+        if fresh {
+            render(&case.scene, geometry, &bg, &opts, &|| {})?;
+        } else {
+            render_into(&case.scene, geometry, &bg, &opts, &|| {}, &mut out)?;
+        }
         Ok(t.elapsed().as_secs_f64())
     };
     time(&g)?;
+    time(&Miss)?;
     let (mut real, mut stub) = (Vec::new(), Vec::new());
     for _ in 0..rounds {
-        real.push(time(&g)?);
-        stub.push(time(&Miss)?);
+        if mode != "stub" {
+            real.push(time(&g)?);
+        }
+        if mode != "real" {
+            stub.push(time(&Miss)?);
+        }
+    }
+    if mode == "stub" || mode == "real" {
+        let t = median(if mode == "stub" { stub } else { real });
+        println!("bunny {bvh:?}: {mode} only: {:.2} ms", t * 1e3);
+        return Ok(());
     }
     let (r, s) = (median(real), median(stub));
     println!(
-        "bunny {bvh:?}: render {:.1} ms, geometry stubbed to a miss {:.1} ms: overhead {:.1}% of render time",
+        "bunny {bvh:?}{}: render {:.1} ms, geometry stubbed to a miss {:.1} ms: overhead {:.1}% of render time",
+        if fresh { " (fresh framebuffers)" } else { "" },
         r * 1e3,
         s * 1e3,
         100.0 * s / r
