@@ -326,36 +326,11 @@ fn face_side(p: Vec3, t: &[Vec3; 3]) -> Option<bool> {
 /// the side of a face's plane is the side of the solid next to that face. Triangles with
 /// out-of-range indices make it false.
 pub(crate) fn consistently_oriented(mesh: &TriangleMesh) -> bool {
-    use std::collections::HashMap;
-    let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(mesh.positions.len());
-    let welded: Vec<u32> = mesh
-        .positions
-        .iter()
-        .map(|p| {
-            let next = weld.len() as u32;
-            *weld.entry(p.to_array().map(f32::to_bits)).or_insert(next)
-        })
-        .collect();
-    // Per undirected edge: uses as (low -> high) minus uses as (high -> low), and all uses.
-    let mut edges: HashMap<(u32, u32), (i32, u32)> =
-        HashMap::with_capacity(mesh.triangles.len() * 2);
-    for t in &mesh.triangles {
-        for k in 0..3 {
-            let (Some(&a), Some(&b)) = (
-                welded.get(t[k] as usize),
-                welded.get(t[(k + 1) % 3] as usize),
-            ) else {
-                return false;
-            };
-            if a == b {
-                continue;
-            }
-            let e = edges.entry((a.min(b), a.max(b))).or_insert((0, 0));
-            e.0 += if a < b { 1 } else { -1 };
-            e.1 += 1;
-        }
-    }
-    edges.values().all(|&(net, uses)| uses < 2 || net == 0)
+    mesh.edge_uses().is_some_and(|edges| {
+        edges
+            .iter()
+            .all(|(&(a, b), e)| a == b || e.uses < 2 || e.net == 0)
+    })
 }
 
 /// True when two neighbouring samples of a brick (`edge`^3, x fastest) have opposite signs

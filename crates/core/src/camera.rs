@@ -167,13 +167,7 @@ impl<'a> PrimarySamples<'a> {
 /// rounding; a test compares every pixel).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct TileRays {
-    forward: DVec3,
-    right: DVec3,
-    up: DVec3,
-    width: f64,
-    height: f64,
-    half_w: f64,
-    half_h: f64,
+    plane: ImagePlane,
     t_max: f32,
 }
 
@@ -183,16 +177,8 @@ pub(crate) const MAX_TILE_WIDTH: usize = 64;
 impl TileRays {
     /// The camera's rays, ending at `t_max` (the scene's maximum distance).
     pub(crate) fn new(camera: &Camera, t_max: f64) -> Self {
-        // As `Camera::image_plane`.
-        let half_h = (camera.vfov_rad * 0.5).tan();
         Self {
-            forward: camera.forward,
-            right: camera.right,
-            up: camera.up,
-            width: camera.width as f64,
-            height: camera.height as f64,
-            half_w: half_h * camera.width as f64 / camera.height as f64,
-            half_h,
+            plane: camera.image_plane(),
             t_max: t_max as f32,
         }
     }
@@ -204,15 +190,11 @@ impl TileRays {
         assert!(tw <= MAX_TILE_WIDTH, "tile wider than MAX_TILE_WIDTH");
         let mut columns = [DVec3::ZERO; MAX_TILE_WIDTH];
         for (k, c) in columns[..tw].iter_mut().enumerate() {
-            let px = (tile.x + k as u32) as f64 + offset.x;
-            let x = (2.0 * px / self.width - 1.0) * self.half_w;
-            *c = self.forward + x * self.right;
+            *c = self.plane.column((tile.x + k as u32) as f64 + offset.x);
         }
         out.reserve(tw * tile.height as usize);
         for row in tile.y..tile.y + tile.height {
-            let py = row as f64 + offset.y;
-            let y = (1.0 - 2.0 * py / self.height) * self.half_h;
-            let up = y * self.up;
+            let up = self.plane.row_offset(row as f64 + offset.y);
             for chunk in columns[..tw].chunks(LANES) {
                 let d = directions(chunk, up);
                 out.extend((0..chunk.len()).map(|i| Ray {

@@ -345,9 +345,16 @@ impl TriangleMesh {
     /// position (so meshes split at normal seams still count as closed). An empty mesh is not
     /// closed.
     pub fn is_closed(&self) -> bool {
-        if self.triangles.is_empty() {
-            return false;
-        }
+        !self.triangles.is_empty()
+            && self
+                .edge_uses()
+                .is_some_and(|edges| edges.values().all(|e| e.uses == 2))
+    }
+
+    /// Every undirected edge of the mesh, vertices welded by position (bitwise equal
+    /// coordinates share an index), keyed `(low, high)` welded index, with how its triangles
+    /// walk it. `None` when a triangle indexes past the positions.
+    pub fn edge_uses(&self) -> Option<HashMap<(u32, u32), EdgeUses>> {
         let mut weld: HashMap<[u32; 3], u32> = HashMap::with_capacity(self.positions.len());
         let welded: Vec<u32> = self
             .positions
@@ -358,19 +365,18 @@ impl TriangleMesh {
                 *weld.entry(key).or_insert(next)
             })
             .collect();
-        let mut edges: HashMap<(u32, u32), u32> = HashMap::with_capacity(self.triangles.len() * 2);
+        let mut edges: HashMap<(u32, u32), EdgeUses> =
+            HashMap::with_capacity(self.triangles.len() * 2);
         for t in &self.triangles {
             for k in 0..3 {
-                let (Some(&a), Some(&b)) = (
-                    welded.get(t[k] as usize),
-                    welded.get(t[(k + 1) % 3] as usize),
-                ) else {
-                    return false;
-                };
-                *edges.entry((a.min(b), a.max(b))).or_insert(0) += 1;
+                let a = *welded.get(t[k] as usize)?;
+                let b = *welded.get(t[(k + 1) % 3] as usize)?;
+                let e = edges.entry((a.min(b), a.max(b))).or_default();
+                e.net += (a < b) as i32 - (a > b) as i32;
+                e.uses += 1;
             }
         }
-        edges.values().all(|&n| n == 2)
+        Some(edges)
     }
 
     /// Exact bytes of positions, normals and indices (lengths, not capacities).
@@ -380,6 +386,17 @@ impl TriangleMesh {
             + self.normals.as_ref().map_or(0, |n| n.len() as u64 * v)
             + self.triangles.len() as u64 * std::mem::size_of::<[u32; 3]>() as u64
     }
+}
+
+/// How the triangles of a mesh walk one undirected edge `(low, high)` (see
+/// [`TriangleMesh::edge_uses`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EdgeUses {
+    /// Walks from low to high minus walks from high to low: 0 when the faces around the edge
+    /// agree on their orientation; always 0 for a degenerate edge (`low == high`).
+    pub net: i32,
+    /// Triangles walking the edge (2 on a closed manifold).
+    pub uses: u32,
 }
 
 /// 64-bit FNV-1a (stable, unlike `std`'s `DefaultHasher`).

@@ -112,9 +112,23 @@ impl ImagePlane {
     /// Unit direction (world space) through image-plane point `(px, py)` in pixel units,
     /// `(0, 0)` being the top-left corner of the image.
     pub fn direction(&self, px: f64, py: f64) -> DVec3 {
+        (self.column(px) + self.row_offset(py)).normalize()
+    }
+
+    /// The unnormalised direction's part that depends on the column only:
+    /// `forward + x right` at image-plane x-coordinate `px` (pixel units). Adding
+    /// [`ImagePlane::row_offset`] and normalising gives [`ImagePlane::direction`] bit for bit,
+    /// so callers tracing many rows can compute columns once.
+    pub fn column(&self, px: f64) -> DVec3 {
         let x = (2.0 * px / self.width - 1.0) * self.half_w;
+        self.forward + x * self.right
+    }
+
+    /// The part that depends on the row only: `y up` at image-plane y-coordinate `py`
+    /// (pixel units, 0 at the top edge).
+    pub fn row_offset(&self, py: f64) -> DVec3 {
         let y = (1.0 - 2.0 * py / self.height) * self.half_h;
-        (self.forward + x * self.right + y * self.up).normalize()
+        y * self.up
     }
 }
 

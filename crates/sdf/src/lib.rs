@@ -421,6 +421,20 @@ impl SdfGeometry {
 
     /// Marches `m` to its end with the distance function `distance` and, while it is
     /// segment tracing, the safe-step function `segment(point, direction, length)`.
+    /// [`Self::run_with`] on the distance to the nearest solid of `inside` (rays starting
+    /// inside a solid), with plain steps: the per-object fields have no directional bounds.
+    fn run_inside(m: &mut March, params: &Params, inside: &Inside) -> Termination {
+        Self::run_with(
+            m,
+            params,
+            |p| inside.nearest(p).0,
+            |p, _, _| {
+                let d = inside.nearest(p).0;
+                (d, d.abs())
+            },
+        )
+    }
+
     fn run_with(
         m: &mut March,
         params: &Params,
@@ -466,16 +480,7 @@ impl SdfGeometry {
             Ok(m) => m,
             Err(why) => return TraceResult::not_found(why, RayWork::default()),
         };
-        let term = Self::run_with(
-            &mut m,
-            &self.params,
-            |p| inside.nearest(p).0,
-            |p, _, _| {
-                // No directional bounds for the per-object fields: plain steps.
-                let d = inside.nearest(p).0;
-                (d, d.abs())
-            },
-        );
+        let term = Self::run_inside(&mut m, &self.params, inside);
         self.finish_with(&m, term, |p, dir, h| {
             inside.normal_material(inside.nearest(p).1, p, dir, h)
         })
@@ -637,16 +642,7 @@ impl Geometry for SdfGeometry {
                     work: RayWork::default(),
                 },
                 Ok(mut m) => {
-                    let t = Self::run_with(
-                        &mut m,
-                        &self.params,
-                        |p| inside.nearest(p).0,
-                        |p, _, _| {
-                            // No directional bounds for the per-object fields: plain steps.
-                            let d = inside.nearest(p).0;
-                            (d, d.abs())
-                        },
-                    );
+                    let t = Self::run_inside(&mut m, &self.params, inside);
                     Self::occ(&m, t)
                 }
             };
