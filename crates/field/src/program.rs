@@ -225,6 +225,23 @@ enum Ctx<T> {
     Below(T),
 }
 
+impl<T: Copy> Ctx<T> {
+    /// The running threshold node `ins` inherits: a union that is combined by `min` (or a
+    /// smooth minimum) one level up only has to be exact below the parent's running
+    /// threshold, so it starts its own minimum there and skips its children against it too.
+    /// Its result then is `min(thr, value)`, which leaves the parent's combination unchanged.
+    /// Only without a distance scale, so the threshold needs no conversion.
+    #[inline(always)]
+    fn inherited_by<S: Scalar>(self, ins: &Instr<S>) -> Option<T> {
+        match self {
+            Ctx::Below(thr) if matches!(ins.op, Op::Union) && ins.dscale.to_f64() == 1.0 => {
+                Some(thr)
+            }
+            _ => None,
+        }
+    }
+}
+
 const BIG: f64 = 1e30;
 
 /// Material select, compiled away when materials are not tracked (`M = false`).
@@ -270,17 +287,7 @@ impl<S: Scalar> Program<S> {
         grids: &[&dyn GridSampler],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
-        // A union that is combined by `min` (or a smooth minimum) one level up only has to be
-        // exact below the parent's running threshold: it starts its own minimum there, so its
-        // children are skipped against it too. Its result then is `min(thr, value)`, which
-        // leaves the parent's combination unchanged. Only without a distance scale, so the
-        // threshold needs no conversion.
-        let above = match ctx {
-            Ctx::Below(thr) if matches!(ins.op, Op::Union) && ins.dscale.to_f64() == 1.0 => {
-                Some(thr)
-            }
-            _ => None,
-        };
+        let above = ctx.inherited_by(ins);
         if !ins.has_bound {
             return self.node::<T, M>(i, p, above, grids);
         }

@@ -63,12 +63,7 @@ impl<S: Scalar> Program<S> {
         grids: &[&dyn GridSampler],
     ) -> (S, S) {
         let ins = &self.instrs[i];
-        let above = match ctx {
-            Ctx::Below(thr) if matches!(ins.op, Op::Union) && ins.dscale.to_f64() == 1.0 => {
-                Some(thr)
-            }
-            _ => None,
-        };
+        let above = ctx.inherited_by(ins);
         if !ins.has_bound {
             return self.seg_node(i, p, d, len, above, grids);
         }
