@@ -131,17 +131,7 @@ impl Default for SparseOptions {
 }
 
 /// A baked sparse grid and how it was obtained.
-#[derive(Debug, Clone, PartialEq)]
-pub struct BakedSparse {
-    /// The grid, mesh local frame.
-    pub grid: SparseGrid,
-    /// True when read from the cache.
-    pub from_cache: bool,
-    /// Wall time of the bake or the cache read, milliseconds.
-    pub bake_ms: f64,
-    /// Human-readable notes: bricks, phases, open-mesh handling, cache events.
-    pub notes: Vec<String>,
-}
+pub type BakedSparse = crate::Baked<SparseGrid>;
 
 /// Work counters, times and bytes of a sparse bake (zero when read from the cache).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -190,81 +180,57 @@ pub fn bake_sparse(
     opts.validate()?;
     let path = mesh.report.source.clone();
     let tris = triangles_of(mesh)?;
-    let mut notes = Vec::new();
     let hash = mesh.content_hash();
-    let cache_file = opts
-        .cache_dir
-        .as_ref()
-        .map(|d| cache::sparse_cache_path(d, hash, opts));
-    if let Some(file) = &cache_file
-        && let Some(grid) = cache::read_cached(
-            file,
-            "sparse grid",
-            |b| cache::decode_sparse(b, hash, opts),
-            &mut notes,
-        )
-    {
-        notes.push(format!(
-            "sparse grid ({} bricks) read from cache {}",
-            grid.brick_count(),
-            file.display()
-        ));
-        let baked = BakedSparse {
-            grid,
-            from_cache: true,
-            bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-            notes,
-        };
-        return Ok((baked, SparseBakeStats::default()));
-    }
-    let closed = mesh.is_closed();
-    let oriented = consistently_oriented(mesh);
-    let (grid, stats) = bake_bricks(tris, opts, oriented, &path)?;
-    let s = &stats;
-    notes.push(format!(
-        "baked {} triangles into a sparse grid at {} cells on the longest side (cell {:.4e}): {} of {} brick cells hold {}^3-cell bricks ({} candidates, {} signed by winding numbers), {} {} samples, band {} cells, clamp {:.3e}, {}; {} B; {:.1} ms (bvh {:.1}, coarse {:.1}, distance {:.1}, sign {:.1}, encode {:.1}); {} distances, {} winding numbers",
-        mesh.triangles.len(),
-        opts.resolution,
-        grid.cell_size(),
-        s.bricks,
-        s.brick_cells,
-        BRICK,
-        s.candidates,
-        s.winding_bricks,
-        grid.samples().len(),
-        opts.quantization.name(),
-        opts.band_voxels,
-        grid.clamp(),
-        opts.reconstruction.name(),
-        grid.memory_bytes(),
-        t0.elapsed().as_secs_f64() * 1e3,
-        s.bvh_ms,
-        s.coarse_ms,
-        s.distance_ms,
-        s.sign_ms,
-        s.encode_ms,
-        s.distance_evaluations,
-        s.winding_evaluations,
-    ));
-    if !closed {
-        notes.push(format!(
-            "mesh {} is not closed: signs from face sides{} and the winding number; {} brick(s) whose face sides contradict their distances are signed by the winding number sample by sample; large holes may still get a cap (as in the dense grid)",
-            path.display(),
-            if oriented { "" } else { " (not used: faces inconsistently oriented)" },
-            s.winding_bricks
-        ));
-    }
-    if let Some(file) = &cache_file {
-        let bytes = cache::encode_sparse(&grid, hash, opts);
-        cache::write_cached(file, "sparse grid", &bytes, &mut notes);
-    }
-    let baked = BakedSparse {
-        grid,
-        from_cache: false,
-        bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-        notes,
-    };
-    Ok((baked, stats))
+    crate::bake_or_load(
+        t0,
+        opts.cache_dir
+            .as_ref()
+            .map(|d| cache::sparse_cache_path(d, hash, opts)),
+        "sparse grid",
+        |b| cache::decode_sparse(b, hash, opts),
+        |grid| format!("sparse grid ({} bricks)", grid.brick_count()),
+        |notes| {
+            let closed = mesh.is_closed();
+            let oriented = consistently_oriented(mesh);
+            let (grid, stats) = bake_bricks(tris, opts, oriented, &path)?;
+            let s = &stats;
+            notes.push(format!(
+                "baked {} triangles into a sparse grid at {} cells on the longest side (cell {:.4e}): {} of {} brick cells hold {}^3-cell bricks ({} candidates, {} signed by winding numbers), {} {} samples, band {} cells, clamp {:.3e}, {}; {} B; {:.1} ms (bvh {:.1}, coarse {:.1}, distance {:.1}, sign {:.1}, encode {:.1}); {} distances, {} winding numbers",
+                mesh.triangles.len(),
+                opts.resolution,
+                grid.cell_size(),
+                s.bricks,
+                s.brick_cells,
+                BRICK,
+                s.candidates,
+                s.winding_bricks,
+                grid.samples().len(),
+                opts.quantization.name(),
+                opts.band_voxels,
+                grid.clamp(),
+                opts.reconstruction.name(),
+                grid.memory_bytes(),
+                t0.elapsed().as_secs_f64() * 1e3,
+                s.bvh_ms,
+                s.coarse_ms,
+                s.distance_ms,
+                s.sign_ms,
+                s.encode_ms,
+                s.distance_evaluations,
+                s.winding_evaluations,
+            ));
+            if !closed {
+                notes.push(format!(
+                    "mesh {} is not closed: signs from face sides{} and the winding number; {} brick(s) whose face sides contradict their distances are signed by the winding number sample by sample; large holes may still get a cap (as in the dense grid)",
+                    path.display(),
+                    if oriented { "" } else { " (not used: faces inconsistently oriented)" },
+                    s.winding_bricks
+                ));
+            }
+            Ok((grid, stats))
+        },
+        |grid| cache::encode_sparse(grid, hash, opts),
+    )
 }
 
 /// Lattice for the mesh bounds `(lo, hi)` at `res` cells on the longest side, padded by

@@ -152,17 +152,61 @@ pub struct BakeStats {
     pub sign_ms: f64,
 }
 
-/// A baked grid and how it was obtained.
+/// A baked grid (dense [`DistanceGrid`] by default, or [`SparseGrid`] as [`BakedSparse`])
+/// and how it was obtained.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Baked {
+pub struct Baked<G = DistanceGrid> {
     /// The signed distance grid, mesh local frame.
-    pub grid: DistanceGrid,
+    pub grid: G,
     /// True when the grid was read from the cache.
     pub from_cache: bool,
     /// Wall time of the bake or the cache read, milliseconds.
     pub bake_ms: f64,
     /// Human-readable notes: grid size, sign method, open-mesh warning, cache events.
     pub notes: Vec<String>,
+}
+
+/// The grid cached in `cache_file` if it holds a valid one (`decode`; `describe` names it in
+/// the note), else `bake`'s grid (which adds its own notes), written to `cache_file` with
+/// `encode`. Cache problems only add notes; the stats are zero for a cached grid. `t0`
+/// starts the reported wall time. Shared by the dense and the sparse bake.
+fn bake_or_load<G, S: Default>(
+    t0: Instant,
+    cache_file: Option<PathBuf>,
+    what: &str,
+    decode: impl FnOnce(&[u8]) -> Result<G, String>,
+    describe: impl FnOnce(&G) -> String,
+    bake: impl FnOnce(&mut Vec<String>) -> Result<(G, S), BakeError>,
+    encode: impl FnOnce(&G) -> Vec<u8>,
+) -> Result<(Baked<G>, S), BakeError> {
+    let mut notes = Vec::new();
+    let cached = cache_file
+        .as_deref()
+        .and_then(|file| cache::read_cached(file, what, decode, &mut notes));
+    let (grid, from_cache, stats) = match (cached, &cache_file) {
+        (Some(grid), Some(file)) => {
+            notes.push(format!(
+                "{} read from cache {}",
+                describe(&grid),
+                file.display()
+            ));
+            (grid, true, S::default())
+        }
+        _ => {
+            let (grid, stats) = bake(&mut notes)?;
+            if let Some(file) = &cache_file {
+                cache::write_cached(file, what, &encode(&grid), &mut notes);
+            }
+            (grid, false, stats)
+        }
+    };
+    let baked = Baked {
+        grid,
+        from_cache,
+        bake_ms: t0.elapsed().as_secs_f64() * 1e3,
+        notes,
+    };
+    Ok((baked, stats))
 }
 
 /// Bakes `mesh` (its own coordinates) into a signed distance grid, or loads it from
@@ -184,69 +228,48 @@ pub fn bake_with_stats(
     }
     let path = mesh.report.source.clone();
     let tris = triangles_of(mesh)?;
-    let mut notes = Vec::new();
     let hash = mesh.content_hash();
-    let cache_file = opts
-        .cache_dir
-        .as_ref()
-        .map(|d| cache::cache_path(d, hash, res));
-    if let Some(file) = &cache_file
-        && let Some(grid) = cache::read_cached(
-            file,
-            "distance grid",
-            |b| cache::decode(b, hash, res),
-            &mut notes,
-        )
-    {
-        notes.push(format!(
-            "distance grid {}x{}x{} read from cache {}",
-            grid.dims[0],
-            grid.dims[1],
-            grid.dims[2],
-            file.display()
-        ));
-        let baked = Baked {
-            grid,
-            from_cache: true,
-            bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-            notes,
-        };
-        return Ok((baked, BakeStats::default()));
-    }
-    let (grid, stats) = bake_grid(tris, res, &path)?;
-    notes.push(format!(
-        "baked {} triangles into {}x{}x{} samples (cell {:.4e}, {} cells on the longest side, {} padding cells) in {:.1} ms (bvh {:.1}, distance {:.1}, sign {:.1}); sign from the generalized winding number ({} of {} samples evaluated)",
-        mesh.triangles.len(),
-        grid.dims[0],
-        grid.dims[1],
-        grid.dims[2],
-        grid.cell_size,
-        res,
-        PAD_CELLS,
-        t0.elapsed().as_secs_f64() * 1e3,
-        stats.bvh_ms,
-        stats.distance_ms,
-        stats.sign_ms,
-        stats.winding_evaluations,
-        stats.samples
-    ));
-    if !mesh.is_closed() {
-        notes.push(format!(
-            "mesh {} is not closed: inside/outside from the generalized winding number (w >= 0.5 inside); expect a spurious cap across large holes and noisy sign near thin open sheets",
-            path.display()
-        ));
-    }
-    if let Some(file) = &cache_file {
-        let bytes = cache::encode(&grid, hash, res);
-        cache::write_cached(file, "distance grid", &bytes, &mut notes);
-    }
-    let baked = Baked {
-        grid,
-        from_cache: false,
-        bake_ms: t0.elapsed().as_secs_f64() * 1e3,
-        notes,
-    };
-    Ok((baked, stats))
+    bake_or_load(
+        t0,
+        opts.cache_dir
+            .as_ref()
+            .map(|d| cache::cache_path(d, hash, res)),
+        "distance grid",
+        |b| cache::decode(b, hash, res),
+        |grid| {
+            format!(
+                "distance grid {}x{}x{}",
+                grid.dims[0], grid.dims[1], grid.dims[2]
+            )
+        },
+        |notes| {
+            let (grid, stats) = bake_grid(tris, res, &path)?;
+            notes.push(format!(
+                "baked {} triangles into {}x{}x{} samples (cell {:.4e}, {} cells on the longest side, {} padding cells) in {:.1} ms (bvh {:.1}, distance {:.1}, sign {:.1}); sign from the generalized winding number ({} of {} samples evaluated)",
+                mesh.triangles.len(),
+                grid.dims[0],
+                grid.dims[1],
+                grid.dims[2],
+                grid.cell_size,
+                res,
+                PAD_CELLS,
+                t0.elapsed().as_secs_f64() * 1e3,
+                stats.bvh_ms,
+                stats.distance_ms,
+                stats.sign_ms,
+                stats.winding_evaluations,
+                stats.samples
+            ));
+            if !mesh.is_closed() {
+                notes.push(format!(
+                    "mesh {} is not closed: inside/outside from the generalized winding number (w >= 0.5 inside); expect a spurious cap across large holes and noisy sign near thin open sheets",
+                    path.display()
+                ));
+            }
+            Ok((grid, stats))
+        },
+        |grid| cache::encode(grid, hash, res),
+    )
 }
 
 /// The mesh's triangles by value, checked: at least one, indices in range, finite vertices.
