@@ -243,6 +243,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
     describe(&built, &walk, options, &mut report);
     let Assembled {
         flat_blas,
+        flat_material,
         blases,
         instances,
         tlas,
@@ -250,7 +251,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
     } = built;
     Ok(MeshGeometry {
         flat: flat_blas,
-        flat_materials_default: 0,
+        flat_materials_default: flat_material,
         packets: options.packets,
         blases,
         instances,
@@ -331,6 +332,9 @@ struct ShapeInputs<'a> {
 /// Phase 3's result: the flat BVH, the instanced BLASes, their instances and the TLAS.
 struct Assembled {
     flat_blas: Option<Blas>,
+    /// Material of every flat triangle when they all share one (the flat BLAS then keeps no
+    /// per-triangle materials and a hit needs no lookup); 0 otherwise.
+    flat_material: MaterialId,
     flat_triangles: usize,
     blases: Vec<Blas>,
     instances: Vec<Instance>,
@@ -591,8 +595,9 @@ impl ShapeInputs<'_> {
             }
         }
         let flat_triangles = flat.triangles.len();
-        let flat_blas = (!flat.triangles.is_empty())
-            .then(|| Blas::build(flat.into_input(), options.bvh, params));
+        let (input, flat_material) = flat.into_input();
+        let flat_blas =
+            (!input.triangles.is_empty()).then(|| Blas::build(input, options.bvh, params));
         let tlas = if instances.is_empty() {
             None
         } else {
@@ -608,6 +613,7 @@ impl ShapeInputs<'_> {
 
         Assembled {
             flat_blas,
+            flat_material,
             flat_triangles,
             blases,
             instances,
@@ -636,6 +642,7 @@ fn describe(
         blases,
         instances,
         tlas,
+        ..
     } = built;
     let flat_triangles = *flat_triangles;
     let blas_triangles: usize = blases.iter().map(|b| b.triangle_count).sum();
@@ -940,13 +947,26 @@ impl FlatBuilder {
         ((side - 1) * (side - 1)) as usize
     }
 
-    fn into_input(self) -> BlasInput {
-        BlasInput {
+    /// The BLAS input and the material every triangle shares (0 when they differ). A
+    /// uniform material is returned instead of stored per triangle, so shading a hit reads
+    /// no per-triangle array (on a large mesh that lookup is one more cache miss per hit).
+    fn into_input(self) -> (BlasInput, MaterialId) {
+        let uniform = match self.materials.split_first() {
+            Some((&first, rest)) if rest.iter().all(|&m| m == first) => Some(first),
+            Some(_) => None,
+            None => Some(0),
+        };
+        let input = BlasInput {
             positions: self.positions,
             normals: self.any_normals.then_some(self.normals),
             triangles: self.triangles,
-            materials: self.materials,
-        }
+            materials: if uniform.is_some() {
+                Vec::new()
+            } else {
+                self.materials
+            },
+        };
+        (input, uniform.unwrap_or(0))
     }
 }
 
