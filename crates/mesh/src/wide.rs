@@ -6,8 +6,10 @@
 //! triangle4 blocks, Wald et al. 2014): each node holds its 8 child boxes as structure of
 //! arrays plus 8 child references; leaves are runs of [`TriBlock`]s holding 4 triangles each
 //! as structure of arrays, in BVH slot order, so slots, normals and materials of the
-//! [`crate::blas::Blas`] stay valid. Conversion keeps every Bvh2 leaf as a leaf and collapses
-//! inner nodes greedily (open the child with the largest surface area until 8 children).
+//! [`crate::blas::Blas`] stay valid. Conversion collapses the Bvh2 by the SAH-optimal
+//! dynamic programme of Ylitie et al. 2017 (see [`Collapse`]), which fills nodes (5.8 of 8
+//! children on average on the dragons against 4.4 for opening the largest child greedily)
+//! and may merge small Bvh2 leaves into one block.
 //!
 //! Exactness: the triangle test is obvhs' `RtTriangle::intersect` (Möller-Trumbore) computed
 //! lane-wise in the same operation order without fused multiply-add, so every `t` is
@@ -78,7 +80,9 @@ const EMPTY_BLOCK: TriBlock = TriBlock {
 /// The 8-wide BVH with its triangle blocks.
 #[derive(Clone)]
 pub(crate) struct WideBvh {
+    /// Nodes, each node's inner children contiguous, in depth-first order of their parents.
     pub(crate) nodes: Vec<WideNode>,
+    /// Triangle blocks, each node's leaf children contiguous.
     pub(crate) blocks: Vec<TriBlock>,
     /// BVH slots of each block's lanes (`EMPTY` on padding lanes), parallel to `blocks`.
     pub(crate) slots: Vec<[u32; BLOCK]>,
@@ -93,56 +97,36 @@ impl WideBvh {
     /// deep for the fixed traversal stack or too large for the 24-bit block references
     /// (more than 16M blocks): the caller keeps the Bvh2, which has no such limits.
     pub(crate) fn from_bvh2(bvh: &Bvh2, tris: &[RtTriangle]) -> Option<Self> {
-        let mut out = Self {
-            nodes: Vec::new(),
-            blocks: Vec::new(),
-            slots: Vec::new(),
-            root: EMPTY,
-            avx: detect_avx(),
-        };
-        let Some(root) = bvh.nodes.first() else {
-            return Some(out);
-        };
-        if root.is_leaf() {
-            out.root = out.leaf(root.first_index, root.prim_count, tris)?;
-            return Some(out);
+        let mut out = Builder::default();
+        if bvh.nodes.is_empty() {
+            return Some(out.finish(EMPTY));
         }
-        out.root = 0;
+        let plan = Collapse::plan(bvh)?;
+        if plan.leaf_at_root() {
+            let slots = plan.slots_under(bvh, 0)?;
+            let root = out.leaf(&slots, tris)?;
+            return Some(out.finish(root));
+        }
         out.nodes.push(EMPTY_NODE);
         // (wide node index, Bvh2 node index, depth)
         let mut queue: Vec<(usize, usize, u32)> = vec![(0, 0, 1)];
+        let mut children = Vec::with_capacity(WIDTH);
         while let Some((w, b, depth)) = queue.pop() {
             if depth > MAX_DEPTH {
                 return None;
             }
-            let first = bvh.nodes.get(b)?.first_index as usize;
-            let mut children: Vec<usize> = vec![first, first + 1];
-            while children.len() < WIDTH {
-                // Open the inner child with the largest surface area.
-                let widest = children
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, c)| bvh.nodes.get(**c).is_some_and(|n| !n.is_leaf()))
-                    .max_by(|a, b| {
-                        let area = |i: usize| bvh.nodes[i].aabb().half_area();
-                        area(*a.1).total_cmp(&area(*b.1))
-                    })
-                    .map(|(k, _)| k);
-                let Some(k) = widest else { break };
-                let opened = children.swap_remove(k);
-                let f = bvh.nodes[opened].first_index as usize;
-                children.extend([f, f + 1]);
-            }
+            children.clear();
+            plan.children(bvh, b, &mut children)?;
             let mut node = EMPTY_NODE;
-            for (lane, &c) in children.iter().enumerate() {
-                let n = bvh.nodes.get(c)?;
-                let aabb = n.aabb();
+            for (lane, &(c, is_leaf)) in children.iter().enumerate() {
+                let aabb = bvh.nodes.get(c)?.aabb();
                 for axis in 0..3 {
                     node.lo[axis][lane] = aabb.min[axis];
                     node.hi[axis][lane] = aabb.max[axis];
                 }
-                node.child[lane] = if n.is_leaf() {
-                    out.leaf(n.first_index, n.prim_count, tris)?
+                node.child[lane] = if is_leaf {
+                    let slots = plan.slots_under(bvh, c)?;
+                    out.leaf(&slots, tris)?
                 } else {
                     let index = out.nodes.len();
                     out.nodes.push(EMPTY_NODE);
@@ -152,36 +136,7 @@ impl WideBvh {
             }
             out.nodes[w] = node;
         }
-        out.nodes.shrink_to_fit();
-        out.blocks.shrink_to_fit();
-        out.slots.shrink_to_fit();
-        Some(out)
-    }
-
-    /// Appends the blocks of the Bvh2 leaf `slots first..first + count`; its reference.
-    fn leaf(&mut self, first: u32, count: u32, tris: &[RtTriangle]) -> Option<u32> {
-        let first_block = u32::try_from(self.blocks.len()).ok()?;
-        let n_blocks = count.div_ceil(BLOCK as u32);
-        if first_block >= 1 << LEAF_FIRST_BITS || n_blocks > LEAF_MAX_BLOCKS {
-            return None;
-        }
-        for chunk in (first..first + count).collect::<Vec<u32>>().chunks(BLOCK) {
-            let mut block = EMPTY_BLOCK;
-            let mut slots = [EMPTY; BLOCK];
-            for (lane, &slot) in chunk.iter().enumerate() {
-                let t = tris.get(slot as usize)?;
-                for axis in 0..3 {
-                    block.v0[axis][lane] = t.v0[axis];
-                    block.e1[axis][lane] = t.e1[axis];
-                    block.e2[axis][lane] = t.e2[axis];
-                    block.ng[axis][lane] = t.ng[axis];
-                }
-                slots[lane] = slot;
-            }
-            self.blocks.push(block);
-            self.slots.push(slots);
-        }
-        Some(LEAF | n_blocks << LEAF_FIRST_BITS | first_block)
+        Some(out.finish(0))
     }
 
     /// The triangle (obvhs form, bit-identical to the `RtTriangle` it was converted from)
@@ -401,6 +356,149 @@ impl WideBvh {
     }
 }
 
+/// Cost of testing one node's 8 child boxes, per unit of the node's surface area.
+const COST_NODE: f32 = 1.0;
+/// Cost of testing one triangle block, per unit of the leaf's surface area.
+const COST_BLOCK: f32 = 1.0;
+/// Most triangles a collapsed leaf may hold.
+const MAX_LEAF_TRIS: u32 = 4;
+
+/// How one Bvh2 subtree is represented with `k + 1` wide subtrees (`k` in `0..WIDTH`).
+#[derive(Clone, Copy)]
+enum Choice {
+    /// One leaf holding every triangle below (only for `k = 0`).
+    Leaf,
+    /// One wide node whose children distribute the two Bvh2 children: the left gets `j + 1`
+    /// subtrees, the right the rest of `WIDTH` (only for `k = 0`).
+    Node(u8),
+    /// Fewer subtrees than allowed are cheaper: as for `k - 1`.
+    Fewer,
+    /// The left Bvh2 child as `j + 1` subtrees, the right as `k - j`.
+    Split(u8),
+}
+
+/// SAH-optimal collapse of a Bvh2 into 8-wide nodes and leaves of at most
+/// [`MAX_LEAF_TRIS`] triangles, by the dynamic programme of Ylitie, Karras, Laine 2017
+/// ("Efficient incoherent ray traversal on GPUs through compressed wide BVHs", sec. 4.1):
+/// `C(n, k)` is the least SAH cost of representing the subtree `n` with at most `k`
+/// subtrees; a leaf costs `area * blocks * COST_BLOCK`, a node `area * COST_NODE` plus
+/// the best distribution of its two children over `WIDTH` subtrees.
+struct Collapse {
+    /// Per Bvh2 node, the choice for each `k + 1` subtrees.
+    choice: Vec<[Choice; WIDTH]>,
+}
+
+impl Collapse {
+    /// `None` when the Bvh2 is malformed (a child index out of range).
+    fn plan(bvh: &Bvh2) -> Option<Self> {
+        let n = bvh.nodes.len();
+        let mut cost = vec![[f32::INFINITY; WIDTH]; n];
+        let mut prims = vec![0u32; n];
+        let mut choice = vec![[Choice::Fewer; WIDTH]; n];
+        // Post-order walk without recursion (degenerate trees can be deep).
+        let mut stack: Vec<(usize, bool)> = vec![(0, false)];
+        while let Some((i, expanded)) = stack.pop() {
+            let node = bvh.nodes.get(i)?;
+            let area = node.aabb().half_area();
+            if node.is_leaf() {
+                prims[i] = node.prim_count;
+                let blocks = node.prim_count.div_ceil(BLOCK as u32).max(1) as f32;
+                cost[i] = [area * blocks * COST_BLOCK; WIDTH];
+                choice[i] = [Choice::Leaf; WIDTH];
+                continue;
+            }
+            let (l, r) = (node.first_index as usize, node.first_index as usize + 1);
+            if r >= n {
+                return None;
+            }
+            if !expanded {
+                stack.extend([(i, true), (l, false), (r, false)]);
+                continue;
+            }
+            prims[i] = prims[l].saturating_add(prims[r]);
+            // distribute(k): least cost of the two children as k + 2 subtrees in all.
+            let (cl, cr) = (cost[l], cost[r]);
+            let distribute = |k: usize| {
+                (0..=k)
+                    .map(|j| (cl[j] + cr[k - j], j as u8))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .unwrap_or((f32::INFINITY, 0))
+            };
+            let (inner, j) = distribute(WIDTH - 2);
+            let mut c0 = (area * COST_NODE + inner, Choice::Node(j));
+            if prims[i] <= MAX_LEAF_TRIS {
+                let leaf = area * prims[i].div_ceil(BLOCK as u32) as f32 * COST_BLOCK;
+                if leaf <= c0.0 {
+                    c0 = (leaf, Choice::Leaf);
+                }
+            }
+            cost[i][0] = c0.0;
+            choice[i][0] = c0.1;
+            for k in 1..WIDTH {
+                let (d, j) = distribute(k - 1);
+                if d < cost[i][k - 1] {
+                    cost[i][k] = d;
+                    choice[i][k] = Choice::Split(j);
+                } else {
+                    cost[i][k] = cost[i][k - 1];
+                    choice[i][k] = Choice::Fewer;
+                }
+            }
+        }
+        Some(Self { choice })
+    }
+
+    /// Whether the whole tree collapses into one leaf.
+    fn leaf_at_root(&self) -> bool {
+        matches!(self.choice.first().map(|c| c[0]), Some(Choice::Leaf) | None)
+    }
+
+    /// Children of the wide node made from Bvh2 node `b` (whose choice is `Node`), as
+    /// `(Bvh2 node, is a leaf)`, at most `WIDTH`.
+    fn children(&self, bvh: &Bvh2, b: usize, out: &mut Vec<(usize, bool)>) -> Option<()> {
+        let Choice::Node(j) = self.choice.get(b)?[0] else {
+            return None;
+        };
+        let l = bvh.nodes.get(b)?.first_index as usize;
+        self.expand(bvh, l, j as usize, out)?;
+        self.expand(bvh, l + 1, WIDTH - 2 - j as usize, out)
+    }
+
+    /// Appends the subtrees representing Bvh2 node `n` with at most `k + 1` subtrees.
+    fn expand(&self, bvh: &Bvh2, n: usize, k: usize, out: &mut Vec<(usize, bool)>) -> Option<()> {
+        // Depth of this recursion is at most WIDTH: each Split hands out fewer subtrees.
+        match *self.choice.get(n)?.get(k)? {
+            Choice::Leaf => out.push((n, true)),
+            Choice::Node(_) => out.push((n, false)),
+            Choice::Fewer => self.expand(bvh, n, k.checked_sub(1)?, out)?,
+            Choice::Split(j) => {
+                // A Split is only recorded for inner nodes, whose children are
+                // `first_index` and `first_index + 1`.
+                let l = bvh.nodes.get(n)?.first_index as usize;
+                self.expand(bvh, l, j as usize, out)?;
+                self.expand(bvh, l + 1, k.checked_sub(1 + j as usize)?, out)?;
+            }
+        }
+        Some(())
+    }
+
+    /// The triangle slots of every Bvh2 leaf below node `n`, left to right.
+    fn slots_under(&self, bvh: &Bvh2, n: usize) -> Option<Vec<u32>> {
+        let mut slots = Vec::new();
+        let mut stack = vec![n];
+        while let Some(i) = stack.pop() {
+            let node = bvh.nodes.get(i)?;
+            if node.is_leaf() {
+                slots.extend(node.first_index..node.first_index.checked_add(node.prim_count)?);
+            } else {
+                let l = node.first_index as usize;
+                stack.extend([l + 1, l]);
+            }
+        }
+        Some(slots)
+    }
+}
+
 const PREFETCH: bool = true;
 
 impl WideBvh {
@@ -431,6 +529,56 @@ impl WideBvh {
         }
         #[cfg(not(target_arch = "x86_64"))]
         let _ = c;
+    }
+}
+
+/// The wide BVH under construction, in growable arrays.
+#[derive(Default)]
+struct Builder {
+    nodes: Vec<WideNode>,
+    blocks: Vec<TriBlock>,
+    slots: Vec<[u32; BLOCK]>,
+}
+
+impl Builder {
+    /// Appends the blocks of a leaf holding the triangle slots `slots`; its reference.
+    fn leaf(&mut self, slots: &[u32], tris: &[RtTriangle]) -> Option<u32> {
+        let first_block = u32::try_from(self.blocks.len()).ok()?;
+        let n_blocks = u32::try_from(slots.len().div_ceil(BLOCK)).ok()?;
+        if first_block >= 1 << LEAF_FIRST_BITS || n_blocks > LEAF_MAX_BLOCKS {
+            return None;
+        }
+        for chunk in slots.chunks(BLOCK) {
+            let mut block = EMPTY_BLOCK;
+            let mut slots = [EMPTY; BLOCK];
+            for (lane, &slot) in chunk.iter().enumerate() {
+                let t = tris.get(slot as usize)?;
+                for axis in 0..3 {
+                    block.v0[axis][lane] = t.v0[axis];
+                    block.e1[axis][lane] = t.e1[axis];
+                    block.e2[axis][lane] = t.e2[axis];
+                    block.ng[axis][lane] = t.ng[axis];
+                }
+                slots[lane] = slot;
+            }
+            self.blocks.push(block);
+            self.slots.push(slots);
+        }
+        Some(LEAF | n_blocks << LEAF_FIRST_BITS | first_block)
+    }
+
+    /// The finished BVH with root reference `root`.
+    fn finish(mut self, root: u32) -> WideBvh {
+        self.nodes.shrink_to_fit();
+        self.blocks.shrink_to_fit();
+        self.slots.shrink_to_fit();
+        WideBvh {
+            nodes: self.nodes,
+            blocks: self.blocks,
+            slots: self.slots,
+            root,
+            avx: detect_avx(),
+        }
     }
 }
 
@@ -687,14 +835,9 @@ mod tests {
         let tris = random_tris(399, 7);
         let mut s = 99u64;
         for chunk in tris.chunks(BLOCK) {
-            let mut w = WideBvh {
-                nodes: Vec::new(),
-                blocks: Vec::new(),
-                slots: Vec::new(),
-                root: EMPTY,
-                avx: false,
-            };
-            assert!(w.leaf(0, chunk.len() as u32, chunk).is_some());
+            let mut w = Builder::default();
+            let slots: Vec<u32> = (0..chunk.len() as u32).collect();
+            assert!(w.leaf(&slots, chunk).is_some());
             let block = w.blocks[0];
             for _ in 0..200 {
                 let o = Vec3A::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 6.0 - 3.0;
@@ -763,6 +906,55 @@ mod tests {
         }
         assert!(seen.iter().all(|&s| s), "every slot in some block");
         assert!(w.triangle((w.blocks.len() * BLOCK) as u32).is_none());
+    }
+
+    #[test]
+    fn collapse_fills_nodes_and_keeps_leaves_within_one_block() {
+        let tris = random_tris(3000, 23);
+        let plain: Vec<Triangle> = tris
+            .iter()
+            .map(|t| Triangle {
+                v0: t.v0,
+                v1: t.v0 - t.e1,
+                v2: t.v0 + t.e2,
+            })
+            .collect();
+        let mut time = std::time::Duration::default();
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
+            &plain,
+            obvhs::BvhBuildParams {
+                max_prims_per_leaf: BLOCK as u32,
+                ..obvhs::BvhBuildParams::medium_build()
+            },
+            &mut time,
+        );
+        let slot_tris: Vec<RtTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&plain[i as usize]))
+            .collect();
+        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        let mut children = 0;
+        for node in w.nodes.iter() {
+            let used = node.child.iter().filter(|&&c| c != EMPTY).count();
+            assert!((2..=WIDTH).contains(&used), "{used} children");
+            // Used lanes first, empty lanes after.
+            assert!(node.child[..used].iter().all(|&c| c != EMPTY));
+            for &c in &node.child[..used] {
+                if c & LEAF != 0 {
+                    let blocks = (c & !LEAF) >> LEAF_FIRST_BITS;
+                    assert!(
+                        blocks as usize * BLOCK
+                            <= MAX_LEAF_TRIS.next_multiple_of(BLOCK as u32) as usize
+                    );
+                }
+            }
+            children += used;
+        }
+        // A Bvh2 node has 2 children; the collapse must do much better than pairs (the
+        // greedy collapse it replaced averaged 4.4 on the dragons).
+        let mean = children as f64 / w.nodes.len() as f64;
+        assert!(mean > 5.0, "{mean} children per node");
     }
 
     #[test]
