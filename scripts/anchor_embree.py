@@ -66,7 +66,8 @@ def main():
     ap.add_argument(
         "--bvh",
         default="bvh2,wide1,wide,raw",
-        help="marchmesh tracers: bvh2, cwbvh, wide1 (single rays), wide (packets), raw (obvhs Bvh2)",
+        help="marchmesh tracers: bvh2, cwbvh, wide1 (single rays), wide (row packets), wide4x2 "
+        "(4x2-tile packets), wide8 (row batches, no packets), raw (obvhs Bvh2)",
     )
     a = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")

@@ -4,10 +4,13 @@
 //!
 //! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
 //! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
-//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh` (bvh2|cwbvh|wide|wide1|wide4x2|raw;
-//! `wide1` traces single rays, `wide` row batches with packets of 8 consecutive pixels of a
-//! row, `wide4x2` the same rays reordered into 4x2-pixel tiles, handed over a tile row at a
-//! time) and prints
+//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh`
+//! (bvh2|cwbvh|wide|wide1|wide4x2|wide8|wide8x8|raw; `wide1` traces single rays one call each,
+//! `wide` row batches with packets of 8 consecutive pixels of a row, `wide4x2` the same rays
+//! reordered into 4x2-pixel tiles, handed over a tile row at a time; `wide8` row batches
+//! without packets and `wide8x8` 8x8-pixel tiles without packets, a tile row at a time (both
+//! interleaved single rays on a large mesh, see `INTERLEAVE_MIN_BYTES`; packet modes fall back
+//! to the same there)) and prints
 //! one Mrays/s figure per timed repeat (CPU time of the tracing thread) after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
 
@@ -119,7 +122,7 @@ fn main() -> Res<()> {
             let kind = match bvh {
                 "bvh2" | "raw" => BvhKind::Bvh2,
                 "cwbvh" => BvhKind::CwBvh,
-                "wide" | "wide1" | "wide4x2" => BvhKind::Wide,
+                "wide" | "wide1" | "wide4x2" | "wide8" | "wide8x8" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
             use marchmesh_mesh::BuildQuality as Q;
@@ -152,6 +155,8 @@ fn main() -> Res<()> {
             // One batch per image row, or per row of tiles.
             let (rays, batch) = if bvh == "wide4x2" {
                 (tiled(&rays, side, 4, 2), side * 2)
+            } else if bvh == "wide8x8" {
+                (tiled(&rays, side, 8, 8), side * 8)
             } else {
                 (rays, side)
             };

@@ -191,3 +191,54 @@ fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
     }
     assert!(hits > 1000, "the scenes should hit something: {hits} hits");
 }
+
+#[test]
+fn interleaved_batches_match_single_rays_on_a_large_mesh() {
+    // 262k triangles: a wide BVH above the interleaving threshold.
+    let s = scene(
+        r#"{"camera": {"position": [0, 0, -3], "look_at": [0, 0, 0], "vfov_deg": 50},
+            "objects": [{"shape": {"sphere": {"radius": 1}}},
+                        {"shape": {"box": {"half_extents": [0.3, 0.3, 0.3]}}, "transform": {"translate": [0.9, 0.6, -0.8]}}]}"#,
+    );
+    let g = build(
+        &s,
+        &MeshOptions {
+            bvh: BvhKind::Wide,
+            tessellation: Tessellation::FixedLevel(6),
+            ..MeshOptions::DEFAULT
+        },
+    )
+    .expect("build");
+    assert!(
+        g.report().notes.iter().any(|n| n.contains("interleaved")),
+        "interleaving should be on: {:?}",
+        g.report().notes
+    );
+    let mut rays = camera_rays(&s, 48);
+    // An empty interval and a short one among them.
+    rays[5].t_max = -1.0;
+    rays[9].t_max = 2.5;
+    let mut out = vec![marchmesh_core::TraceResult::default(); rays.len()];
+    for (r, o) in rays.chunks(48).zip(out.chunks_mut(48)) {
+        g.closest_hits(r, o);
+    }
+    let mut hits = 0;
+    for (k, (ray, batch)) in rays.iter().zip(&out).enumerate() {
+        let one = g.closest_hit(ray);
+        assert_eq!(one.work, batch.work, "ray {k}: work");
+        match (one.hit(), batch.hit()) {
+            (Some(a), Some(b)) => {
+                hits += 1;
+                assert_eq!(a.t.to_bits(), b.t.to_bits(), "ray {k}");
+                assert_eq!(a.normal, b.normal, "ray {k}");
+                assert_eq!(a.material, b.material, "ray {k}");
+            }
+            (None, None) => {}
+            (a, b) => panic!("ray {k}: single {a:?} vs batch {b:?}"),
+        }
+    }
+    assert!(
+        hits > 1000,
+        "the sphere should fill much of the view: {hits} hits"
+    );
+}
