@@ -1147,7 +1147,7 @@ impl MeshGeometry {
 
 impl Geometry for MeshGeometry {
     /// Traces 8 consecutive rays at a time: interleaved single rays on a large flat wide
-    /// BVH (see [`INTERLEAVE_MIN_BYTES`]), else as a packet where packets are on and the
+    /// BVH (above 16 MiB), else as a packet where packets are on and the
     /// scene allows it (flat wide BVH, shared origin), else one by one; same hits either
     /// way (a packet may break an exact tie between two triangles differently).
     fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
