@@ -8,7 +8,7 @@
 //!    stays empty and keeps `d_c` as its distance bound. No sample of empty space is ever
 //!    computed.
 //! 2. **Distance**: for the remaining candidates, the exact distance of every brick sample
-//!    (apron included), with the dense bake's candidate list: the triangles within `d_c +
+//!    (the `(BRICK + 1)^3` lattice samples), with the dense bake's candidate list: the triangles within `d_c +
 //!    2 r` of the centre sorted by distance, each sample stopping at the first that cannot
 //!    beat its best. A candidate whose core samples are all farther than the band plus half
 //!    a cell diagonal holds no surface within the band: it is dropped (empty).
@@ -25,7 +25,8 @@
 //!    number instead, as the dense grid does. Empty brick cells take the winding number's
 //!    side at their centre: across a large hole the boundary between inside and outside
 //!    empty cells is still a cap (the dense grid's limitation).
-//! 4. **Encode**: clamp to `(band + 3)` cells and quantize ([`Quantization`]).
+//! 4. **Encode**: clamp to `band + 1` cells ([`CLAMP_BEYOND_BAND`]) and quantize
+//!    ([`Quantization`]).
 //!
 //! Everything runs on the caller's rayon pool.
 
@@ -45,6 +46,10 @@ use crate::{
     BakeError, CANDIDATES_PER_SAMPLE, MAX_RESOLUTION, MIN_RESOLUTION, PAD_CELLS, cache,
     point_triangle_distance_squared, triangles_of,
 };
+
+/// Cells beyond the band to which stored distances are clamped (`clamp = (band + this) *
+/// cell`): the quantization step is `2 clamp / 255` for u8.
+pub const CLAMP_BEYOND_BAND: u32 = 1;
 
 /// Smallest accepted [`SparseOptions::band_voxels`].
 pub const MIN_BAND_VOXELS: u32 = 1;
@@ -326,14 +331,14 @@ fn has_cap(values: &[f32], edge: usize, lim: f32) -> bool {
     false
 }
 
-/// One kept brick's signed samples (apron included).
+/// One kept brick's signed samples.
 struct BrickOut {
     values: Vec<f32>,
     rewound: bool,
     windings: u64,
 }
 
-/// The signed samples of candidate brick cell `b` (apron included), or `None` when no core
+/// The signed samples of candidate brick cell `b`, or `None` when no core
 /// sample is within the band plus half a cell diagonal. Adds its distance and sign times to
 /// `ns` (nanoseconds).
 #[allow(clippy::too_many_arguments)]
@@ -629,7 +634,11 @@ fn bake_bricks(
 
     // Phase 4: encode.
     let t = Instant::now();
-    let clamp = (opts.band_voxels + 3) as f32 * h;
+    // One cell beyond the band: the samples that set a hit and its normal (the corners of
+    // the cells around the surface, within sqrt(3) cells of it) keep their values, and u8
+    // codes are 5/3 finer than with the former `band + 3` (bunny 256 u8: 38.75 against 38.46
+    // dB, the f32 grid's 38.77; 1% more steps). Values farther out only size steps.
+    let clamp = (opts.band_voxels + CLAMP_BEYOND_BAND) as f32 * h;
     let mut cells = vec![0u32; n_cells];
     for n in 0..n_cells {
         let bound = (centre_d[n] / h * BOUND_STEPS as f32 * (1.0 - 1e-5)).floor();
