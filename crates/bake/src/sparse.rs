@@ -201,11 +201,16 @@ impl Samples {
 /// A stored sample type and its decoding to a distance (`code * scale + offset`).
 trait Code: Copy {
     fn get(self) -> f64;
+    fn get_f32(self) -> f32;
 }
 impl Code for f32 {
     #[inline(always)]
     fn get(self) -> f64 {
         self as f64
+    }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self
     }
 }
 impl Code for u16 {
@@ -213,11 +218,19 @@ impl Code for u16 {
     fn get(self) -> f64 {
         self as f64
     }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self as f32
+    }
 }
 impl Code for u8 {
     #[inline(always)]
     fn get(self) -> f64 {
         self as f64
+    }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self as f32
     }
 }
 
@@ -483,9 +496,54 @@ impl SparseGrid {
         None
     }
 
-    /// Signed distance at `p` (mesh local frame), f32 (computed in f64).
+    /// Signed distance at `p` (mesh local frame), f32: the value of
+    /// [`SparseGrid::sample_f64`] (same contract), with lattice coordinates and the
+    /// trilinear interpolation in f32 inside the lattice box (the tracer's hot path, as the
+    /// dense grid's f32 sampler); points outside the box and tricubic evaluations go through
+    /// the f64 path. A NaN coordinate gives NaN; never panics.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
+        let c = self.lattice_cells();
+        let maxc = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+        let g = (p - self.min) * (1.0 / self.cell_size);
+        // Outside the box, or NaN (which fails every comparison): the f64 path.
+        if !(g.cmpge(Vec3::ZERO).all() && g.cmple(maxc).all()) {
+            return self.sample_f64(p.as_dvec3()) as f32;
+        }
+        let bs = BRICK as f32;
+        let gb = g * (1.0 / bs);
+        let bi = [
+            (gb.x as u32).min(self.bricks[0] - 1),
+            (gb.y as u32).min(self.bricks[1] - 1),
+            (gb.z as u32).min(self.bricks[2] - 1),
+        ];
+        let w = self.cells[(bi[0] + self.bricks[0] * (bi[1] + self.bricks[1] * bi[2])) as usize];
+        let corner = Vec3::new(bi[0] as f32, bi[1] as f32, bi[2] as f32) * bs;
+        if w & EMPTY != 0 {
+            let bound = (w & BOUND_MAX) as f32 * (1.0 / BOUND_STEPS as f32);
+            let centre = corner + Vec3::splat(0.5 * bs);
+            let d = (bound - (g - centre).length()).max(self.band_voxels as f32) * self.cell_size;
+            return if w & INSIDE != 0 { -d } else { d };
+        }
+        let local = g - corner;
+        let i = (local.x as usize).min(BRICK as usize - 1);
+        let j = (local.y as usize).min(BRICK as usize - 1);
+        let k = (local.z as usize).min(BRICK as usize - 1);
+        let f = local - Vec3::new(i as f32, j as f32, k as f32);
+        let s = self.brick_edge();
+        let base = w as usize * s * s * s + i + s * (j + s * k);
+        let (scale, off) = self.decode();
+        let tri = match &self.samples {
+            Samples::F32(v) => trilinear_f32(v, base, s, f),
+            Samples::U16(v) => trilinear_f32(v, base, s, f),
+            Samples::U8(v) => trilinear_f32(v, base, s, f),
+        } * scale as f32
+            + off as f32;
+        if self.reconstruction == Reconstruction::Trilinear
+            || tri.abs() >= (TRICUBIC_ZONE_CELLS as f32) * self.cell_size
+        {
+            return tri;
+        }
         self.sample_f64(p.as_dvec3()) as f32
     }
 
@@ -496,7 +554,14 @@ impl SparseGrid {
     pub fn sample_f64(&self, p: DVec3) -> f64 {
         let c = self.lattice_cells();
         let maxc = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-        let (gc, outside) = clamp_to_lattice(p, self.min, self.cell_size as f64, maxc);
+        let h = self.cell_size as f64;
+        // Inside the box (the common case): no clamping, no distance to the box. NaN fails
+        // the comparisons and takes the general path, which maps it to NaN.
+        let g = (p - self.min.as_dvec3()) * (1.0 / h);
+        if g.cmpge(DVec3::ZERO).all() && g.cmple(maxc).all() {
+            return self.value_in_box(g);
+        }
+        let (gc, outside) = clamp_to_lattice(p, self.min, h, maxc);
         extend_outside(self.value_in_box(gc), outside)
     }
 
@@ -505,10 +570,11 @@ impl SparseGrid {
     fn value_in_box(&self, g: DVec3) -> f64 {
         let [bx, by, _] = self.bricks;
         let bs = BRICK as f64;
+        let gb = g * (1.0 / bs); // exact: BRICK is a power of two
         let bi = [
-            ((g.x / bs) as u32).min(self.bricks[0] - 1),
-            ((g.y / bs) as u32).min(self.bricks[1] - 1),
-            ((g.z / bs) as u32).min(self.bricks[2] - 1),
+            (gb.x as u32).min(self.bricks[0] - 1),
+            (gb.y as u32).min(self.bricks[1] - 1),
+            (gb.z as u32).min(self.bricks[2] - 1),
         ];
         let w = self.cells[(bi[0] + bx * (bi[1] + by * bi[2])) as usize];
         let h = self.cell_size as f64;
@@ -542,19 +608,18 @@ impl SparseGrid {
             return tri;
         }
         let inner = 1..=BRICK as usize - 2;
-        let stencil = if inner.contains(&i) && inner.contains(&j) && inner.contains(&k) {
+        if inner.contains(&i) && inner.contains(&j) && inner.contains(&k) {
             // The whole 4^3 stencil lies in this brick: it starts one sample below the cell.
             let o = base - 1 - s - s * s;
-            let mut idx = [0usize; 64];
-            for (n, x) in idx.iter_mut().enumerate() {
-                *x = o + (n & 3) + s * ((n >> 2) & 3) + s * s * (n >> 4);
-            }
-            idx
-        } else {
-            match self.stencil_across_bricks(bi, [i, j, k]) {
-                Some(idx) => idx,
-                None => return tri,
-            }
+            let cubic = match &self.samples {
+                Samples::F32(v) => tricubic_strided(v, o, s, f),
+                Samples::U16(v) => tricubic_strided(v, o, s, f),
+                Samples::U8(v) => tricubic_strided(v, o, s, f),
+            };
+            return cubic * scale + off;
+        }
+        let Some(stencil) = self.stencil_across_bricks(bi, [i, j, k]) else {
+            return tri;
         };
         let cubic = match &self.samples {
             Samples::F32(v) => tricubic(v, &stencil, f),
@@ -632,6 +697,38 @@ fn trilinear<T: Code>(v: &[T], base: usize, s: usize, f: DVec3) -> f64 {
     let y0 = x00 + (x10 - x00) * f.y;
     let y1 = x01 + (x11 - x01) * f.y;
     y0 + (y1 - y0) * f.z
+}
+
+/// [`trilinear`] in f32.
+#[inline(always)]
+fn trilinear_f32<T: Code>(v: &[T], base: usize, s: usize, f: Vec3) -> f32 {
+    let (sy, sz) = (s, s * s);
+    let g = |o: usize| v[base + o].get_f32();
+    let x00 = g(0) + (g(1) - g(0)) * f.x;
+    let x10 = g(sy) + (g(sy + 1) - g(sy)) * f.x;
+    let x01 = g(sz) + (g(sz + 1) - g(sz)) * f.x;
+    let x11 = g(sz + sy) + (g(sz + sy + 1) - g(sz + sy)) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    y0 + (y1 - y0) * f.z
+}
+
+/// [`tricubic`] over the 4^3 samples of one brick starting at `v[o]` (row stride `s`).
+#[inline(always)]
+fn tricubic_strided<T: Code>(v: &[T], o: usize, s: usize, f: DVec3) -> f64 {
+    let (wx, wy, wz) = (catmull_rom(f.x), catmull_rom(f.y), catmull_rom(f.z));
+    let mut acc = 0.0;
+    for (c, wzc) in wz.iter().enumerate() {
+        let mut plane = 0.0;
+        for (b, wyb) in wy.iter().enumerate() {
+            let r = &v[o + b * s + c * s * s..o + b * s + c * s * s + 4];
+            let row =
+                wx[0] * r[0].get() + wx[1] * r[1].get() + wx[2] * r[2].get() + wx[3] * r[3].get();
+            plane += wyb * row;
+        }
+        acc += wzc * plane;
+    }
+    acc
 }
 
 /// The Catmull-Rom tricubic (in stored codes) at `f` over the 4^3 samples `v[stencil[n]]`,
@@ -808,6 +905,43 @@ mod tests {
         let d = g.sample_f64(p);
         assert!((d - exact(p)).abs() < 0.1 * 3.0 * 0.25 / 4.0 + 1e-6, "{d}");
         assert!((d - exact(p)).abs() > 1e-4, "{d}");
+    }
+
+    #[test]
+    fn f32_sampling_agrees_with_f64_everywhere() {
+        let mut grids = vec![paraboloid(None), paraboloid(Some(3))];
+        for q in [Quantization::F32, Quantization::U16, Quantization::U8] {
+            grids.push(linear(Reconstruction::Trilinear, q));
+            grids.push(linear(Reconstruction::Tricubic, q));
+        }
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for g in &grids {
+            let (lo, hi) = g.bounds();
+            let span = hi - lo;
+            for _ in 0..4000 {
+                // A margin around the box, so the outside branch is exercised too.
+                let p = lo - 0.2 * span + 1.4 * span * Vec3::new(rnd(), rnd(), rnd());
+                let (a, b) = (g.sample(p) as f64, g.sample_f64(p.as_dvec3()));
+                assert!(
+                    (a - b).abs() <= 1e-4 * (1.0 + b.abs()),
+                    "{p}: f32 {a} vs f64 {b}"
+                );
+            }
+            for p in [lo, hi, 0.5 * (lo + hi)] {
+                let (a, b) = (g.sample(p) as f64, g.sample_f64(p.as_dvec3()));
+                assert!(
+                    (a - b).abs() <= 1e-4 * (1.0 + b.abs()),
+                    "{p}: f32 {a} vs f64 {b}"
+                );
+            }
+            assert!(g.sample(Vec3::new(f32::NAN, 1.0, 1.0)).is_nan());
+        }
     }
 
     #[test]
