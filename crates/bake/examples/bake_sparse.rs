@@ -87,6 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ds.sign_ms
         );
     }
+    memory_breakdown(g);
     let h = g.cell_size();
     let (lo, hi) = g.bounds();
     let mut state = 0x1234_5678_9abc_def0u64;
@@ -120,4 +121,71 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         max_near
     );
     Ok(())
+}
+
+/// Where the grid's bytes go: brick samples against brick-cell words, the samples' distances
+/// (within one cell of the surface, within the band, clamped), and what 4^3-cell bricks
+/// (5^3 samples, kept under the same rule) would hold instead.
+fn memory_breakdown(g: &marchmesh_bake::SparseGrid) {
+    let h = g.cell_size();
+    let [bx, by, bz] = g.bricks();
+    let b = marchmesh_bake::sparse::BRICK;
+    let (mut n, mut near1, mut in_band, mut clamped) = (0u64, 0u64, 0u64, 0u64);
+    let keep = (g.band_voxels() as f32 + 0.5 * 3f32.sqrt()) * h * (1.0 + 1e-4);
+    let mut sub_kept = 0u64;
+    let mut sub_total = 0u64;
+    for k in 0..bz {
+        for j in 0..by {
+            for i in 0..bx {
+                let w = g.cells()[(i + bx * (j + by * k)) as usize];
+                if w & (1 << 31) != 0 {
+                    continue;
+                }
+                let mut sub = [false; 8];
+                for c in 0..=b {
+                    for bb in 0..=b {
+                        for a in 0..=b {
+                            let Some(v) = g.value(b * i + a, b * j + bb, b * k + c) else {
+                                continue;
+                            };
+                            n += 1;
+                            let d = v.abs();
+                            near1 += u64::from(d <= h);
+                            in_band += u64::from(d <= g.band_voxels() as f32 * h);
+                            clamped += u64::from(d >= g.clamp() * 0.999);
+                            if d <= keep {
+                                for (s, kept) in sub.iter_mut().enumerate() {
+                                    let lo =
+                                        [s & 1, (s >> 1) & 1, s >> 2].map(|x| x as u32 * b / 2);
+                                    if [a, bb, c]
+                                        .iter()
+                                        .zip(lo)
+                                        .all(|(&x, l)| x >= l && x <= l + b / 2)
+                                    {
+                                        *kept = true;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                sub_total += 8;
+                sub_kept += sub.iter().filter(|x| **x).count() as u64;
+            }
+        }
+    }
+    let q = g.samples().quantization().bytes() as u64;
+    let words = g.cells().len() as u64 * 4;
+    let words4 = words * 8;
+    println!(
+        "  memory: samples {} B, brick-cell words {} B; of {n} samples: {:.1}% within 1 cell, {:.1}% within the band, {:.1}% clamped; 4^3 bricks: {sub_kept} of {sub_total} sub-bricks kept -> samples {} B + words {} B (one level) = {} B",
+        g.samples().bytes(),
+        words,
+        100.0 * near1 as f64 / n.max(1) as f64,
+        100.0 * in_band as f64 / n.max(1) as f64,
+        100.0 * clamped as f64 / n.max(1) as f64,
+        sub_kept * 125 * q,
+        words4,
+        sub_kept * 125 * q + words4
+    );
 }

@@ -8,7 +8,7 @@
 //!    stays empty and keeps `d_c` as its distance bound. No sample of empty space is ever
 //!    computed.
 //! 2. **Distance**: for the remaining candidates, the exact distance of every brick sample
-//!    (apron included), with the dense bake's candidate list: the triangles within `d_c +
+//!    (the `(BRICK + 1)^3` lattice samples), with the dense bake's candidate list: the triangles within `d_c +
 //!    2 r` of the centre sorted by distance, each sample stopping at the first that cannot
 //!    beat its best. A candidate whose core samples are all farther than the band plus half
 //!    a cell diagonal holds no surface within the band: it is dropped (empty).
@@ -25,7 +25,8 @@
 //!    number instead, as the dense grid does. Empty brick cells take the winding number's
 //!    side at their centre: across a large hole the boundary between inside and outside
 //!    empty cells is still a cap (the dense grid's limitation).
-//! 4. **Encode**: clamp to `(band + 3)` cells and quantize ([`Quantization`]).
+//! 4. **Encode**: clamp to `band + 1` cells ([`CLAMP_BEYOND_BAND`]) and quantize
+//!    ([`Quantization`]).
 //!
 //! Everything runs on the caller's rayon pool.
 
@@ -45,6 +46,10 @@ use crate::{
     BakeError, CANDIDATES_PER_SAMPLE, MAX_RESOLUTION, MIN_RESOLUTION, PAD_CELLS, cache,
     point_triangle_distance_squared, triangles_of,
 };
+
+/// Cells beyond the band to which stored distances are clamped (`clamp = (band + this) *
+/// cell`): the quantization step is `2 clamp / 255` for u8.
+pub const CLAMP_BEYOND_BAND: u32 = 1;
 
 /// Smallest accepted [`SparseOptions::band_voxels`].
 pub const MIN_BAND_VOXELS: u32 = 1;
@@ -326,14 +331,14 @@ fn has_cap(values: &[f32], edge: usize, lim: f32) -> bool {
     false
 }
 
-/// One kept brick's signed samples (apron included).
+/// One kept brick's signed samples.
 struct BrickOut {
     values: Vec<f32>,
     rewound: bool,
     windings: u64,
 }
 
-/// The signed samples of candidate brick cell `b` (apron included), or `None` when no core
+/// The signed samples of candidate brick cell `b`, or `None` when no core
 /// sample is within the band plus half a cell diagonal. Adds its distance and sign times to
 /// `ns` (nanoseconds).
 #[allow(clippy::too_many_arguments)]
@@ -345,6 +350,7 @@ fn brick_samples(
     edge: usize,
     apron: u32,
     band_voxels: u32,
+    clamp: f32,
     oriented: bool,
     cand: &mut Vec<(f32, u32)>,
     ns: &[AtomicU64; 2],
@@ -372,7 +378,23 @@ fn brick_samples(
                 let r = 0.5 * h * span.length();
                 let (dc2, t) = bvh.closest(c, hint);
                 hint = t;
-                let reach = (dc2.sqrt() + 2.0 * r) * (1.0 + 1e-5) + 1e-6 * h;
+                let dc = dc2.sqrt();
+                if dc - r >= clamp * (1.0 + 1e-4) {
+                    // Every sample of the sub-block is beyond the clamp: its stored value is
+                    // the clamp whatever the exact distance (about 2/3 of a brick's samples),
+                    // and its side comes from its neighbours (or the winding number).
+                    for k in k0..k0 + kn {
+                        for j in j0..j0 + jn {
+                            for i in i0..i0 + in_ {
+                                dist[i + edge * (j + edge * k)] = clamp;
+                            }
+                        }
+                    }
+                    continue;
+                }
+                // Triangles farther than `clamp + r` from the centre cannot bring a sample
+                // below the clamp, so the candidates stop there too.
+                let reach = ((dc + 2.0 * r).min(clamp + r) * (1.0 + 1e-5)) + 1e-6 * h;
                 let exhaustive = !bvh.gather(c, reach, CANDIDATES_PER_SAMPLE * in_ * jn * kn, cand);
                 if !exhaustive {
                     cand.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
@@ -389,8 +411,9 @@ fn brick_samples(
                                 continue;
                             }
                             let s = (p - c).length();
-                            let (mut best2, mut best, mut bt) =
-                                (f32::INFINITY, f32::INFINITY, u32::MAX);
+                            // Start at the clamp: a sample no triangle brings below it is
+                            // stored as the clamp, side unknown (`u32::MAX`).
+                            let (mut best2, mut best, mut bt) = (clamp * clamp, clamp, u32::MAX);
                             for &(tc, ti) in cand.iter() {
                                 if tc - s >= best {
                                     break;
@@ -400,10 +423,6 @@ fn brick_samples(
                                 if d2 < best2 {
                                     (best2, best, bt) = (d2, d2.sqrt(), ti);
                                 }
-                            }
-                            if !best.is_finite() {
-                                let (d2, tt) = bvh.closest(p, t);
-                                (best, bt) = (d2.sqrt(), tt);
                             }
                             dist[idx] = best;
                             closest[idx] = bt;
@@ -569,6 +588,11 @@ fn bake_bricks(
     stats.candidates = candidates.len() as u64;
     stats.coarse_bytes = (n_cells * 4 + candidates.len() * 8) as u64;
 
+    // One cell beyond the band: the samples that set a hit and its normal (the corners of
+    // the cells around the surface, within sqrt(3) cells of it) keep their values, and u8
+    // codes are 5/3 finer than with the former `band + 3` (bunny 256 u8: 38.75 against 38.46
+    // dB, the f32 grid's 38.77; 1% more steps). Values farther out only size steps.
+    let clamp = (opts.band_voxels + CLAMP_BEYOND_BAND) as f32 * h;
     // Phases 2 and 3: candidate bricks' samples, then signs (timed together per brick and
     // split by the measured share below).
     let t = Instant::now();
@@ -592,6 +616,7 @@ fn bake_bricks(
                 edge,
                 apron,
                 opts.band_voxels,
+                clamp,
                 oriented,
                 cand,
                 &ns,
@@ -629,7 +654,6 @@ fn bake_bricks(
 
     // Phase 4: encode.
     let t = Instant::now();
-    let clamp = (opts.band_voxels + 3) as f32 * h;
     let mut cells = vec![0u32; n_cells];
     for n in 0..n_cells {
         let bound = (centre_d[n] / h * BOUND_STEPS as f32 * (1.0 - 1e-5)).floor();

@@ -67,7 +67,7 @@ pub fn cache_path(dir: &Path, hash: u64, resolution: u32) -> PathBuf {
 
 /// Sparse cache format version; bump when the layout or the sparse bake (band rule, sign
 /// rule, clamp) changes.
-pub const SPARSE_FORMAT_VERSION: u32 = 2;
+pub const SPARSE_FORMAT_VERSION: u32 = 3;
 
 const SPARSE_MAGIC: &[u8; 8] = b"MMSDFBRK";
 const SPARSE_HEADER: usize = 8 + 4 + 8 + 4 + 4 + 2 + 12 + 12 + 4 + 4 + 8;

@@ -58,7 +58,8 @@ use marchmesh_meshio::TriangleMesh;
 use rayon::prelude::*;
 
 pub use bricks::{
-    BakedSparse, MAX_BAND_VOXELS, MIN_BAND_VOXELS, SparseBakeStats, SparseOptions, bake_sparse,
+    BakedSparse, CLAMP_BEYOND_BAND, MAX_BAND_VOXELS, MIN_BAND_VOXELS, SparseBakeStats,
+    SparseOptions, bake_sparse,
 };
 pub use geom::{
     closest_point_on_triangle, closest_point_on_triangle_f64, point_triangle_distance_squared,

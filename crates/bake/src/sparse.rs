@@ -3,8 +3,9 @@
 //! A lattice of cubic cells (edge [`SparseGrid::cell_size`]) is cut into *brick cells* of
 //! [`BRICK`]^3 cells. Only brick cells the surface passes near (within
 //! [`SparseGrid::band_voxels`] cells of the brick's box) hold a *brick*: the signed distance
-//! at its `(BRICK + 1)^3` lattice samples plus an apron of [`Reconstruction::apron`] samples
-//! on every side, so a trilinear (or tricubic) lookup never reads another brick. Every other
+//! at its `(BRICK + 1)^3` lattice samples (the samples on a brick face are stored by both
+//! bricks), so a trilinear lookup never reads another brick; a tricubic stencil that
+//! crosses a brick face reads the neighbour's samples. Every other
 //! brick cell stores one 32-bit word: a conservative lower bound of the distance at its
 //! centre and the side (inside/outside). This is the layout of Unreal Engine's mesh distance
 //! fields (8^3 bricks of 8-bit distances in a narrow band) and of OpenVDB narrow-band level
@@ -108,9 +109,13 @@ pub enum Reconstruction {
     /// Tricubic Catmull-Rom (Catmull & Rom 1974; Keys 1981, `a = -1/2`) over the 4^3
     /// surrounding samples, within [`TRICUBIC_ZONE_CELLS`] of the surface (trilinear
     /// elsewhere): interpolating, exact for quadratic fields, C1, so normals are continuous
-    /// across cells. Needs a one-sample apron (11^3 samples per brick instead of 9^3) and 8x
-    /// the sample reads near the surface. Not a strict bound: the kernel overshoots by a few
-    /// percent of the sample differences.
+    /// across cells. Stores the same 9^3 samples per brick as trilinear: a stencil that
+    /// crosses a brick face reads the neighbouring brick's samples (the ring of cells along
+    /// a brick's faces costs up to 8 brick-word lookups instead of none), and falls back to
+    /// the trilinear value where a neighbouring brick cell is empty or off the lattice (a
+    /// seam, rare within the zone: empty brick cells lie beyond the band). 8x the sample
+    /// reads near the surface. Not a strict bound: the kernel overshoots by a few percent of
+    /// the sample differences.
     Tricubic,
 }
 
@@ -119,11 +124,12 @@ pub enum Reconstruction {
 pub const TRICUBIC_ZONE_CELLS: f64 = 1.5;
 
 impl Reconstruction {
-    /// Samples of apron on each side of a brick beyond its `BRICK + 1` own samples.
+    /// Samples of apron on each side of a brick beyond its `BRICK + 1` own samples: none for
+    /// either reconstruction (tricubic stencils that cross a brick face read the neighbour
+    /// brick), kept as the layout parameter of the cache and the bake.
     pub fn apron(self) -> u32 {
         match self {
-            Reconstruction::Trilinear => 0,
-            Reconstruction::Tricubic => 1,
+            Reconstruction::Trilinear | Reconstruction::Tricubic => 0,
         }
     }
 
@@ -195,11 +201,16 @@ impl Samples {
 /// A stored sample type and its decoding to a distance (`code * scale + offset`).
 trait Code: Copy {
     fn get(self) -> f64;
+    fn get_f32(self) -> f32;
 }
 impl Code for f32 {
     #[inline(always)]
     fn get(self) -> f64 {
         self as f64
+    }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self
     }
 }
 impl Code for u16 {
@@ -207,11 +218,19 @@ impl Code for u16 {
     fn get(self) -> f64 {
         self as f64
     }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self as f32
+    }
 }
 impl Code for u8 {
     #[inline(always)]
     fn get(self) -> f64 {
         self as f64
+    }
+    #[inline(always)]
+    fn get_f32(self) -> f32 {
+        self as f32
     }
 }
 
@@ -264,7 +283,7 @@ pub struct SparseGrid {
     /// of holds a brick.
     band_voxels: u32,
     /// Stored distances are clamped to `[-clamp, clamp]`, mesh units
-    /// (`(band_voxels + 3) * cell_size`).
+    /// (`(band_voxels + 1) * cell_size`, see [`crate::CLAMP_BEYOND_BAND`]).
     clamp: f32,
     /// How bricks are interpolated (sets the apron).
     reconstruction: Reconstruction,
@@ -477,9 +496,54 @@ impl SparseGrid {
         None
     }
 
-    /// Signed distance at `p` (mesh local frame), f32 (computed in f64).
+    /// Signed distance at `p` (mesh local frame), f32: the value of
+    /// [`SparseGrid::sample_f64`] (same contract), with lattice coordinates and the
+    /// trilinear interpolation in f32 inside the lattice box (the tracer's hot path, as the
+    /// dense grid's f32 sampler); points outside the box and tricubic evaluations go through
+    /// the f64 path. A NaN coordinate gives NaN; never panics.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
+        let c = self.lattice_cells();
+        let maxc = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
+        let g = (p - self.min) * (1.0 / self.cell_size);
+        // Outside the box, or NaN (which fails every comparison): the f64 path.
+        if !(g.cmpge(Vec3::ZERO).all() && g.cmple(maxc).all()) {
+            return self.sample_f64(p.as_dvec3()) as f32;
+        }
+        let bs = BRICK as f32;
+        let gb = g * (1.0 / bs);
+        let bi = [
+            (gb.x as u32).min(self.bricks[0] - 1),
+            (gb.y as u32).min(self.bricks[1] - 1),
+            (gb.z as u32).min(self.bricks[2] - 1),
+        ];
+        let w = self.cells[(bi[0] + self.bricks[0] * (bi[1] + self.bricks[1] * bi[2])) as usize];
+        let corner = Vec3::new(bi[0] as f32, bi[1] as f32, bi[2] as f32) * bs;
+        if w & EMPTY != 0 {
+            let bound = (w & BOUND_MAX) as f32 * (1.0 / BOUND_STEPS as f32);
+            let centre = corner + Vec3::splat(0.5 * bs);
+            let d = (bound - (g - centre).length()).max(self.band_voxels as f32) * self.cell_size;
+            return if w & INSIDE != 0 { -d } else { d };
+        }
+        let local = g - corner;
+        let i = (local.x as usize).min(BRICK as usize - 1);
+        let j = (local.y as usize).min(BRICK as usize - 1);
+        let k = (local.z as usize).min(BRICK as usize - 1);
+        let f = local - Vec3::new(i as f32, j as f32, k as f32);
+        let s = self.brick_edge();
+        let base = w as usize * s * s * s + i + s * (j + s * k);
+        let (scale, off) = self.decode();
+        let tri = match &self.samples {
+            Samples::F32(v) => trilinear_f32(v, base, s, f),
+            Samples::U16(v) => trilinear_f32(v, base, s, f),
+            Samples::U8(v) => trilinear_f32(v, base, s, f),
+        } * scale as f32
+            + off as f32;
+        if self.reconstruction == Reconstruction::Trilinear
+            || tri.abs() >= (TRICUBIC_ZONE_CELLS as f32) * self.cell_size
+        {
+            return tri;
+        }
         self.sample_f64(p.as_dvec3()) as f32
     }
 
@@ -490,7 +554,14 @@ impl SparseGrid {
     pub fn sample_f64(&self, p: DVec3) -> f64 {
         let c = self.lattice_cells();
         let maxc = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
-        let (gc, outside) = clamp_to_lattice(p, self.min, self.cell_size as f64, maxc);
+        let h = self.cell_size as f64;
+        // Inside the box (the common case): no clamping, no distance to the box. NaN fails
+        // the comparisons and takes the general path, which maps it to NaN.
+        let g = (p - self.min.as_dvec3()) * (1.0 / h);
+        if g.cmpge(DVec3::ZERO).all() && g.cmple(maxc).all() {
+            return self.value_in_box(g);
+        }
+        let (gc, outside) = clamp_to_lattice(p, self.min, h, maxc);
         extend_outside(self.value_in_box(gc), outside)
     }
 
@@ -499,10 +570,11 @@ impl SparseGrid {
     fn value_in_box(&self, g: DVec3) -> f64 {
         let [bx, by, _] = self.bricks;
         let bs = BRICK as f64;
+        let gb = g * (1.0 / bs); // exact: BRICK is a power of two
         let bi = [
-            ((g.x / bs) as u32).min(self.bricks[0] - 1),
-            ((g.y / bs) as u32).min(self.bricks[1] - 1),
-            ((g.z / bs) as u32).min(self.bricks[2] - 1),
+            (gb.x as u32).min(self.bricks[0] - 1),
+            (gb.y as u32).min(self.bricks[1] - 1),
+            (gb.z as u32).min(self.bricks[2] - 1),
         ];
         let w = self.cells[(bi[0] + bx * (bi[1] + by * bi[2])) as usize];
         let h = self.cell_size as f64;
@@ -525,30 +597,97 @@ impl SparseGrid {
         let a = self.reconstruction.apron() as usize;
         let base = w as usize * s * s * s + (i + a) + s * ((j + a) + s * (k + a));
         let (scale, off) = self.decode();
-        let cubic = self.reconstruction == Reconstruction::Tricubic;
-        let zone = TRICUBIC_ZONE_CELLS * h;
-        match &self.samples {
-            Samples::F32(v) => interp(v, base, s, f, scale, off, cubic, zone),
-            Samples::U16(v) => interp(v, base, s, f, scale, off, cubic, zone),
-            Samples::U8(v) => interp(v, base, s, f, scale, off, cubic, zone),
+        let tri = match &self.samples {
+            Samples::F32(v) => trilinear(v, base, s, f),
+            Samples::U16(v) => trilinear(v, base, s, f),
+            Samples::U8(v) => trilinear(v, base, s, f),
+        } * scale
+            + off;
+        if self.reconstruction == Reconstruction::Trilinear || tri.abs() >= TRICUBIC_ZONE_CELLS * h
+        {
+            return tri;
         }
+        let inner = 1..=BRICK as usize - 2;
+        if inner.contains(&i) && inner.contains(&j) && inner.contains(&k) {
+            // The whole 4^3 stencil lies in this brick: it starts one sample below the cell.
+            let o = base - 1 - s - s * s;
+            let cubic = match &self.samples {
+                Samples::F32(v) => tricubic_strided(v, o, s, f),
+                Samples::U16(v) => tricubic_strided(v, o, s, f),
+                Samples::U8(v) => tricubic_strided(v, o, s, f),
+            };
+            return cubic * scale + off;
+        }
+        let Some(stencil) = self.stencil_across_bricks(bi, [i, j, k]) else {
+            return tri;
+        };
+        let cubic = match &self.samples {
+            Samples::F32(v) => tricubic(v, &stencil, f),
+            Samples::U16(v) => tricubic(v, &stencil, f),
+            Samples::U8(v) => tricubic(v, &stencil, f),
+        };
+        cubic * scale + off
+    }
+
+    /// Sample indices of the 4^3 tricubic stencil of local cell `cell` (`0..BRICK` per axis)
+    /// of brick cell `bi` (x fastest, see [`tricubic`]) when the stencil crosses a brick face.
+    /// A stencil coordinate is local `-1..=BRICK + 1` of this brick: local `BRICK - 1` of the
+    /// brick below for `-1`, this brick for `0..=BRICK`, local 1 of the brick above for
+    /// `BRICK + 1` (shared face samples are equal in both bricks). `None` when a needed brick
+    /// cell is off the lattice or empty.
+    #[cold]
+    #[inline(never)]
+    fn stencil_across_bricks(&self, bi: [u32; 3], cell: [usize; 3]) -> Option<[usize; 64]> {
+        // Per axis and stencil position: (brick offset + 1, local sample index).
+        let per_axis = |a: usize| -> Option<[(usize, usize); 4]> {
+            let mut out = [(1usize, 0usize); 4];
+            for (t, o) in out.iter_mut().enumerate() {
+                let l = cell[a] as i64 + t as i64 - 1;
+                *o = if l < 0 {
+                    if bi[a] == 0 {
+                        return None;
+                    }
+                    (0, (l + BRICK as i64) as usize)
+                } else if l > BRICK as i64 {
+                    if bi[a] + 1 >= self.bricks[a] {
+                        return None;
+                    }
+                    (2, (l - BRICK as i64) as usize)
+                } else {
+                    (1, l as usize)
+                };
+            }
+            Some(out)
+        };
+        let axes = [per_axis(0)?, per_axis(1)?, per_axis(2)?];
+        let s = self.brick_edge();
+        let per = s * s * s;
+        // Sample base of each neighbouring brick (offset + 1 per axis), looked up once.
+        let mut bases: [Option<Option<usize>>; 27] = [None; 27];
+        let mut idx = [0usize; 64];
+        for (n, x) in idx.iter_mut().enumerate() {
+            let (ex, ey, ez) = (axes[0][n & 3], axes[1][(n >> 2) & 3], axes[2][n >> 4]);
+            let slot = ex.0 + 3 * (ey.0 + 3 * ez.0);
+            let base = *bases[slot].get_or_insert_with(|| {
+                let b = [
+                    bi[0] + ex.0 as u32 - 1,
+                    bi[1] + ey.0 as u32 - 1,
+                    bi[2] + ez.0 as u32 - 1,
+                ];
+                let w =
+                    self.cells[(b[0] + self.bricks[0] * (b[1] + self.bricks[1] * b[2])) as usize];
+                (w & EMPTY == 0).then_some(w as usize * per)
+            });
+            *x = base? + ex.1 + s * (ey.1 + s * ez.1);
+        }
+        Some(idx)
     }
 }
 
-/// Trilinear at `f` in the cell whose `(0, 0, 0)` sample is `v[base]` (row stride `s`), then
-/// tricubic when `cubic` and the trilinear value is within `zone`.
-#[allow(clippy::too_many_arguments)]
+/// The trilinear interpolant (in stored codes) at `f` in the cell whose `(0, 0, 0)` sample
+/// is `v[base]` (row stride `s`, plane stride `s^2`).
 #[inline(always)]
-fn interp<T: Code>(
-    v: &[T],
-    base: usize,
-    s: usize,
-    f: DVec3,
-    scale: f64,
-    off: f64,
-    cubic: bool,
-    zone: f64,
-) -> f64 {
+fn trilinear<T: Code>(v: &[T], base: usize, s: usize, f: DVec3) -> f64 {
     let (sy, sz) = (s, s * s);
     let g = |o: usize| v[base + o].get();
     let x00 = g(0) + (g(1) - g(0)) * f.x;
@@ -557,27 +696,61 @@ fn interp<T: Code>(
     let x11 = g(sz + sy) + (g(sz + sy + 1) - g(sz + sy)) * f.x;
     let y0 = x00 + (x10 - x00) * f.y;
     let y1 = x01 + (x11 - x01) * f.y;
-    let tri = (y0 + (y1 - y0) * f.z) * scale + off;
-    if !cubic || tri.abs() >= zone {
-        return tri;
-    }
-    // The 4^3 stencil starts one sample below the cell in every axis (the apron).
-    let o = base - 1 - sy - sz;
+    y0 + (y1 - y0) * f.z
+}
+
+/// [`trilinear`] in f32.
+#[inline(always)]
+fn trilinear_f32<T: Code>(v: &[T], base: usize, s: usize, f: Vec3) -> f32 {
+    let (sy, sz) = (s, s * s);
+    let g = |o: usize| v[base + o].get_f32();
+    let x00 = g(0) + (g(1) - g(0)) * f.x;
+    let x10 = g(sy) + (g(sy + 1) - g(sy)) * f.x;
+    let x01 = g(sz) + (g(sz + 1) - g(sz)) * f.x;
+    let x11 = g(sz + sy) + (g(sz + sy + 1) - g(sz + sy)) * f.x;
+    let y0 = x00 + (x10 - x00) * f.y;
+    let y1 = x01 + (x11 - x01) * f.y;
+    y0 + (y1 - y0) * f.z
+}
+
+/// [`tricubic`] over the 4^3 samples of one brick starting at `v[o]` (row stride `s`).
+#[inline(always)]
+fn tricubic_strided<T: Code>(v: &[T], o: usize, s: usize, f: DVec3) -> f64 {
     let (wx, wy, wz) = (catmull_rom(f.x), catmull_rom(f.y), catmull_rom(f.z));
     let mut acc = 0.0;
     for (c, wzc) in wz.iter().enumerate() {
         let mut plane = 0.0;
         for (b, wyb) in wy.iter().enumerate() {
-            let r = o + b * sy + c * sz;
-            let row = wx[0] * v[r].get()
-                + wx[1] * v[r + 1].get()
-                + wx[2] * v[r + 2].get()
-                + wx[3] * v[r + 3].get();
+            let r = &v[o + b * s + c * s * s..o + b * s + c * s * s + 4];
+            let row =
+                wx[0] * r[0].get() + wx[1] * r[1].get() + wx[2] * r[2].get() + wx[3] * r[3].get();
             plane += wyb * row;
         }
         acc += wzc * plane;
     }
-    acc * scale + off
+    acc
+}
+
+/// The Catmull-Rom tricubic (in stored codes) at `f` over the 4^3 samples `v[stencil[n]]`,
+/// `n = a + 4 b + 16 c` for the samples at offsets `(a - 1, b - 1, c - 1)` from the cell's
+/// `(0, 0, 0)` sample.
+#[inline(always)]
+fn tricubic<T: Code>(v: &[T], stencil: &[usize; 64], f: DVec3) -> f64 {
+    let (wx, wy, wz) = (catmull_rom(f.x), catmull_rom(f.y), catmull_rom(f.z));
+    let mut acc = 0.0;
+    for (c, wzc) in wz.iter().enumerate() {
+        let mut plane = 0.0;
+        for (b, wyb) in wy.iter().enumerate() {
+            let r = &stencil[16 * c + 4 * b..16 * c + 4 * b + 4];
+            let row = wx[0] * v[r[0]].get()
+                + wx[1] * v[r[1]].get()
+                + wx[2] * v[r[2]].get()
+                + wx[3] * v[r[3]].get();
+            plane += wyb * row;
+        }
+        acc += wzc * plane;
+    }
+    acc
 }
 
 #[cfg(test)]
@@ -665,10 +838,116 @@ mod tests {
         assert!(g.sample(Vec3::splat(1e30)).is_finite());
     }
 
+    /// `f(p) = 0.1 |p - (4, 4, 4)|^2 - 0.3` on 2x2x2 brick cells of cell 0.5 (all eight
+    /// bricks meet at the paraboloid's centre), tricubic, f32; `drop` empties one brick.
+    fn paraboloid(drop: Option<usize>) -> SparseGrid {
+        let h = 0.5f32;
+        let s = (BRICK + 1) as usize;
+        let f = |p: Vec3| 0.1 * (p - Vec3::splat(4.0)).length_squared() - 0.3;
+        let mut cells = Vec::new();
+        let mut vals = Vec::new();
+        for n in 0..8usize {
+            let b = [n & 1, (n >> 1) & 1, n >> 2];
+            if drop == Some(n) {
+                cells.push(EMPTY | INSIDE);
+                continue;
+            }
+            cells.push((vals.len() / s.pow(3)) as u32);
+            for c in 0..s {
+                for bb in 0..s {
+                    for a in 0..s {
+                        let l = [a, bb, c];
+                        let p = Vec3::from_array(
+                            [0, 1, 2].map(|x| (BRICK as usize * b[x] + l[x]) as f32 * h),
+                        );
+                        vals.push(f(p));
+                    }
+                }
+            }
+        }
+        SparseGrid::from_parts(
+            Vec3::ZERO,
+            h,
+            [2, 2, 2],
+            2,
+            16.0,
+            Reconstruction::Tricubic,
+            cells,
+            Samples::F32(vals),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn tricubic_reads_across_brick_faces_and_falls_back_at_empty_ones() {
+        let exact = |p: DVec3| 0.1 * (p - DVec3::splat(4.0)).length_squared() - 0.3;
+        let g = paraboloid(None);
+        let tri = linear(Reconstruction::Trilinear, Quantization::F32);
+        assert_eq!(g.brick_edge(), tri.brick_edge());
+        // Points in cells along brick faces, edges and the shared corner, all in the zone:
+        // Catmull-Rom reproduces quadratics, so the stencil read across the bricks is exact
+        // (the trilinear value is off by up to 0.1 * 3 * h^2 / 4 here).
+        let pts = [
+            DVec3::new(3.8, 4.1, 4.3),
+            DVec3::new(4.2, 3.6, 3.9),
+            DVec3::new(3.7, 3.9, 4.45),
+            DVec3::new(4.05, 4.4, 3.55),
+            DVec3::new(3.6, 3.6, 3.6),
+        ];
+        for p in pts {
+            let d = g.sample_f64(p);
+            assert!((d - exact(p)).abs() < 1e-5, "{p}: {d} vs {}", exact(p));
+        }
+        // With one brick empty, stencils reaching into it fall back to trilinear: finite,
+        // within the trilinear error, and no longer exact.
+        let g = paraboloid(Some(0));
+        let p = DVec3::new(4.2, 4.1, 4.3); // in brick 7, its stencil reaches brick 0
+        let d = g.sample_f64(p);
+        assert!((d - exact(p)).abs() < 0.1 * 3.0 * 0.25 / 4.0 + 1e-6, "{d}");
+        assert!((d - exact(p)).abs() > 1e-4, "{d}");
+    }
+
+    #[test]
+    fn f32_sampling_agrees_with_f64_everywhere() {
+        let mut grids = vec![paraboloid(None), paraboloid(Some(3))];
+        for q in [Quantization::F32, Quantization::U16, Quantization::U8] {
+            grids.push(linear(Reconstruction::Trilinear, q));
+            grids.push(linear(Reconstruction::Tricubic, q));
+        }
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        for g in &grids {
+            let (lo, hi) = g.bounds();
+            let span = hi - lo;
+            for _ in 0..4000 {
+                // A margin around the box, so the outside branch is exercised too.
+                let p = lo - 0.2 * span + 1.4 * span * Vec3::new(rnd(), rnd(), rnd());
+                let (a, b) = (g.sample(p) as f64, g.sample_f64(p.as_dvec3()));
+                assert!(
+                    (a - b).abs() <= 1e-4 * (1.0 + b.abs()),
+                    "{p}: f32 {a} vs f64 {b}"
+                );
+            }
+            for p in [lo, hi, 0.5 * (lo + hi)] {
+                let (a, b) = (g.sample(p) as f64, g.sample_f64(p.as_dvec3()));
+                assert!(
+                    (a - b).abs() <= 1e-4 * (1.0 + b.abs()),
+                    "{p}: f32 {a} vs f64 {b}"
+                );
+            }
+            assert!(g.sample(Vec3::new(f32::NAN, 1.0, 1.0)).is_nan());
+        }
+    }
+
     #[test]
     fn lattice_values_and_addressing() {
         let g = linear(Reconstruction::Tricubic, Quantization::F32);
-        assert_eq!(g.brick_edge(), 11);
+        assert_eq!(g.brick_edge(), 9);
         assert_eq!(g.brick_count(), 1);
         assert_eq!(g.dims(), [17, 9, 9]);
         for i in 0..=8 {
@@ -680,7 +959,7 @@ mod tests {
         assert_eq!(g.value(17, 0, 0), None);
         assert_eq!(
             g.memory_bytes(),
-            (11usize.pow(3) * 4 + 8 + std::mem::size_of::<SparseGrid>()) as u64
+            (9usize.pow(3) * 4 + 8 + std::mem::size_of::<SparseGrid>()) as u64
         );
     }
 
@@ -706,7 +985,8 @@ mod tests {
         assert!(parts(vec![0, 0], g.samples.clone(), t).is_err());
         assert!(parts(vec![EMPTY, EMPTY], g.samples.clone(), t).is_err());
         assert!(parts(g.cells.clone(), Samples::U8(vec![0; 700]), t).is_err());
-        assert!(parts(g.cells.clone(), g.samples.clone(), Reconstruction::Tricubic).is_err());
+        // Both reconstructions share the layout.
+        assert!(parts(g.cells.clone(), g.samples.clone(), Reconstruction::Tricubic).is_ok());
         assert!(parts(vec![0, EMPTY], Samples::F32(vec![f32::NAN; 729]), t).is_err());
         assert!(
             SparseGrid::from_parts(

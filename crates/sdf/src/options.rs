@@ -86,12 +86,12 @@ pub struct SdfOptions {
     /// Representation of mesh distance fields ([`marchmesh_field::MeshGrid`]): dense
     /// trilinear grids (default) or sparse narrow-band brick grids with their band,
     /// quantization and reconstruction. Sparse u8 at 128 cells holds the bunny in 0.90 MB
-    /// where the dense 64^3 grid takes 1.11 MB, with PSNR 34.8 dB / mean normal error 0.63
-    /// deg against 32.0 dB / 0.98 deg on `scenes/generated/mesh_bunny.json` at 320x240
-    /// (dragon_res3: 0.60 MB, 32.6 dB, 1.19 deg against 0.54 MB, 29.6 dB, 1.85 deg), and
-    /// bakes faster than the dense 128^3 grid. It is not the default because the open
-    /// teapot regresses in the stability study (sparse 128: 10.6 deg mean normal error
-    /// against 2.4 for dense 128, from its unsigned cap bricks).
+    /// where the dense 64^3 grid takes 1.11 MB, with PSNR 34.8 dB (36.4 dB tricubic) / mean
+    /// normal error 0.60 deg against 32.1 dB / 0.98 deg on
+    /// `scenes/generated/mesh_bunny.json` at 320x240 (dragon_res3: 0.60 MB, 32.6 dB, 1.18
+    /// deg, tricubic 34.0 dB, 1.04 deg), and bakes faster than the dense 128^3 grid; it
+    /// renders at about the dense grid's speed (1.08x its time at 128, tricubic 1.43x). The
+    /// default stays the dense grid every committed run was measured with.
     pub mesh_grid: marchmesh_field::MeshGrid,
     /// Cache folder for baked grids; `None` (default) = no disk cache.
     pub cache_dir: Option<PathBuf>,

@@ -54,10 +54,10 @@ pub struct SdfSettings {
     /// close; the field is at least this far elsewhere).
     pub band: u32,
     /// Sparse grids: sample storage, f32, u16 or u8 (error clamp/65535 or clamp/255, clamp
-    /// = band + 3 cells).
+    /// = band + 1 cells).
     pub quantize: QuantizeKind,
     /// Sparse grids: interpolation, trilinear or tricubic (Catmull-Rom near the surface,
-    /// C1 normals, 11^3 instead of 9^3 samples per brick).
+    /// C1 normals, the same 9^3 samples per brick, stencils read across brick faces).
     pub recon: ReconKind,
     /// Folder caching baked grids (none = no disk cache).
     pub cache_dir: Option<PathBuf>,

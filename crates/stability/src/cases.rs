@@ -572,7 +572,7 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 family: "mesh_dragon_full",
                 parameter: "triangles",
                 value: 871_414.0,
-                scene_json: scene(cam, vec![obj], 100.0),
+                scene_json: scene(cam.clone(), vec![obj.clone()], 100.0),
                 truth_json: None,
                 scene_size: 2.0,
                 variants: both_backends(),
@@ -580,6 +580,33 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 self_truth: false,
                 base_dir: ctx.scenes_dir.clone(),
             });
+            // The full scan baked to sparse u8 brick grids at 128..512 effective: the only
+            // grids that hold its detail at a size this study can afford.
+            for res in [128u32, 256, 512] {
+                let variants = ["trilinear", "tricubic"]
+                    .map(|recon| Variant {
+                        backend: BackendKind::Sdf,
+                        options: vec![
+                            (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
+                            (keys::SDF_GRID.to_string(), res.to_string()),
+                            (keys::SDF_QUANTIZE.to_string(), "u8".to_string()),
+                            (keys::SDF_RECON.to_string(), recon.to_string()),
+                        ],
+                    })
+                    .to_vec();
+                out.push(StabilityCase {
+                    family: "bake_dragon_full_sparse",
+                    parameter: "grid_res",
+                    value: res as f64,
+                    scene_json: scene(cam.clone(), vec![obj.clone()], 100.0),
+                    truth_json: None,
+                    scene_size: 2.0,
+                    variants,
+                    judge_by_image: false,
+                    self_truth: false,
+                    base_dir: ctx.scenes_dir.clone(),
+                });
+            }
         }
     }
     Ok(out)
