@@ -27,7 +27,7 @@ struct Bound {
 
 impl Bound {
     fn of(ins: &Instr<f32>) -> Option<Bound> {
-        ins.has_bound.then(|| Bound {
+        ins.has_bound.then_some(Bound {
             lo: ins.lo,
             hi: ins.hi,
             tau: ins.tau,

@@ -147,6 +147,10 @@ fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
     Ok(())
 }
 
+/// A lockstep hit waiting for its normal: ray index, `t`, work, and the point, ray
+/// direction and normal step the normal is computed from.
+type PendingHit = (usize, f32, RayWork, (Vec3, Vec3, f32));
+
 /// A scene compiled for sphere tracing.
 #[derive(Debug)]
 pub struct SdfGeometry {
@@ -738,9 +742,8 @@ impl Geometry for SdfGeometry {
             return;
         }
         // Hits wait here for their normals, computed 8 at a time.
-        let mut pending: Vec<(usize, f32, RayWork, (Vec3, Vec3, f32))> = Vec::with_capacity(8);
-        let flush = |pending: &mut Vec<(usize, f32, RayWork, (Vec3, Vec3, f32))>,
-                     out: &mut [TraceResult]| {
+        let mut pending: Vec<PendingHit> = Vec::with_capacity(8);
+        let flush = |pending: &mut Vec<PendingHit>, out: &mut [TraceResult]| {
             let mut hits = [(Vec3::ZERO, Vec3::ZERO, 0.0); 8];
             for (h, p) in hits.iter_mut().zip(pending.iter()) {
                 *h = p.3;
