@@ -866,14 +866,14 @@ impl Lanes8 {
             F32x8::lt(s, self.r_prev),
             F32x8::lt(self.r_prev * c(SEGMENT_RATIO), s),
         );
+        // Branch-free per lane (all-ones masks), so the loop vectorises: the same decision as
+        // `evals + 1 < max_steps && !(segment && evals + 1 >= seg_from && slow_progress)`.
+        let mask = |b: bool| 0u32.wrapping_sub(u32::from(b));
+        let segment_on = mask(p.segment);
         let budget = M8(std::array::from_fn(|k| {
-            let segment =
-                p.segment && self.evals[k] + 1 >= self.seg_from[k] && slow_progress.0[k] != 0;
-            if self.evals[k] + 1 < p.max_steps && !segment {
-                !0
-            } else {
-                0
-            }
+            let e = self.evals[k] + 1;
+            let segment = segment_on & mask(e >= self.seg_from[k]) & slow_progress.0[k];
+            mask(e < p.max_steps) & !segment
         }));
         // `eps <= s` is false for NaN too; `t + s <= t_end` is `!(t + s > t_end)` there.
         let ok = F32x8::and(
