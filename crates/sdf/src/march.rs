@@ -774,7 +774,8 @@ pub(crate) struct Plain {
 
 /// Eight rays marched in lockstep, structure of arrays. The common case, a step of plain
 /// (relaxed) marching that enters no shell, undoes no relaxed step, leaves no range and
-/// exhausts no budget, runs on all lanes at once in [`Lanes8::step`] with exactly the
+/// exhausts no budget (or a ray's first sample that is such a step into `March`), runs on all
+/// lanes at once in [`Lanes8::step`] with exactly the
 /// arithmetic of [`March::feed`]'s `March` phase in 8-lane vector operations (so results
 /// are bit for bit those of single rays); a lane that needs any other decision, or is in
 /// another phase, is handed to its scalar [`March`] for that step.
