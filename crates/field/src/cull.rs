@@ -19,6 +19,7 @@ use glam::{DVec3, Vec3};
 use crate::Field;
 use crate::lane::{F32x8, V3};
 use crate::program::{Instr, Op, Program};
+use crate::tape::Tape;
 
 /// Rays from `origin` whose directions lie in a pyramid around `axis`: in the frame
 /// (`u`, `v`, `axis`), a direction `d` is inside when `u.d / axis.d` lies in `[u_lo, u_hi]`
@@ -155,6 +156,9 @@ impl RayCone {
 pub struct Restricted {
     prog: Program<f32>,
     dropped: usize,
+    /// `prog` flattened, when it is a small union of analytic leaves (`taped`).
+    tape: Tape,
+    taped: bool,
 }
 
 impl Restricted {
@@ -178,6 +182,7 @@ impl Field {
             emit(&self.p32.instrs, 0, cone, &mut out.prog.instrs);
         }
         out.dropped = self.p32.instrs.len() - out.prog.instrs.len().min(self.p32.instrs.len());
+        out.taped = out.tape.rebuild(&out.prog);
     }
 
     /// Distances at eight points under a restriction made by [`Field::restrict_to`] on this
@@ -191,7 +196,11 @@ impl Field {
     /// as [`Field::restricted_distance`]).
     #[inline]
     pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
-        self.eval::<F32x8, false>(&r.prog, p).0
+        if r.taped {
+            r.tape.eval::<F32x8, false>(p).0
+        } else {
+            self.eval::<F32x8, false>(&r.prog, p).0
+        }
     }
 
     /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this

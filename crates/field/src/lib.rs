@@ -37,9 +37,11 @@
 
 pub mod compile;
 pub mod cull;
+pub mod dual;
 pub mod lane;
 pub mod program;
 pub mod shapes;
+pub mod tape;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -49,11 +51,13 @@ use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
 
 use compile::{Aabb, MeshResolver, compile_roots};
 pub use cull::{RayCone, Restricted};
+pub use dual::{Dual1, Dual8};
 pub use lane::{F32x8, Lane, M8, Scalar, V3};
 /// The bake crate (grid types, quantization and reconstruction options), re-exported so
 /// backends name the same types.
 pub use marchmesh_bake as bake;
 use program::{GridSampler, Program};
+use tape::Tape;
 
 /// Which representation a mesh's distance field is baked into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -149,6 +153,9 @@ pub struct FieldReport {
 pub struct Field {
     p32: Program<f32>,
     p64: Program<f64>,
+    /// `p32` flattened when it is a small union of analytic leaves ([`tape`]): what the
+    /// 8-lane evaluations run (same values).
+    tape: Option<Tape>,
     grids: Vec<Box<dyn GridSampler>>,
     bounds: Option<(DVec3, DVec3)>,
     report: FieldReport,
@@ -369,6 +376,7 @@ impl Field {
             ("mesh_grids".to_string(), meshes.grids.len() as f64),
         ];
         Ok(Field {
+            tape: Tape::of(&p32),
             p32,
             p64,
             grids: meshes.grids,
@@ -459,14 +467,54 @@ impl Field {
     /// [`Field::distance_material`]).
     #[inline]
     pub fn distance_material_x8(&self, p: [Vec3; 8]) -> ([f32; 8], [MaterialId; 8]) {
-        let (d, m) = self.eval::<F32x8, true>(&self.p32, V3::from_points(p));
+        let p = V3::from_points(p);
+        let (d, m) = match &self.tape {
+            Some(t) => t.eval::<F32x8, true>(p),
+            None => self.eval::<F32x8, true>(&self.p32, p),
+        };
         (d.0, m)
     }
 
-    /// Distances of eight points given as SoA lanes.
+    /// Distances of eight points given as SoA lanes (per lane the same as
+    /// [`Field::distance`]).
     #[inline]
     pub fn distance_lanes(&self, p: V3<F32x8>) -> F32x8 {
-        self.eval::<F32x8, false>(&self.p32, p).0
+        match &self.tape {
+            Some(t) => t.eval::<F32x8, false>(p).0,
+            None => self.eval::<F32x8, false>(&self.p32, p).0,
+        }
+    }
+
+    /// Distances and their gradients at eight points, by forward-mode differentiation of
+    /// the f32 program ([`Dual8`]): the exact gradient of the evaluated expression (at a
+    /// crease, of the branch the evaluation took; 0 where the distance is 0 on an unsigned
+    /// surface). `None` when the field has mesh grids, which are sampled without a
+    /// derivative, and when the field has no [`tape`] (the interpreter is not instantiated
+    /// for dual numbers: its recursion made that instance too costly to compile). Distances
+    /// are the same as [`Field::distance_x8`]'s.
+    #[inline]
+    pub fn distance_gradient_x8(&self, p: [Vec3; 8]) -> Option<([f32; 8], [Vec3; 8])> {
+        let t = self.tape.as_ref()?;
+        let d = t.eval::<Dual8, false>(Dual8::seed(V3::from_points(p))).0;
+        let g = std::array::from_fn(|k| Vec3::new(d.d.x.0[k], d.d.y.0[k], d.d.z.0[k]));
+        Some((d.v.0, g))
+    }
+
+    /// [`Field::distance_gradient_x8`] at one point ([`Dual1`]: per lane the same
+    /// operations, so the same bits as the 8-lane result).
+    #[inline]
+    pub fn distance_gradient(&self, p: Vec3) -> Option<(f32, Vec3)> {
+        let t = self.tape.as_ref()?;
+        let d = t
+            .eval::<Dual1, false>(Dual1::seed(V3::new(p.x, p.y, p.z)))
+            .0;
+        Some((d.v, Vec3::new(d.d.x, d.d.y, d.d.z)))
+    }
+
+    /// Whether the 8-lane evaluations run a flattened [`tape`] (a union of at most
+    /// [`Tape::MAX_LEAVES`] analytic leaves) rather than the interpreter.
+    pub fn has_tape(&self) -> bool {
+        self.tape.is_some()
     }
 
     /// The same field without its skipping bounds: every node is evaluated at every query
@@ -481,6 +529,7 @@ impl Field {
         for i in &mut self.p64.instrs {
             i.has_bound = false;
         }
+        self.tape = Tape::of(&self.p32);
         self.bounds = None;
         self
     }

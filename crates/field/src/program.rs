@@ -43,8 +43,9 @@ pub struct Affine<S> {
 }
 
 impl<S: Scalar> Affine<S> {
+    /// `lin * p + trans` in lane type `T`.
     #[inline(always)]
-    fn apply<T: Lane<S = S>>(&self, p: V3<T>) -> V3<T> {
+    pub(crate) fn apply<T: Lane<S = S>>(&self, p: V3<T>) -> V3<T> {
         let t = V3::<T>::splat3(self.trans);
         match &self.lin {
             None => p + t,

@@ -13,10 +13,15 @@
 //!   field is below `eps` they step by the (safe) field value and only count a hit if the
 //!   field drops below half of its starting value (another surface closing in, e.g. at a
 //!   contact), so a ray never re-hits the surface it leaves yet still sees contacts.
-//! * Normals: central differences of the field with a step that is a fraction of the pixel
-//!   footprint ([`SdfOptions::normal_step`]), evaluated as one 8-lane field call (the two
-//!   spare lanes detect a stencil straddling an unsigned surface, see
-//!   [`SdfGeometry::normal_at`]).
+//! * Normals: the field's analytic gradient at the hit, by forward-mode differentiation
+//!   ([`marchmesh_field::Dual8`]) of the flattened program ([`marchmesh_field::tape`]), for
+//!   the 8 hits of a lockstep batch in one evaluation (a single ray gets the same bits from
+//!   the scalar [`marchmesh_field::Dual1`]). Where there is no tape (CSG, repetition, mesh
+//!   grids, large unions) or the gradient is shorter than 0.9 (an unsigned surface at its
+//!   zero set, a smooth blend, an ellipsoid's bound), central differences of the field with a
+//!   step that is a fraction of the pixel footprint ([`SdfOptions::normal_step`]), evaluated
+//!   as one 8-lane field call (the two spare lanes detect a stencil straddling an unsigned
+//!   surface, see [`SdfGeometry::normal_at`]).
 //! * Every ray reports its evaluations and whether it ended by hit, miss (left the scene's
 //!   box), max steps or max distance.
 //! * [`Geometry::closest_hits`] / [`Geometry::occluded_many`] trace 8 rays in lockstep: one
@@ -141,6 +146,10 @@ fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
     }
     Ok(())
 }
+
+/// A lockstep hit waiting for its normal: ray index, `t`, work, and the point, ray
+/// direction and normal step the normal is computed from.
+type PendingHit = (usize, f32, RayWork, (Vec3, Vec3, f32));
 
 /// A scene compiled for sphere tracing.
 #[derive(Debug)]
@@ -356,6 +365,47 @@ impl SdfGeometry {
         }
     }
 
+    /// Normals and materials of up to 8 hits at once (`hits[..n]`: point, ray direction,
+    /// normal step). The normal is the field's analytic gradient at the point
+    /// ([`Field::distance_gradient_x8`], one forward-mode evaluation for all eight: as
+    /// accurate as the f32 distance, where central differences lose `ulp(|p|) / h`), the
+    /// material the field's at `p - 2 h dir` as in [`SdfGeometry::normal_material`] (one
+    /// 8-lane evaluation). A hit whose gradient is shorter than 0.9 or not finite (an
+    /// unsigned surface at its zero set, a smooth blend, an ellipsoid's bound, a mesh grid)
+    /// takes [`SdfGeometry::normal_material`] instead, with its straddle fallback.
+    fn normals_material_x8(&self, hits: &[(Vec3, Vec3, f32)]) -> [(Vec3, MaterialId); 8] {
+        let n = hits.len().min(8);
+        let mut out = [(Vec3::ZERO, 0); 8];
+        let Some(&first) = hits.first() else {
+            return out;
+        };
+        // Idle lanes repeat the first hit (finite points).
+        let hit = |k: usize| if k < n { hits[k] } else { first };
+        let grads = self
+            .field
+            .distance_gradient_x8(std::array::from_fn(|k| hit(k).0));
+        let Some((_, g)) = grads else {
+            for (o, &(p, dir, h)) in out.iter_mut().zip(&hits[..n]) {
+                *o = self.normal_material(p, dir, h);
+            }
+            return out;
+        };
+        let (_, m) = self.field.distance_material_x8(std::array::from_fn(|k| {
+            let (p, dir, h) = hit(k);
+            p - dir * (2.0 * h)
+        }));
+        for (k, o) in out.iter_mut().enumerate().take(n) {
+            let len = g[k].length();
+            *o = if len >= 0.9 && len.is_finite() {
+                (g[k] / len, m[k])
+            } else {
+                let (p, dir, h) = hits[k];
+                self.normal_material(p, dir, h)
+            };
+        }
+        out
+    }
+
     fn gradient(&self, p: Vec3, h: f32) -> Vec3 {
         let (x, y, z) = (Vec3::X * h, Vec3::Y * h, Vec3::Z * h);
         let d = self
@@ -365,7 +415,20 @@ impl SdfGeometry {
     }
 
     fn finish(&self, m: &March, term: Termination) -> TraceResult {
-        self.finish_with(m, term, |p, dir, h| self.normal_material(p, dir, h))
+        self.finish_with(m, term, |p, dir, h| self.normal_material_one(p, dir, h))
+    }
+
+    /// The normal and material of one hit as [`SdfGeometry::normals_material_x8`] computes
+    /// them (bit for bit: a single ray and the lockstep lanes report the same hit).
+    fn normal_material_one(&self, p: Vec3, dir: Vec3, h: f32) -> (Vec3, MaterialId) {
+        if let Some((_, g)) = self.field.distance_gradient(p) {
+            let len = g.length();
+            if len >= 0.9 && len.is_finite() {
+                let (_, m) = self.field.distance_material(p - dir * (2.0 * h));
+                return (g / len, m);
+            }
+        }
+        self.normal_material(p, dir, h)
     }
 
     /// The trace result of a finished march, the hit's normal and material from
@@ -383,10 +446,7 @@ impl SdfGeometry {
         if let Ok(why) = NoHit::try_from(term) {
             return TraceResult::not_found(why, work);
         }
-        let p = m.point();
-        let h = (self.normal_step * m.path_length())
-            .max(p.length() * 1e-6)
-            .max(1e-30);
+        let (p, h) = self.hit_point(m);
         let (normal, material) = normal_material(p, m.dir(), h);
         TraceResult::found(
             Hit {
@@ -397,6 +457,15 @@ impl SdfGeometry {
             },
             work,
         )
+    }
+
+    /// The hit point of a march ended by a hit and its normal step.
+    fn hit_point(&self, m: &March) -> (Vec3, f32) {
+        let p = m.point();
+        let h = (self.normal_step * m.path_length())
+            .max(p.length() * 1e-6)
+            .max(1e-30);
+        (p, h)
     }
 
     fn occ(m: &March, term: Termination) -> OcclusionResult {
@@ -672,8 +741,41 @@ impl Geometry for SdfGeometry {
             }
             return;
         }
+        // Hits wait here for their normals, computed 8 at a time.
+        let mut pending: Vec<PendingHit> = Vec::with_capacity(8);
+        let flush = |pending: &mut Vec<PendingHit>, out: &mut [TraceResult]| {
+            let mut hits = [(Vec3::ZERO, Vec3::ZERO, 0.0); 8];
+            for (h, p) in hits.iter_mut().zip(pending.iter()) {
+                *h = p.3;
+            }
+            let nm = self.normals_material_x8(&hits[..pending.len()]);
+            for (&(i, t, work, (p, _, _)), &(normal, material)) in pending.iter().zip(&nm) {
+                out[i] = TraceResult::found(
+                    Hit {
+                        t,
+                        position: p,
+                        normal,
+                        material,
+                    },
+                    work,
+                );
+            }
+            pending.clear();
+        };
         self.lockstep(rays, true, |i, m, t| {
             out[i] = match m {
+                Some(m) if t == Termination::Hit => {
+                    let (p, h) = self.hit_point(m);
+                    let work = RayWork {
+                        steps: m.evals,
+                        ..RayWork::default()
+                    };
+                    pending.push((i, m.t, work, (p, m.dir(), h)));
+                    if pending.len() == 8 {
+                        flush(&mut pending, out);
+                    }
+                    return;
+                }
                 Some(m) => self.finish(m, t),
                 // A ray that never started marching (March::new refused it) has no hit.
                 None => TraceResult::not_found(
@@ -682,6 +784,9 @@ impl Geometry for SdfGeometry {
                 ),
             };
         });
+        if !pending.is_empty() {
+            flush(&mut pending, out);
+        }
     }
 
     fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {

@@ -248,10 +248,26 @@ impl March {
         })
     }
 
-    /// Writes back a state taken by [`March::plain`] and advanced by [`Lanes8::step`].
+    /// The state [`Lanes8::step`] starts from when the ray has not been evaluated yet
+    /// (`Start` phase), else `None`.
+    #[inline]
+    pub fn start(&self) -> Option<Plain> {
+        (self.phase == Phase::Start).then_some(Plain {
+            t: self.t,
+            t_prev: self.t_prev,
+            r_prev: self.r_prev,
+            omega: self.omega,
+            evals: self.evals,
+        })
+    }
+
+    /// Writes back a state taken by [`March::plain`] (or [`March::start`]) and advanced by
+    /// [`Lanes8::step`]: the ray is in the `March` phase from then on (a ray that starts
+    /// takes the lane's first step there only when it enters `March`).
     #[inline]
     fn set_plain(&mut self, s: Plain) {
-        debug_assert!(self.phase == Phase::March);
+        debug_assert!(matches!(self.phase, Phase::March | Phase::Start));
+        self.phase = Phase::March;
         self.t = s.t;
         self.t_prev = s.t_prev;
         self.r_prev = s.r_prev;
@@ -758,7 +774,8 @@ pub(crate) struct Plain {
 
 /// Eight rays marched in lockstep, structure of arrays. The common case, a step of plain
 /// (relaxed) marching that enters no shell, undoes no relaxed step, leaves no range and
-/// exhausts no budget, runs on all lanes at once in [`Lanes8::step`] with exactly the
+/// exhausts no budget (or a ray's first sample that is such a step into `March`), runs on all
+/// lanes at once in [`Lanes8::step`] with exactly the
 /// arithmetic of [`March::feed`]'s `March` phase in 8-lane vector operations (so results
 /// are bit for bit those of single rays); a lane that needs any other decision, or is in
 /// another phase, is handed to its scalar [`March`] for that step.
@@ -777,6 +794,9 @@ pub(crate) struct Lanes8 {
     seg_from: [u32; 8],
     /// Lane holds a ray in the `March` phase whose plain state lives here (all ones).
     fast: M8,
+    /// Lane holds a ray in the `Start` phase whose state lives here (all ones): its first
+    /// sample, when it is a plain step into `March`, is taken here too.
+    start: M8,
 }
 
 impl Lanes8 {
@@ -794,16 +814,15 @@ impl Lanes8 {
         self.sign.0[k] = m.sign;
         self.t_end.0[k] = m.t_end;
         self.t.0[k] = m.t;
-        match m.plain() {
-            Some(s) => {
-                self.t_prev.0[k] = s.t_prev;
-                self.r_prev.0[k] = s.r_prev;
-                self.omega.0[k] = s.omega;
-                self.evals[k] = s.evals;
-                self.seg_from[k] = m.seg_from;
-                self.fast.0[k] = !0;
-            }
-            None => self.fast.0[k] = 0,
+        let (plain, start) = (m.plain(), m.start());
+        self.fast.0[k] = if plain.is_some() { !0 } else { 0 };
+        self.start.0[k] = if start.is_some() { !0 } else { 0 };
+        if let Some(s) = plain.or(start) {
+            self.t_prev.0[k] = s.t_prev;
+            self.r_prev.0[k] = s.r_prev;
+            self.omega.0[k] = s.omega;
+            self.evals[k] = s.evals;
+            self.seg_from[k] = m.seg_from;
         }
     }
 
@@ -813,7 +832,10 @@ impl Lanes8 {
     pub fn seat(&mut self, k: usize, m: Option<&March>) {
         match m {
             Some(m) => self.load(k, m),
-            None => self.fast.0[k] = 0,
+            None => {
+                self.fast.0[k] = 0;
+                self.start.0[k] = 0;
+            }
         }
     }
 
@@ -866,21 +888,31 @@ impl Lanes8 {
             F32x8::lt(s, self.r_prev),
             F32x8::lt(self.r_prev * c(SEGMENT_RATIO), s),
         );
+        // Branch-free per lane (all-ones masks), so the loop vectorises: the same decision as
+        // `evals + 1 < max_steps && !(segment && evals + 1 >= seg_from && slow_progress)`.
+        let mask = |b: bool| 0u32.wrapping_sub(u32::from(b));
+        let segment_on = mask(p.segment);
         let budget = M8(std::array::from_fn(|k| {
-            let segment =
-                p.segment && self.evals[k] + 1 >= self.seg_from[k] && slow_progress.0[k] != 0;
-            if self.evals[k] + 1 < p.max_steps && !segment {
-                !0
-            } else {
-                0
-            }
+            let e = self.evals[k] + 1;
+            let segment = segment_on & mask(e >= self.seg_from[k]) & slow_progress.0[k];
+            mask(e < p.max_steps) & !segment
         }));
         // `eps <= s` is false for NaN too; `t + s <= t_end` is `!(t + s > t_end)` there.
-        let ok = F32x8::and(
-            F32x8::and(self.fast, F32x8::le(eps, s)),
+        let go = F32x8::and(
+            F32x8::le(eps, s),
             F32x8::and(F32x8::le(t + s, self.t_end), budget),
         );
-        let plain = M8(std::array::from_fn(|k| ok.0[k] & !undo.0[k]));
+        let ok = F32x8::and(self.fast, go);
+        // A ray's first sample (`Start`): a distance of at least `eps` (so the sign stays +1
+        // and the ray does not start on a surface) is a plain step into `March`, with no
+        // overlap check owed (`March::feed_with`'s `Start` arm then `step_from`); its
+        // `r_prev` is 0, so `budget` holds no segment switch for it.
+        let started = F32x8::and(self.start, go);
+        let plain = M8(std::array::from_fn(|k| {
+            (ok.0[k] & !undo.0[k]) | started.0[k]
+        }));
+        self.fast = F32x8::or(self.fast, started);
+        self.start = M8(std::array::from_fn(|k| self.start.0[k] & !started.0[k]));
         let stepped = (t + s * self.omega).min(self.t_end);
         self.t_prev = F32x8::select(plain, t, self.t_prev);
         self.r_prev = F32x8::select(plain, s, self.r_prev);

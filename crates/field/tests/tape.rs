@@ -1,0 +1,172 @@
+//! The flattened tape ([`marchmesh_field::tape`]) against the interpreter: bit for bit the
+//! same distances and materials on unions of analytic leaves (bounded and unbounded, the
+//! nearer-first pair, a single leaf); and the forward-mode gradient
+//! ([`Field::distance_gradient_x8`]) against f64 central differences.
+
+use glam::{DAffine3, DVec3, Vec3};
+use marchmesh_field::{Field, FieldOptions};
+use marchmesh_scene::{Node, NodeKind, compose_transform};
+use proptest::prelude::*;
+
+fn node(kind: NodeKind, transform: DAffine3, material: u32) -> Node {
+    Node {
+        transform,
+        material,
+        name: None,
+        json_path: "test".into(),
+        kind,
+    }
+}
+
+fn field(n: &Node) -> Field {
+    Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default()).expect("compiles")
+}
+
+fn union(children: Vec<Node>) -> Node {
+    node(NodeKind::Union(children), DAffine3::IDENTITY, 0)
+}
+
+/// Leaves of every analytic kind, rotated, translated and scaled, materials 1..
+fn leaves() -> Vec<Node> {
+    let xf = |t: [f64; 3], r: [f64; 3], s: f64| {
+        compose_transform(DVec3::from(t), DVec3::from(r), DVec3::splat(s))
+    };
+    vec![
+        node(
+            NodeKind::Sphere { radius: 0.7 },
+            xf([0.5, 0.2, 3.0], [0.0; 3], 1.0),
+            1,
+        ),
+        node(
+            NodeKind::Box {
+                half_extents: DVec3::new(0.4, 0.3, 0.5),
+            },
+            xf([1.1, -0.6, 2.2], [10.0, 35.0, 0.0], 1.0),
+            2,
+        ),
+        node(
+            NodeKind::Ellipsoid {
+                radii: DVec3::new(0.9, 0.3, 0.5),
+            },
+            xf([-1.0, 0.4, 2.5], [0.0, 20.0, 40.0], 1.0),
+            3,
+        ),
+        node(
+            NodeKind::Torus {
+                major_radius: 0.6,
+                minor_radius: 0.2,
+            },
+            xf([0.0, -1.0, 4.0], [60.0, 0.0, 20.0], 1.3),
+            4,
+        ),
+        node(
+            NodeKind::Cylinder {
+                radius: 0.3,
+                half_height: 1.0,
+            },
+            xf([-1.5, -0.5, 3.5], [0.0, 0.0, 15.0], 1.0),
+            5,
+        ),
+        node(
+            NodeKind::Triangle {
+                vertices: [
+                    DVec3::new(-1.0, 0.0, 5.0),
+                    DVec3::new(1.0, 0.3, 5.0),
+                    DVec3::new(0.0, 1.5, 5.5),
+                ],
+            },
+            DAffine3::IDENTITY,
+            6,
+        ),
+        node(
+            NodeKind::Plane {
+                normal: DVec3::Y,
+                offset: -2.0,
+            },
+            DAffine3::IDENTITY,
+            7,
+        ),
+    ]
+}
+
+fn cases() -> Vec<(&'static str, Field)> {
+    let l = leaves();
+    vec![
+        ("all leaves", field(&union(l.clone()))),
+        ("bounded leaves", field(&union(l[2..6].to_vec()))),
+        // Two bounded members: visited nearer first.
+        ("pair", field(&union(vec![l[2].clone(), l[3].clone()]))),
+        ("single sphere", field(&l[0])),
+        ("single ellipsoid", field(&l[2])),
+        (
+            "all leaves without bounds",
+            field(&union(l.clone())).without_bounds(),
+        ),
+    ]
+}
+
+#[test]
+fn small_unions_of_leaves_get_a_tape_and_others_do_not() {
+    for (name, f) in cases() {
+        assert!(f.has_tape(), "{name}");
+    }
+    let l = leaves();
+    let nested = union(vec![union(l[..2].to_vec()), l[2].clone()]);
+    assert!(!field(&nested).has_tape());
+    let csg = node(
+        NodeKind::Subtraction(l[..2].to_vec()),
+        DAffine3::IDENTITY,
+        0,
+    );
+    assert!(!field(&csg).has_tape());
+}
+
+fn pt() -> impl Strategy<Value = DVec3> {
+    (-3.0f64..3.0, -3.0f64..3.0, -1.0f64..7.0).prop_map(|(x, y, z)| DVec3::new(x, y, z))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+
+    #[test]
+    fn tapes_are_bit_for_bit_the_interpreter(p in pt(), spread in 0.0f64..2.0) {
+        for (name, f) in cases() {
+            // Lanes near and far apart (the root's and the leaves' skips decide per lane).
+            let pts: [Vec3; 8] = std::array::from_fn(|i| {
+                (p + DVec3::new(i as f64 * 0.37, -(i as f64) * 0.21, 0.1) * spread).as_vec3()
+            });
+            let lanes = f.distance_x8(pts);
+            let (dm, mm) = f.distance_material_x8(pts);
+            for i in 0..8 {
+                prop_assert_eq!(lanes[i].to_bits(), f.distance(pts[i]).to_bits(), "{} lane {}", name, i);
+                let (d, m) = f.distance_material(pts[i]);
+                prop_assert_eq!((dm[i].to_bits(), mm[i]), (d.to_bits(), m), "{} lane {}", name, i);
+            }
+        }
+    }
+
+    #[test]
+    fn gradients_are_the_fields_derivative(p in pt()) {
+        for (name, f) in cases() {
+            let pts: [Vec3; 8] = std::array::from_fn(|i| (p + DVec3::new(0.0, 0.0, i as f64 * 0.05)).as_vec3());
+            let (d, g) = f.distance_gradient_x8(pts).expect("no mesh grids");
+            prop_assert_eq!(d, f.distance_x8(pts), "{}", name);
+            for i in 0..8 {
+                let q = pts[i].as_dvec3();
+                let h = 1e-5;
+                let c = |e: DVec3| (f.distance_f64(q + e * h) - f.distance_f64(q - e * h)) / (2.0 * h);
+                let want = DVec3::new(c(DVec3::X), c(DVec3::Y), c(DVec3::Z));
+                // Away from creases (where the two one-sided derivatives differ) the
+                // analytic gradient is the difference quotient's limit.
+                let one_sided = |e: DVec3| (f.distance_f64(q + e * h) - f.distance_f64(q)) / h;
+                let smooth = [DVec3::X, DVec3::Y, DVec3::Z]
+                    .iter()
+                    .all(|&e| (one_sided(e) + one_sided(-e)).abs() < 1e-3);
+                if smooth {
+                    prop_assert!((g[i].as_dvec3() - want).length() < 2e-3,
+                        "{} lane {}: {} vs {}", name, i, g[i], want);
+                }
+            }
+        }
+    }
+}
