@@ -18,6 +18,7 @@ use obvhs::ray::Ray;
 
 use crate::wide::{
     BLOCK, EMPTY, LEAF, LEAF_FIRST_BITS, STACK, WIDTH, WideBvh, WideNode, block_hits,
+    entered_children,
 };
 
 /// Rays per packet.
@@ -208,20 +209,7 @@ fn closest8_with(
             }
             let hits = mask.count_ones() as usize;
             if hits > 0 {
-                let mut near = [(EMPTY, 0.0f32); WIDTH];
-                let mut k = 0;
-                while mask != 0 {
-                    let lane = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let e = (node.child[lane], dist[lane]);
-                    let mut j = k;
-                    while j > 0 && near[j - 1].1 > e.1 {
-                        near[j] = near[j - 1];
-                        j -= 1;
-                    }
-                    near[j] = e;
-                    k += 1;
-                }
+                let near = entered_children::<false>(node, &dist, mask);
                 for e in near[1..hits].iter().rev() {
                     // The depth limit of the conversion keeps sp < STACK.
                     if let Some(s) = stack.get_mut(sp) {

@@ -292,7 +292,7 @@ impl WideBvh {
                 }
             } else if let Some(node) = self.nodes.get(cur as usize) {
                 visits += 1;
-                let (mut mask, dist) = N::test(node, ray);
+                let (mask, dist) = N::test(node, ray);
                 if PREFETCH {
                     let mut m = mask;
                     while m != 0 {
@@ -307,25 +307,7 @@ impl WideBvh {
                         continue 'walk;
                     }
                     hits => {
-                        let mut near = [(EMPTY, 0.0f32); WIDTH];
-                        let mut k = 0;
-                        while mask != 0 {
-                            let lane = mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            let e = (node.child[lane], dist[lane]);
-                            if ANY {
-                                near[k] = e;
-                            } else {
-                                // Insertion sort, nearest first.
-                                let mut j = k;
-                                while j > 0 && near[j - 1].1 > e.1 {
-                                    near[j] = near[j - 1];
-                                    j -= 1;
-                                }
-                                near[j] = e;
-                            }
-                            k += 1;
-                        }
+                        let near = entered_children::<ANY>(node, &dist, mask);
                         for e in near[1..hits as usize].iter().rev() {
                             // The depth limit of the conversion keeps sp < STACK.
                             if let Some(s) = stack.get_mut(sp) {
@@ -650,7 +632,7 @@ impl WideBvh {
                     }
                 } else if let Some(node) = self.nodes.get(cur as usize) {
                     visits[k] += 1;
-                    let (mut mask, dist) = N::test(node, ray);
+                    let (mask, dist) = N::test(node, ray);
                     let mut m = mask;
                     while m != 0 {
                         self.prefetch(node.child[m.trailing_zeros() as usize]);
@@ -663,21 +645,7 @@ impl WideBvh {
                             continue;
                         }
                         hits => {
-                            let mut near = [(EMPTY, 0.0f32); WIDTH];
-                            let mut n = 0;
-                            while mask != 0 {
-                                let lane = mask.trailing_zeros() as usize;
-                                mask &= mask - 1;
-                                let e = (node.child[lane], dist[lane]);
-                                // Insertion sort, nearest first (as `traverse`).
-                                let mut j = n;
-                                while j > 0 && near[j - 1].1 > e.1 {
-                                    near[j] = near[j - 1];
-                                    j -= 1;
-                                }
-                                near[j] = e;
-                                n += 1;
-                            }
+                            let near = entered_children::<false>(node, &dist, mask);
                             for e in near[1..hits as usize].iter().rev() {
                                 // The depth limit of the conversion keeps sp < STACK.
                                 if let Some(s) = stack.get_mut(*sp) {
@@ -943,6 +911,38 @@ unsafe fn select_ps(
     unsafe { _mm_or_ps(_mm_and_ps(mask, a_true), _mm_andnot_ps(mask, a_false)) }
 }
 
+/// The children of `node` whose lanes are set in `mask`, with their entry distances `dist`:
+/// the first `mask.count_ones()` entries, nearest first unless `ANY` (an occlusion query
+/// takes any order and skips the sort), the rest `EMPTY`. Shared by single-ray, interleaved
+/// and packet traversal so all three visit children in the same order.
+#[inline(always)]
+pub(crate) fn entered_children<const ANY: bool>(
+    node: &WideNode,
+    dist: &[f32; WIDTH],
+    mut mask: u32,
+) -> [(u32, f32); WIDTH] {
+    let mut near = [(EMPTY, 0.0f32); WIDTH];
+    let mut k = 0;
+    while mask != 0 {
+        let lane = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let e = (node.child[lane], dist[lane]);
+        if ANY {
+            near[k] = e;
+        } else {
+            // Insertion sort, nearest first.
+            let mut j = k;
+            while j > 0 && near[j - 1].1 > e.1 {
+                near[j] = near[j - 1];
+                j -= 1;
+            }
+            near[j] = e;
+        }
+        k += 1;
+    }
+    near
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -972,6 +972,32 @@ mod tests {
             .collect()
     }
 
+    /// `n` random triangles (seed `seed`) built by obvhs with `params` and converted: the
+    /// wide BVH and the Bvh2-ordered slot triangles it was converted from.
+    fn wide_of_random(
+        n: usize,
+        seed: u64,
+        params: obvhs::BvhBuildParams,
+    ) -> (WideBvh, Vec<RtTriangle>) {
+        let plain: Vec<Triangle> = random_tris(n, seed)
+            .iter()
+            .map(|t| Triangle {
+                v0: t.v0,
+                v1: t.v0 - t.e1,
+                v2: t.v0 + t.e2,
+            })
+            .collect();
+        let mut time = std::time::Duration::default();
+        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(&plain, params, &mut time);
+        let slot_tris: Vec<RtTriangle> = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&plain[i as usize]))
+            .collect();
+        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        (w, slot_tris)
+    }
+
     #[test]
     fn block_test_is_bit_identical_to_obvhs_intersect() {
         // 399: the last block has a padding lane, which must never hit.
@@ -999,30 +1025,7 @@ mod tests {
 
     #[test]
     fn hit_references_give_back_the_converted_triangle_and_slot() {
-        let tris = random_tris(2000, 11);
-        let plain: Vec<Triangle> = tris
-            .iter()
-            .map(|t| {
-                let (v0, e1, e2) = (t.v0, t.e1, t.e2);
-                Triangle {
-                    v0,
-                    v1: v0 - e1,
-                    v2: v0 + e2,
-                }
-            })
-            .collect();
-        let mut time = std::time::Duration::default();
-        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
-            &plain,
-            obvhs::BvhBuildParams::medium_build(),
-            &mut time,
-        );
-        let slot_tris: Vec<RtTriangle> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&plain[i as usize]))
-            .collect();
-        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        let (w, slot_tris) = wide_of_random(2000, 11, obvhs::BvhBuildParams::medium_build());
         assert_eq!(w.blocks.len(), w.slots.len());
         let mut seen = vec![false; slot_tris.len()];
         for prim in 0..(w.blocks.len() * BLOCK) as u32 {
@@ -1053,30 +1056,14 @@ mod tests {
 
     #[test]
     fn collapse_fills_nodes_and_keeps_leaves_within_one_block() {
-        let tris = random_tris(3000, 23);
-        let plain: Vec<Triangle> = tris
-            .iter()
-            .map(|t| Triangle {
-                v0: t.v0,
-                v1: t.v0 - t.e1,
-                v2: t.v0 + t.e2,
-            })
-            .collect();
-        let mut time = std::time::Duration::default();
-        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
-            &plain,
+        let (w, _) = wide_of_random(
+            3000,
+            23,
             obvhs::BvhBuildParams {
                 max_prims_per_leaf: BLOCK as u32,
                 ..obvhs::BvhBuildParams::medium_build()
             },
-            &mut time,
         );
-        let slot_tris: Vec<RtTriangle> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&plain[i as usize]))
-            .collect();
-        let w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
         let mut children = 0;
         for node in w.nodes.iter() {
             let used = node.child.iter().filter(|&&c| c != EMPTY).count();
@@ -1102,27 +1089,7 @@ mod tests {
 
     #[test]
     fn interleaved_rays_find_exactly_the_single_ray_hits() {
-        let tris = random_tris(4000, 31);
-        let plain: Vec<Triangle> = tris
-            .iter()
-            .map(|t| Triangle {
-                v0: t.v0,
-                v1: t.v0 - t.e1,
-                v2: t.v0 + t.e2,
-            })
-            .collect();
-        let mut time = std::time::Duration::default();
-        let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
-            &plain,
-            obvhs::BvhBuildParams::medium_build(),
-            &mut time,
-        );
-        let slot_tris: Vec<RtTriangle> = bvh
-            .primitive_indices
-            .iter()
-            .map(|&i| RtTriangle::from(&plain[i as usize]))
-            .collect();
-        let mut w = WideBvh::from_bvh2(&bvh, &slot_tris).expect("converts");
+        let (mut w, _) = wide_of_random(4000, 31, obvhs::BvhBuildParams::medium_build());
         let mut s = 41u64;
         let mut hits = 0;
         for avx in [false, detect_avx()] {
