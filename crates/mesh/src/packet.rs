@@ -17,8 +17,7 @@
 use obvhs::ray::Ray;
 
 use crate::wide::{
-    BLOCK, EMPTY, LEAF, LEAF_FIRST_BITS, STACK, WIDTH, WideBvh, WideNode, block_hits,
-    entered_children,
+    EMPTY, LEAF, STACK, WIDTH, WideBvh, WideNode, closest_in_blocks, entered_children, leaf_range,
 };
 
 /// Rays per packet.
@@ -157,20 +156,10 @@ fn closest8_with(
     'walk: loop {
         if cur & LEAF != 0 {
             // Only the root can be a leaf here (leaf children are handled in their parent).
-            let first = (cur & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
-            let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
+            let (first, count) = leaf_range(cur);
             if let Some(blocks) = bvh.blocks.get(first..first + count) {
                 for (k, ray) in rays.iter_mut().enumerate() {
-                    for (i, b) in blocks.iter().enumerate() {
-                        tests[k] += BLOCK as u32;
-                        let t = block_hits(b, ray);
-                        for lane in 0..BLOCK {
-                            if t[lane] < ray.tmax {
-                                ray.tmax = t[lane];
-                                best[k] = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
-                            }
-                        }
-                    }
+                    tests[k] += closest_in_blocks(first, blocks, ray, &mut best[k]);
                 }
                 tmax = packet_tmax(rays);
             }
@@ -185,8 +174,7 @@ fn closest8_with(
                 let lane = leaves.trailing_zeros() as usize;
                 leaves &= leaves - 1;
                 let c = node.child[lane];
-                let first = (c & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
-                let count = ((c & !LEAF) >> LEAF_FIRST_BITS) as usize;
+                let (first, count) = leaf_range(c);
                 let Some(blocks) = bvh.blocks.get(first..first + count) else {
                     continue;
                 };
@@ -194,16 +182,7 @@ fn closest8_with(
                     if !enters(node, lane, ray) {
                         continue;
                     }
-                    for (i, b) in blocks.iter().enumerate() {
-                        tests[k] += BLOCK as u32;
-                        let t = block_hits(b, ray);
-                        for l in 0..BLOCK {
-                            if t[l] < ray.tmax {
-                                ray.tmax = t[l];
-                                best[k] = Some((((first + i) * BLOCK + l) as u32, t[l]));
-                            }
-                        }
-                    }
+                    tests[k] += closest_in_blocks(first, blocks, ray, &mut best[k]);
                 }
                 tmax = packet_tmax(rays);
             }

@@ -230,16 +230,7 @@ impl WideBvh {
         let mut best = None;
         let mut tests = 0u32;
         self.traverse::<N, false>(ray, work, |ray, first, blocks| {
-            for (i, b) in blocks.iter().enumerate() {
-                tests += BLOCK as u32;
-                let t = block_hits(b, ray);
-                for lane in 0..BLOCK {
-                    if t[lane] < ray.tmax {
-                        ray.tmax = t[lane];
-                        best = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
-                    }
-                }
-            }
+            tests += closest_in_blocks(first, blocks, ray, &mut best);
             true
         });
         work.primitive_tests += tests;
@@ -283,8 +274,7 @@ impl WideBvh {
         let mut visits = 0u32;
         'walk: loop {
             if cur & LEAF != 0 {
-                let first = (cur & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
-                let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
+                let (first, count) = leaf_range(cur);
                 if let Some(blocks) = self.blocks.get(first..first + count)
                     && !leaf(ray, first, blocks)
                 {
@@ -294,11 +284,7 @@ impl WideBvh {
                 visits += 1;
                 let (mask, dist) = N::test(node, ray);
                 if PREFETCH {
-                    let mut m = mask;
-                    while m != 0 {
-                        self.prefetch(node.child[m.trailing_zeros() as usize]);
-                        m &= m - 1;
-                    }
+                    self.prefetch_children(node, mask);
                 }
                 match mask.count_ones() {
                     0 => {}
@@ -484,6 +470,15 @@ impl Collapse {
 const PREFETCH: bool = true;
 
 impl WideBvh {
+    /// [`WideBvh::prefetch`] of every child of `node` whose lane is set in `mask`.
+    #[inline(always)]
+    fn prefetch_children(&self, node: &WideNode, mut mask: u32) {
+        while mask != 0 {
+            self.prefetch(node.child[mask.trailing_zeros() as usize]);
+            mask &= mask - 1;
+        }
+    }
+
     /// Starts loading child `c` (a node's 4 cache lines, or a leaf's first two blocks) so
     /// the misses of all children a ray enters overlap (memory-level parallelism).
     #[inline(always)]
@@ -492,8 +487,7 @@ impl WideBvh {
         {
             use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
             let (base, lines): (*const i8, usize) = if c & LEAF != 0 {
-                let first = (c & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
-                let count = ((c & !LEAF) >> LEAF_FIRST_BITS) as usize;
+                let (first, count) = leaf_range(c);
                 (
                     self.blocks.as_ptr().wrapping_add(first).cast(),
                     count.min(2) * size_of::<TriBlock>() / 64,
@@ -616,28 +610,14 @@ impl WideBvh {
                 let cur = curs[k];
                 // One step of `traverse` (closest-hit mode) for ray k.
                 if cur & LEAF != 0 {
-                    let first = (cur & ((1 << LEAF_FIRST_BITS) - 1)) as usize;
-                    let count = ((cur & !LEAF) >> LEAF_FIRST_BITS) as usize;
+                    let (first, count) = leaf_range(cur);
                     if let Some(blocks) = self.blocks.get(first..first + count) {
-                        for (i, b) in blocks.iter().enumerate() {
-                            tests[k] += BLOCK as u32;
-                            let t = block_hits(b, ray);
-                            for lane in 0..BLOCK {
-                                if t[lane] < ray.tmax {
-                                    ray.tmax = t[lane];
-                                    best[k] = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
-                                }
-                            }
-                        }
+                        tests[k] += closest_in_blocks(first, blocks, ray, &mut best[k]);
                     }
                 } else if let Some(node) = self.nodes.get(cur as usize) {
                     visits[k] += 1;
                     let (mask, dist) = N::test(node, ray);
-                    let mut m = mask;
-                    while m != 0 {
-                        self.prefetch(node.child[m.trailing_zeros() as usize]);
-                        m &= m - 1;
-                    }
+                    self.prefetch_children(node, mask);
                     match mask.count_ones() {
                         0 => {}
                         1 => {
@@ -787,6 +767,37 @@ impl NodeTest for Avx {
             (_mm256_movemask_ps(ok) as u32, entry)
         }
     }
+}
+
+/// `(index of the first block, block count)` of leaf child `c` (`c & LEAF != 0`).
+#[inline(always)]
+pub(crate) fn leaf_range(c: u32) -> (usize, usize) {
+    (
+        (c & ((1 << LEAF_FIRST_BITS) - 1)) as usize,
+        ((c & !LEAF) >> LEAF_FIRST_BITS) as usize,
+    )
+}
+
+/// Tests `ray` against a leaf's `blocks` (the first at block index `first`): each hit nearer
+/// than `ray.tmax` shortens the ray and becomes `best` (primitive, t). Returns the triangle
+/// tests done.
+#[inline(always)]
+pub(crate) fn closest_in_blocks(
+    first: usize,
+    blocks: &[TriBlock],
+    ray: &mut Ray,
+    best: &mut Option<(u32, f32)>,
+) -> u32 {
+    for (i, b) in blocks.iter().enumerate() {
+        let t = block_hits(b, ray);
+        for lane in 0..BLOCK {
+            if t[lane] < ray.tmax {
+                ray.tmax = t[lane];
+                *best = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
+            }
+        }
+    }
+    (blocks.len() * BLOCK) as u32
 }
 
 /// Möller-Trumbore (1997) on the 4 lanes of a block, exactly obvhs'
