@@ -337,15 +337,16 @@ impl<'a> Band<'a> {
         }
     }
 
-    /// Copies the pixels [`Band::staged`] traced into `planes` into this band.
+    /// Copies the pixels [`Band::staged`] traced into `planes` into this band, with
+    /// non-temporal stores (the framebuffer is not read again during the render).
     fn copy_from(&mut self, planes: &Planes) {
         let n = self.color.len();
-        self.color.copy_from_slice(&planes.color[..n]);
-        self.depth.copy_from_slice(&planes.depth[..n]);
-        self.normal.copy_from_slice(&planes.normal[..n]);
-        self.material.copy_from_slice(&planes.material[..n]);
-        self.termination.copy_from_slice(&planes.termination[..n]);
-        self.work.copy_from_slice(&planes.work[..n]);
+        crate::stream::copy_streaming(self.color, &planes.color[..n]);
+        crate::stream::copy_streaming(self.depth, &planes.depth[..n]);
+        crate::stream::copy_streaming(self.normal, &planes.normal[..n]);
+        crate::stream::copy_streaming(self.material, &planes.material[..n]);
+        crate::stream::copy_streaming(self.termination, &planes.termination[..n]);
+        crate::stream::copy_streaming(self.work, &planes.work[..n]);
     }
 
     /// The tiles of the band, left to right.

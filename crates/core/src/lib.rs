@@ -18,6 +18,7 @@ pub mod integrator;
 pub mod path;
 pub mod sampling;
 pub mod stats;
+mod stream;
 pub mod tolerance;
 
 pub use backend::Backend;
