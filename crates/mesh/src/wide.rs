@@ -64,10 +64,10 @@ const EMPTY_NODE: WideNode = WideNode {
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
 pub(crate) struct TriBlock {
-    v0: [[f32; BLOCK]; 3],
-    e1: [[f32; BLOCK]; 3],
-    e2: [[f32; BLOCK]; 3],
-    ng: [[f32; BLOCK]; 3],
+    pub(crate) v0: [[f32; BLOCK]; 3],
+    pub(crate) e1: [[f32; BLOCK]; 3],
+    pub(crate) e2: [[f32; BLOCK]; 3],
+    pub(crate) ng: [[f32; BLOCK]; 3],
 }
 
 const EMPTY_BLOCK: TriBlock = TriBlock {
