@@ -64,10 +64,10 @@ const EMPTY_NODE: WideNode = WideNode {
 #[derive(Clone, Copy)]
 #[repr(C, align(64))]
 pub(crate) struct TriBlock {
-    v0: [[f32; BLOCK]; 3],
-    e1: [[f32; BLOCK]; 3],
-    e2: [[f32; BLOCK]; 3],
-    ng: [[f32; BLOCK]; 3],
+    pub(crate) v0: [[f32; BLOCK]; 3],
+    pub(crate) e1: [[f32; BLOCK]; 3],
+    pub(crate) e2: [[f32; BLOCK]; 3],
+    pub(crate) ng: [[f32; BLOCK]; 3],
 }
 
 const EMPTY_BLOCK: TriBlock = TriBlock {
@@ -486,21 +486,31 @@ impl WideBvh {
         #[cfg(target_arch = "x86_64")]
         {
             use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-            let (base, lines): (*const i8, usize) = if c & LEAF != 0 {
-                let (first, count) = leaf_range(c);
-                (
-                    self.blocks.as_ptr().wrapping_add(first).cast(),
-                    count.min(2) * size_of::<TriBlock>() / 64,
-                )
-            } else {
-                (
-                    self.nodes.as_ptr().wrapping_add(c as usize).cast(),
-                    size_of::<WideNode>().div_ceil(64),
-                )
-            };
-            for k in 0..lines {
+            const NODE_LINES: usize = size_of::<WideNode>().div_ceil(64);
+            const BLOCK_LINES: usize = size_of::<TriBlock>() / 64;
+            // Constant trip counts, so the loops unroll (a runtime line count kept a loop
+            // per entered child: single-ray traversal on dragon_res3 took 15% more
+            // instructions, callgrind).
+            let line = |p: *const i8, k: usize| {
                 // SAFETY: a prefetch is a hint and never faults, whatever the address.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(base.wrapping_add(k * 64)) };
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(p.wrapping_add(k * 64)) }
+            };
+            if c & LEAF != 0 {
+                let (first, count) = leaf_range(c);
+                let base: *const i8 = self.blocks.as_ptr().wrapping_add(first).cast();
+                for k in 0..BLOCK_LINES {
+                    line(base, k);
+                }
+                if count > 1 {
+                    for k in BLOCK_LINES..2 * BLOCK_LINES {
+                        line(base, k);
+                    }
+                }
+            } else {
+                let base: *const i8 = self.nodes.as_ptr().wrapping_add(c as usize).cast();
+                for k in 0..NODE_LINES {
+                    line(base, k);
+                }
             }
         }
         #[cfg(not(target_arch = "x86_64"))]
