@@ -1,7 +1,7 @@
 //! Bakes a mesh into a sparse brick grid and a dense grid and reports bytes, time per phase
 //! and error against brute force, near the surface and everywhere.
 //!
-//! `cargo run --release -p marchmesh-bake --example bake_sparse -- scenes/meshes/bunny.obj 256 [band] [f32|u16|u8] [trilinear|tricubic] [dense-res]`
+//! `cargo run --release -p marchmesh-bake --example bake_sparse -- scenes/meshes/bunny.obj 256 [band] [f32|u16|u8] [trilinear|tricubic|normals] [dense-res]`
 //!
 //! Error at pseudo-random points of the grid box: grid value minus the brute-force signed
 //! distance (exact winding number), in cells; "near" = within 1 cell of the surface. Also
@@ -30,6 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let reconstruction = match args.get(5).map_or("trilinear", |s| s.as_str()) {
         "tricubic" => Reconstruction::Tricubic,
+        "normals" => Reconstruction::Normals,
         _ => Reconstruction::Trilinear,
     };
     let dense_res: u32 = args.get(6).map_or(Ok(0), |s| s.parse())?;

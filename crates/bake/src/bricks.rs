@@ -40,7 +40,8 @@ use rayon::prelude::*;
 
 use crate::bvh::Bvh;
 use crate::sparse::{
-    BOUND_MAX, BOUND_STEPS, BRICK, EMPTY, INSIDE, Quantization, Reconstruction, Samples, SparseGrid,
+    BOUND_MAX, BOUND_STEPS, BRICK, EMPTY, INSIDE, Quantization, Reconstruction, Samples,
+    SparseGrid, encode_octahedral,
 };
 use crate::{
     BakeError, CANDIDATES_PER_SAMPLE, MAX_RESOLUTION, MIN_RESOLUTION, PAD_CELLS, cache,
@@ -109,8 +110,12 @@ impl SparseOptions {
         let per_axis = cells.div_ceil(u64::from(BRICK));
         let brick_cells = per_axis.pow(3);
         let edge = u64::from(BRICK + 1 + 2 * self.reconstruction.apron());
+        let normal_bytes = match self.reconstruction {
+            Reconstruction::Normals => 2,
+            _ => 0,
+        };
         brick_cells
-            .saturating_mul(edge.pow(3) * self.quantization.bytes() as u64 + 4)
+            .saturating_mul(edge.pow(3) * (self.quantization.bytes() as u64 + normal_bytes) + 4)
             .saturating_add(std::mem::size_of::<SparseGrid>() as u64)
     }
 }
@@ -334,6 +339,8 @@ fn has_cap(values: &[f32], edge: usize, lim: f32) -> bool {
 /// One kept brick's signed samples.
 struct BrickOut {
     values: Vec<f32>,
+    /// Octahedral normal codes ([`Reconstruction::Normals`] only, else empty).
+    normals: Vec<u16>,
     rewound: bool,
     windings: u64,
 }
@@ -352,6 +359,7 @@ fn brick_samples(
     band_voxels: u32,
     clamp: f32,
     oriented: bool,
+    with_normals: bool,
     cand: &mut Vec<(f32, u32)>,
     ns: &[AtomicU64; 2],
 ) -> Option<BrickOut> {
@@ -534,12 +542,72 @@ fn brick_samples(
             };
         }
     }
+    let normals = if with_normals {
+        (0..n)
+            .map(|idx| {
+                let (i, j, k) = (idx % edge, (idx / edge) % edge, idx / (edge * edge));
+                encode_octahedral(sample_normal(
+                    at(i, j, k),
+                    values[idx],
+                    closest[idx],
+                    bvh,
+                    || brick_gradient(&values, edge, [i, j, k]),
+                ))
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
     ns[1].fetch_add(t_sign.elapsed().as_nanos() as u64, Ordering::Relaxed);
     Some(BrickOut {
+        normals,
         values,
         rewound,
         windings,
     })
+}
+
+/// The normal stored with a sample at `p` of signed value `v` whose closest triangle is
+/// `closest` (`u32::MAX`: none within the clamp): that triangle's unit face normal,
+/// turned to point the way the signed distance grows (towards `p` when `p` is outside
+/// the face's plane and `v > 0`, and so on); `fallback` (the samples' own gradient) when
+/// there is no triangle, it is degenerate, or `p` lies in its plane with no side to check.
+fn sample_normal(
+    p: Vec3,
+    v: f32,
+    closest: u32,
+    bvh: &Bvh,
+    fallback: impl FnOnce() -> Vec3,
+) -> Vec3 {
+    if closest == u32::MAX {
+        return fallback();
+    }
+    let t = bvh.tri(closest);
+    let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero();
+    if n == Vec3::ZERO {
+        return fallback();
+    }
+    let side = n.dot(p - t[0]);
+    let scale = (t[1] - t[0]).length().max((t[2] - t[0]).length());
+    if side.abs() <= 1e-4 * scale {
+        // In the face's plane: oriented faces point outward, which is the growing side.
+        return n;
+    }
+    if (side > 0.0) == (v > 0.0) { n } else { -n }
+}
+
+/// Central differences of a brick's samples at local `(i, j, k)` (one-sided on its faces).
+fn brick_gradient(values: &[f32], edge: usize, ijk: [usize; 3]) -> Vec3 {
+    let at = |q: [usize; 3]| values[q[0] + edge * (q[1] + edge * q[2])];
+    let mut g = [0.0f32; 3];
+    for (a, ga) in g.iter_mut().enumerate() {
+        let (mut lo, mut hi) = (ijk, ijk);
+        lo[a] = ijk[a].saturating_sub(1);
+        hi[a] = (ijk[a] + 1).min(edge - 1);
+        let span = (hi[a] - lo[a]).max(1) as f32;
+        *ga = (at(hi) - at(lo)) / span;
+    }
+    Vec3::from_array(g)
 }
 
 fn bake_bricks(
@@ -618,6 +686,7 @@ fn bake_bricks(
                 opts.band_voxels,
                 clamp,
                 oriented,
+                opts.reconstruction == Reconstruction::Normals,
                 cand,
                 &ns,
             )
@@ -694,6 +763,10 @@ fn bake_bricks(
                 .collect(),
         ),
     };
+    let normals: Vec<u16> = kept
+        .iter()
+        .flat_map(|(_, o)| o.normals.iter().copied())
+        .collect();
     drop(kept);
     drop(outs);
     let grid = SparseGrid::from_parts(
@@ -705,6 +778,7 @@ fn bake_bricks(
         opts.reconstruction,
         cells,
         samples,
+        normals,
     )
     .map_err(|reason| BakeError::InvalidMesh {
         path: path.to_path_buf(),

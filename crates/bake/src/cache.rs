@@ -33,6 +33,7 @@
 //! | 8 | brick count (u64) |
 //! | 4 x cells | brick-cell words (u32) |
 //! | bytes x samples | brick samples (f32, u16 or u8) |
+//! | 2 x samples | octahedral normal codes (u16), `normals` reconstruction only |
 //! | 8 | FNV-1a 64 of every preceding byte |
 //!
 //! and are validated as fully: key, sizes, checksum, then every invariant of
@@ -66,8 +67,8 @@ pub fn cache_path(dir: &Path, hash: u64, resolution: u32) -> PathBuf {
 }
 
 /// Sparse cache format version; bump when the layout or the sparse bake (band rule, sign
-/// rule, clamp) changes.
-pub const SPARSE_FORMAT_VERSION: u32 = 3;
+/// rule, clamp) changes. 4: normal codes of the `normals` reconstruction.
+pub const SPARSE_FORMAT_VERSION: u32 = 4;
 
 const SPARSE_MAGIC: &[u8; 8] = b"MMSDFBRK";
 const SPARSE_HEADER: usize = 8 + 4 + 8 + 4 + 4 + 2 + 12 + 12 + 4 + 4 + 8;
@@ -110,6 +111,9 @@ pub fn encode_sparse(grid: &SparseGrid, hash: u64, opts: &SparseOptions) -> Vec<
         Samples::F32(v) => v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
         Samples::U16(v) => v.iter().for_each(|x| b.extend_from_slice(&x.to_le_bytes())),
         Samples::U8(v) => b.extend_from_slice(v),
+    }
+    for n in grid.normals() {
+        b.extend_from_slice(&n.to_le_bytes());
     }
     let mut h = Fnv::new();
     h.write(&b);
@@ -169,7 +173,12 @@ pub fn decode_sparse(bytes: &[u8], hash: u64, opts: &SparseOptions) -> Result<Sp
         .and_then(|c| c.checked_mul(edge.pow(3) as usize))
         .filter(|&s| s <= n_cells.saturating_mul(edge.pow(3) as usize))
         .ok_or("brick count too large")?;
-    let body = n_cells * 4 + samples * q.bytes();
+    let normal_codes = if recon == Reconstruction::Normals {
+        samples
+    } else {
+        0
+    };
+    let body = n_cells * 4 + samples * q.bytes() + normal_codes * 2;
     if bytes.len() != SPARSE_HEADER + body + 8 {
         return Err(format!(
             "file is {} bytes, expected {}",
@@ -192,7 +201,12 @@ pub fn decode_sparse(bytes: &[u8], hash: u64, opts: &SparseOptions) -> Result<Sp
         .chunks_exact(4)
         .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
-    let raw = &bytes[cells_end..SPARSE_HEADER + body];
+    let samples_end = cells_end + samples * q.bytes();
+    let raw = &bytes[cells_end..samples_end];
+    let normals: Vec<u16> = bytes[samples_end..SPARSE_HEADER + body]
+        .chunks_exact(2)
+        .map(|c| u16::from_le_bytes([c[0], c[1]]))
+        .collect();
     let samples = match q {
         Quantization::F32 => Samples::F32(
             raw.chunks_exact(4)
@@ -206,7 +220,9 @@ pub fn decode_sparse(bytes: &[u8], hash: u64, opts: &SparseOptions) -> Result<Sp
         ),
         Quantization::U8 => Samples::U8(raw.to_vec()),
     };
-    SparseGrid::from_parts(min, cell, bricks, band, clamp, recon, cells, samples)
+    SparseGrid::from_parts(
+        min, cell, bricks, band, clamp, recon, cells, samples, normals,
+    )
 }
 
 struct Fnv(u64);

@@ -329,6 +329,43 @@ fn cache_round_trip_and_corruption() {
 }
 
 #[test]
+fn normals_cache_round_trip_and_corruption() {
+    let dir = unique_dir("cache-normals");
+    let mesh = cube(true);
+    let o = SparseOptions {
+        cache_dir: Some(dir.clone()),
+        ..opts(16, Quantization::U8, Reconstruction::Normals)
+    };
+    let (first, _) = bake_sparse(&mesh, &o).unwrap();
+    assert_eq!(first.grid.normals().len(), first.grid.samples().len());
+    let (second, _) = bake_sparse(&mesh, &o).unwrap();
+    assert!(second.from_cache, "{:?}", second.notes);
+    assert_eq!(first.grid, second.grid);
+    let file = cache::sparse_cache_path(&dir, mesh.content_hash(), &o);
+    let good = std::fs::read(&file).unwrap();
+    // The normal codes are the file's tail before the checksum: a corrupted or missing
+    // code is caught, and a grid of another reconstruction is another key.
+    let tail = good.len() - 8 - 2 * first.grid.normals().len();
+    for i in (tail..good.len()).step_by(5) {
+        let mut c = good.clone();
+        c[i] ^= 0x01;
+        assert!(
+            cache::decode_sparse(&c, mesh.content_hash(), &o).is_err(),
+            "byte {i}"
+        );
+    }
+    let mut short = good[..good.len() - 10].to_vec();
+    short.extend_from_slice(&good[good.len() - 8..]);
+    assert!(cache::decode_sparse(&short, mesh.content_hash(), &o).is_err());
+    let tri = SparseOptions {
+        reconstruction: Reconstruction::Trilinear,
+        ..o.clone()
+    };
+    assert!(cache::decode_sparse(&good, mesh.content_hash(), &tri).is_err());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
 fn hostile_options_and_meshes_are_errors() {
     let mesh = cube(true);
     for (res, band) in [(3, 2), (513, 2), (0, 2), (u32::MAX, 2), (16, 0), (16, 17)] {

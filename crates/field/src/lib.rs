@@ -17,7 +17,7 @@
 //! - Repetition: `min(true distance of the repeated set, R)`, see [`program`].
 //! - Mesh: a baked signed distance grid (`marchmesh-bake`, mesh local frame, cached on disk
 //!   when [`FieldOptions::cache_dir`] is set), dense or sparse ([`MeshGrid`]) sampled
-//!   trilinearly (or tricubically, sparse only): within half a cell diagonal of the true
+//!   trilinearly (or, sparse only, tricubically or by stored normals): within half a cell diagonal of the true
 //!   distance where the sign is right, features thinner than a cell lost; the interpolant's
 //!   gradient can reach `sqrt(3)` between samples near creases, so this is the one leaf that
 //!   is not a strict bound. Sparse grids hold bricks only near the surface and a lower bound

@@ -91,6 +91,8 @@ pub struct SdfOptions {
     /// `scenes/generated/mesh_bunny.json` at 320x240 (dragon_res3: 0.60 MB, 32.6 dB, 1.18
     /// deg, tricubic 34.0 dB, 1.04 deg), and bakes faster than the dense 128^3 grid; it
     /// renders at about the dense grid's speed (1.08x its time at 128, tricubic 1.43x). The
+    /// `normals` reconstruction stores a normal per sample (3x the u8 bytes) and lowers the
+    /// bunny's mean normal error at 128 from 2.17 to 1.67 deg in the stability study. The
     /// default stays the dense grid every committed run was measured with.
     pub mesh_grid: marchmesh_field::MeshGrid,
     /// Cache folder for baked grids; `None` (default) = no disk cache.

@@ -56,8 +56,10 @@ pub struct SdfSettings {
     /// Sparse grids: sample storage, f32, u16 or u8 (error clamp/65535 or clamp/255, clamp
     /// = band + 1 cells).
     pub quantize: QuantizeKind,
-    /// Sparse grids: interpolation, trilinear or tricubic (Catmull-Rom near the surface,
-    /// C1 normals, the same 9^3 samples per brick, stencils read across brick faces).
+    /// Sparse grids: interpolation, trilinear, tricubic (Catmull-Rom near the surface,
+    /// C1 normals, the same 9^3 samples per brick, stencils read across brick faces) or
+    /// normals (a stored normal per sample, 2 bytes more, blended tangent planes near the
+    /// surface: follows flat facets).
     pub recon: ReconKind,
     /// Folder caching baked grids (none = no disk cache).
     pub cache_dir: Option<PathBuf>,
@@ -99,6 +101,9 @@ pub enum ReconKind {
     Trilinear,
     /// Tricubic Catmull-Rom near the surface.
     Tricubic,
+    /// Gradient-corrected: stored per-sample normals (2 more bytes per sample), blended
+    /// tangent planes near the surface.
+    Normals,
 }
 
 impl Default for SdfSettings {
@@ -159,6 +164,7 @@ impl SdfSettings {
             recon: match sparse.2 {
                 Reconstruction::Trilinear => ReconKind::Trilinear,
                 Reconstruction::Tricubic => ReconKind::Tricubic,
+                Reconstruction::Normals => ReconKind::Normals,
             },
             cache_dir: o.cache_dir.clone(),
             cone_shadows: o.cone_shadows,
@@ -195,6 +201,7 @@ impl SdfSettings {
                     reconstruction: match self.recon {
                         ReconKind::Trilinear => Reconstruction::Trilinear,
                         ReconKind::Tricubic => Reconstruction::Tricubic,
+                        ReconKind::Normals => Reconstruction::Normals,
                     },
                 },
             },

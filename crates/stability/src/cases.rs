@@ -28,7 +28,7 @@ pub mod keys {
     pub const SDF_GRID_KIND: &str = "grid";
     /// SDF: sparse grid sample storage, `f32`, `u16` or `u8`.
     pub const SDF_QUANTIZE: &str = "quantize";
-    /// SDF: sparse grid reconstruction, `trilinear` or `tricubic`.
+    /// SDF: sparse grid reconstruction, `trilinear`, `tricubic` or `normals`.
     pub const SDF_RECON: &str = "recon";
     /// Mesh: fixed tessellation level.
     pub const MESH_TESS_LEVEL: &str = "tess_level";
@@ -500,17 +500,29 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
             (
                 128,
                 true,
-                vec![sparse(128, "trilinear"), sparse(128, "tricubic")],
+                vec![
+                    sparse(128, "trilinear"),
+                    sparse(128, "tricubic"),
+                    sparse(128, "normals"),
+                ],
             ),
             (
                 256,
                 true,
-                vec![sparse(256, "trilinear"), sparse(256, "tricubic")],
+                vec![
+                    sparse(256, "trilinear"),
+                    sparse(256, "tricubic"),
+                    sparse(256, "normals"),
+                ],
             ),
             (
                 512,
                 true,
-                vec![sparse(512, "trilinear"), sparse(512, "tricubic")],
+                vec![
+                    sparse(512, "trilinear"),
+                    sparse(512, "tricubic"),
+                    sparse(512, "normals"),
+                ],
             ),
         ] {
             let obj = json!({ "shape": { "mesh": { "path": path } },
@@ -581,19 +593,25 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 base_dir: ctx.scenes_dir.clone(),
             });
             // The full scan baked to sparse u8 brick grids at 128..512 effective: the only
-            // grids that hold its detail at a size this study can afford.
+            // grids that hold its detail at a size this study can afford. At 512 also u16
+            // tricubic: u8's steps cost about 0.14 degrees of normal there.
             for res in [128u32, 256, 512] {
-                let variants = ["trilinear", "tricubic"]
-                    .map(|recon| Variant {
+                let mut configs = vec![("u8", "trilinear"), ("u8", "tricubic"), ("u8", "normals")];
+                if res == 512 {
+                    configs.push(("u16", "tricubic"));
+                }
+                let variants = configs
+                    .into_iter()
+                    .map(|(quant, recon)| Variant {
                         backend: BackendKind::Sdf,
                         options: vec![
                             (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
                             (keys::SDF_GRID.to_string(), res.to_string()),
-                            (keys::SDF_QUANTIZE.to_string(), "u8".to_string()),
+                            (keys::SDF_QUANTIZE.to_string(), quant.to_string()),
                             (keys::SDF_RECON.to_string(), recon.to_string()),
                         ],
                     })
-                    .to_vec();
+                    .collect();
                 out.push(StabilityCase {
                     family: "bake_dragon_full_sparse",
                     parameter: "grid_res",
