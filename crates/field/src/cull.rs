@@ -16,10 +16,12 @@
 
 use glam::{DVec3, Vec3};
 
+use marchmesh_scene::MaterialId;
+
 use crate::Field;
 use crate::lane::{F32x8, V3};
 use crate::program::{Instr, Op, Program};
-use crate::tape::Tape;
+use crate::tape::{Tape, analytic};
 
 /// Rays from `origin` whose directions lie in a pyramid around `axis`: in the frame
 /// (`u`, `v`, `axis`), a direction `d` is inside when `u.d / axis.d` lies in `[u_lo, u_hi]`
@@ -116,36 +118,71 @@ impl RayCone {
     }
 
     /// Whether a ray of the bundle may come within the margin of the box `[lo, hi]`
-    /// (conservative: tests the box's bounding sphere against the pyramid's four side
-    /// planes, the plane through the origin and the rays' length; a box with a non-finite
-    /// corner is always reached).
+    /// (conservative: tests the box grown by the margin against the pyramid's four side
+    /// planes and the plane through the origin, and the box's bounding sphere against the
+    /// rays' length; a box with a non-finite corner is always reached).
     pub fn may_reach(&self, lo: [f32; 3], hi: [f32; 3]) -> bool {
+        Wedge::of(self).may_reach(lo, hi)
+    }
+}
+
+/// A [`RayCone`] with its side planes' unit outward normals computed once, for the many
+/// box tests of one restriction.
+struct Wedge {
+    origin: DVec3,
+    axis: DVec3,
+    /// Outward unit normals of the four side planes (through the origin).
+    sides: [DVec3; 4],
+    t_max: f64,
+    margin_abs: f64,
+    margin_rel: f64,
+}
+
+impl Wedge {
+    fn of(cone: &RayCone) -> Wedge {
+        // The plane of slope `s` along `w` holds the directions `axis + s w`; its normal
+        // `w - s axis` (outward `sign` times), normalised.
+        let side =
+            |w: DVec3, s: f64, sign: f64| (w - cone.axis * s) * (sign / (1.0 + s * s).sqrt());
+        Wedge {
+            origin: cone.origin,
+            axis: cone.axis,
+            sides: [
+                side(cone.u, cone.u_slope[1], 1.0),
+                side(cone.u, cone.u_slope[0], -1.0),
+                side(cone.v, cone.v_slope[1], 1.0),
+                side(cone.v, cone.v_slope[0], -1.0),
+            ],
+            t_max: cone.t_max,
+            margin_abs: cone.margin_abs,
+            margin_rel: cone.margin_rel,
+        }
+    }
+
+    /// [`RayCone::may_reach`].
+    #[inline]
+    fn may_reach(&self, lo: [f32; 3], hi: [f32; 3]) -> bool {
         let lo = DVec3::from(lo.map(f64::from));
         let hi = DVec3::from(hi.map(f64::from));
         if !(lo.is_finite() && hi.is_finite()) {
             return true;
         }
         let c = (lo + hi) * 0.5 - self.origin;
-        let half_diag = (hi - lo).length() * 0.5;
+        let half = (hi - lo) * 0.5;
+        let half_diag = half.length();
         let dist = c.length();
-        let radius = half_diag + self.margin_abs + self.margin_rel * (dist + half_diag);
+        let margin = self.margin_abs + self.margin_rel * (dist + half_diag);
+        let radius = half_diag + margin;
         if dist <= radius {
             return true;
         }
-        if dist - radius > self.t_max {
+        // The box grown by the margin lies beyond a plane through the origin with unit
+        // normal `n` when its centre is farther than its support `|n| . half + margin`.
+        let beyond = |n: DVec3| n.dot(c) > n.abs().dot(half) + margin;
+        if dist - radius > self.t_max || beyond(-self.axis) {
             return false;
         }
-        let a = c.dot(self.axis);
-        if a < -radius {
-            return false;
-        }
-        // Signed distance of the centre to each side plane (positive outside).
-        let side = |p: f64, s: f64, outward: f64| outward * (p - s * a) / (1.0 + s * s).sqrt();
-        let (pu, pv) = (c.dot(self.u), c.dot(self.v));
-        side(pu, self.u_slope[1], 1.0) <= radius
-            && side(pu, self.u_slope[0], -1.0) <= radius
-            && side(pv, self.v_slope[1], 1.0) <= radius
-            && side(pv, self.v_slope[0], -1.0) <= radius
+        !self.sides.iter().any(|&n| beyond(n))
     }
 }
 
@@ -156,15 +193,25 @@ impl RayCone {
 pub struct Restricted {
     prog: Program<f32>,
     dropped: usize,
-    /// `prog` flattened, when it is a small union of analytic leaves (`taped`).
+    /// `prog` as a tape, when it is a small union of analytic leaves (`taped`).
     tape: Tape,
     taped: bool,
+    /// Buffer of [`flatten`].
+    scratch: Vec<Instr<f32>>,
 }
 
 impl Restricted {
     /// Nodes of the restricted program.
     pub fn node_count(&self) -> usize {
         self.prog.instrs.len()
+    }
+
+    /// Whether the 8-lane evaluations (and gradients) under this restriction run a flat
+    /// [`Tape`]: the restricted program is one analytic leaf or a union of at most
+    /// [`Tape::MAX_LEAVES`] of them (nested unions of the compiler's hierarchy are
+    /// flattened). Otherwise they run the interpreter.
+    pub fn is_taped(&self) -> bool {
+        self.taped
     }
 
     /// Nodes the restriction dropped.
@@ -175,13 +222,16 @@ impl Restricted {
 
 impl Field {
     /// Restricts the f32 program to the objects `cone` may reach, into `out` (its buffer is
-    /// reused). Evaluate it with [`Field::restricted_distance_x8`] on this same field.
+    /// reused). Evaluate it with [`Field::restricted_distance_x8`] on this same field. The
+    /// kept part of the compiler's union hierarchy is flattened into one union when it has
+    /// at most [`Tape::MAX_LEAVES`] analytic leaves, so the bundle runs a [`Tape`].
     pub fn restrict_to(&self, cone: &RayCone, out: &mut Restricted) {
         out.prog.instrs.clear();
         if !self.p32.instrs.is_empty() {
-            emit(&self.p32.instrs, 0, cone, &mut out.prog.instrs);
+            emit(&self.p32.instrs, 0, &Wedge::of(cone), &mut out.prog.instrs);
         }
         out.dropped = self.p32.instrs.len() - out.prog.instrs.len().min(self.p32.instrs.len());
+        flatten(&mut out.prog.instrs, &mut out.scratch);
         out.taped = out.tape.rebuild(&out.prog);
     }
 
@@ -201,6 +251,39 @@ impl Field {
         } else {
             self.eval::<F32x8, false>(&r.prog, p).0
         }
+    }
+
+    /// Distances and materials at eight points under a restriction (per lane the same as
+    /// [`Field::restricted_distance_x8`]; materials as [`Field::distance_material_x8`]
+    /// reports them).
+    #[inline]
+    pub fn restricted_distance_material_x8(
+        &self,
+        r: &Restricted,
+        p: [Vec3; 8],
+    ) -> ([f32; 8], [MaterialId; 8]) {
+        let p = V3::from_points(p);
+        let (d, m) = if r.taped {
+            r.tape.eval::<F32x8, true>(p)
+        } else {
+            self.eval::<F32x8, true>(&r.prog, p)
+        };
+        (d.0, m)
+    }
+
+    /// Normals' gradients at eight points on surfaces under a restriction: per lane the
+    /// analytic gradient of the kept leaf nearest to the point ([`Tape::nearest_gradients`]),
+    /// which at a hit of the bundle is the gradient of the surface hit (its object is kept).
+    /// `None` when the restriction has no tape (it has CSG, repetition, mesh grids or too
+    /// many leaves).
+    #[inline]
+    pub fn restricted_nearest_gradients_x8(
+        &self,
+        r: &Restricted,
+        p: [Vec3; 8],
+    ) -> Option<[Vec3; 8]> {
+        r.taped
+            .then(|| r.tape.nearest_gradients(V3::from_points(p)))
     }
 
     /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this
@@ -231,7 +314,7 @@ fn identity_frame(ins: &Instr<f32>) -> bool {
 
 /// Emits node `i` of `src` restricted to `cone` into `out`; false when nothing of it can
 /// be reached (then nothing is emitted).
-fn emit(src: &[Instr<f32>], i: usize, cone: &RayCone, out: &mut Vec<Instr<f32>>) -> bool {
+fn emit(src: &[Instr<f32>], i: usize, cone: &Wedge, out: &mut Vec<Instr<f32>>) -> bool {
     let ins = &src[i];
     // Every node carries its box (in its parent's frame), also where `has_bound` is off
     // because testing it would cost more than the cheap leaf it guards.
@@ -273,6 +356,45 @@ fn emit(src: &[Instr<f32>], i: usize, cone: &RayCone, out: &mut Vec<Instr<f32>>)
         n
     }));
     true
+}
+
+/// Rewrites a restricted program that is a union of identity-frame unions of analytic
+/// leaves (what [`emit`] leaves of the compiler's union hierarchy) as one union of those
+/// leaves, in the same order, when there are at most [`Tape::MAX_LEAVES`] of them, so the
+/// bundle gets a [`Tape`]. A union of unions is the union of their leaves: the value is the
+/// exact minimum over the kept leaves either way; the nested groups only added box tests
+/// (their `tau` is infinite) and a recursion per level. Other programs are left as they are.
+fn flatten(instrs: &mut Vec<Instr<f32>>, scratch: &mut Vec<Instr<f32>>) {
+    let Some(root) = instrs.first() else {
+        return;
+    };
+    if !matches!(root.op, Op::Union) || root.end as usize != instrs.len() {
+        return;
+    }
+    let mut leaves = 0;
+    let mut nested = false;
+    for (k, ins) in instrs.iter().enumerate().skip(1) {
+        if matches!(ins.op, Op::Union) {
+            if !identity_frame(ins) {
+                return;
+            }
+            nested = true;
+        } else if analytic(&ins.op) && ins.end as usize == k + 1 {
+            leaves += 1;
+        } else {
+            return;
+        }
+    }
+    if !nested || leaves > Tape::MAX_LEAVES {
+        return;
+    }
+    scratch.clear();
+    scratch.extend(instrs.drain(1..).filter(|i| !matches!(i.op, Op::Union)));
+    instrs[0].end = (leaves + 1) as u32;
+    for (k, mut leaf) in scratch.drain(..).enumerate() {
+        leaf.end = (k + 2) as u32;
+        instrs.push(leaf);
+    }
 }
 
 #[cfg(test)]

@@ -140,3 +140,44 @@ fn a_bundle_that_sees_nothing_gets_an_empty_field_and_a_wide_one_everything() {
     field.restrict_to(&cone, &mut r);
     assert_eq!(r.dropped(), 0);
 }
+
+#[test]
+fn a_narrow_bundle_over_a_hierarchy_gets_a_flat_tape() {
+    // 400 spheres compile to a union hierarchy (groups of at most 8 under median splits);
+    // a bundle of one pixel row keeps a few dozen of them, flattened into one union.
+    let centres = grid(400, 11);
+    let (field, spheres) = scene(&centres, 0.12);
+    assert!(!field.has_tape());
+    let dirs: Vec<Vec3> = (0..32)
+        .map(|k| Vec3::new(-0.3 + 0.02 * k as f32 / 31.0, 0.05, 1.0).normalize())
+        .collect();
+    let cone = RayCone::around(Vec3::ZERO, dirs.iter().copied(), 1e3, 0.0, 1e-6).expect("narrow");
+    let mut r = Restricted::default();
+    field.restrict_to(&cone, &mut r);
+    assert!(r.is_taped(), "{} nodes kept", r.node_count());
+    assert!(
+        r.node_count() >= 3 && r.dropped() > 300,
+        "kept {}",
+        r.node_count()
+    );
+    // The flat union is the exact minimum over the kept spheres: on the rays it equals the
+    // whole field wherever the nearest sphere lies in the bundle's reach.
+    for d in &dirs {
+        let t_hit = first_hit(d.as_dvec3(), &spheres);
+        for k in 0..32 {
+            let t = t_hit.min(20.0) * k as f64 / 32.0;
+            let p = d.as_dvec3() * t;
+            let kept = f64::from(field.restricted_distance(&r, p.as_vec3()));
+            let exact = spheres
+                .iter()
+                .map(|&(c, rad)| (p - c).length() - rad)
+                .fold(p.y + 3.0, f64::min);
+            assert!(kept >= exact - 1e-5, "t {t}: kept {kept} < exact {exact}");
+            // Lanes (the tape) and the scalar interpreter agree bit for bit.
+            assert_eq!(
+                field.restricted_distance_x8(&r, [p.as_vec3(); 8])[5],
+                kept as f32
+            );
+        }
+    }
+}

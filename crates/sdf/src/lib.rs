@@ -151,6 +151,23 @@ fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
 /// direction and normal step the normal is computed from.
 type PendingHit = (usize, f32, RayWork, (Vec3, Vec3, f32));
 
+/// The field a lockstep bundle is traced through.
+#[derive(Clone, Copy)]
+enum Scope<'a> {
+    /// The whole field.
+    Whole,
+    /// The field restricted to the bundle's cone.
+    Restricted(&'a Restricted),
+}
+
+/// What [`SdfGeometry::lockstep`] reports, with the [`Scope`] of the bundle.
+enum Event<'a> {
+    /// Ray `i` finished (`march` is `None` when it missed the scene box before any step).
+    Done(usize, Option<&'a March>, Termination),
+    /// The bundle's last ray has been reported.
+    BundleEnd,
+}
+
 /// A scene compiled for sphere tracing.
 #[derive(Debug)]
 pub struct SdfGeometry {
@@ -373,7 +390,16 @@ impl SdfGeometry {
     /// 8-lane evaluation). A hit whose gradient is shorter than 0.9 or not finite (an
     /// unsigned surface at its zero set, a smooth blend, an ellipsoid's bound, a mesh grid)
     /// takes [`SdfGeometry::normal_material`] instead, with its straddle fallback.
-    fn normals_material_x8(&self, hits: &[(Vec3, Vec3, f32)]) -> [(Vec3, MaterialId); 8] {
+    ///
+    /// Hits of a bundle traced through a restricted field (`scope`) take the gradient of the
+    /// nearest kept leaf ([`Field::restricted_nearest_gradients_x8`]: the surface hit, whose
+    /// object is kept; unlike a large whole field, a restriction usually has a tape) and the
+    /// material of that field.
+    fn normals_material_x8(
+        &self,
+        scope: Scope<'_>,
+        hits: &[(Vec3, Vec3, f32)],
+    ) -> [(Vec3, MaterialId); 8] {
         let n = hits.len().min(8);
         let mut out = [(Vec3::ZERO, 0); 8];
         let Some(&first) = hits.first() else {
@@ -381,19 +407,25 @@ impl SdfGeometry {
         };
         // Idle lanes repeat the first hit (finite points).
         let hit = |k: usize| if k < n { hits[k] } else { first };
-        let grads = self
-            .field
-            .distance_gradient_x8(std::array::from_fn(|k| hit(k).0));
-        let Some((_, g)) = grads else {
+        let points = std::array::from_fn(|k| hit(k).0);
+        let grads = match scope {
+            Scope::Whole => self.field.distance_gradient_x8(points).map(|(_, g)| g),
+            Scope::Restricted(r) => self.field.restricted_nearest_gradients_x8(r, points),
+        };
+        let Some(g) = grads else {
             for (o, &(p, dir, h)) in out.iter_mut().zip(&hits[..n]) {
                 *o = self.normal_material(p, dir, h);
             }
             return out;
         };
-        let (_, m) = self.field.distance_material_x8(std::array::from_fn(|k| {
+        let behind = std::array::from_fn(|k| {
             let (p, dir, h) = hit(k);
             p - dir * (2.0 * h)
-        }));
+        });
+        let (_, m) = match scope {
+            Scope::Whole => self.field.distance_material_x8(behind),
+            Scope::Restricted(r) => self.field.restricted_distance_material_x8(r, behind),
+        };
         for (k, o) in out.iter_mut().enumerate().take(n) {
             let len = g[k].length();
             *o = if len >= 0.9 && len.is_finite() {
@@ -555,26 +587,77 @@ impl SdfGeometry {
         })
     }
 
-    /// Traces `rays` 8 at a time in lockstep; `done(i, march, termination)` receives each
-    /// finished ray (`march` is `None` when the ray missed the scene box before any step).
-    /// With culling on, bundles of up to [`CULL_BUNDLE`] consecutive rays sharing an origin
-    /// are traced through the field restricted to their cone.
-    fn lockstep(
+    /// One finished lockstep ray into `out`, or into `pending` when it hit (its normal waits
+    /// for [`Self::flush_normals`]); true when 8 hits are pending.
+    #[inline(always)]
+    fn record(
         &self,
-        rays: &[Ray],
-        refine: bool,
-        mut done: impl FnMut(usize, Option<&March>, Termination),
+        (i, m, t): (usize, Option<&March>, Termination),
+        pending: &mut Vec<PendingHit>,
+        out: &mut [TraceResult],
+    ) -> bool {
+        out[i] = match m {
+            Some(m) if t == Termination::Hit => {
+                let (p, h) = self.hit_point(m);
+                let work = RayWork {
+                    steps: m.evals,
+                    ..RayWork::default()
+                };
+                pending.push((i, m.t, work, (p, m.dir(), h)));
+                return pending.len() == 8;
+            }
+            Some(m) => self.finish(m, t),
+            // A ray that never started marching (March::new refused it) has no hit.
+            None => TraceResult::not_found(
+                NoHit::try_from(t).unwrap_or(NoHit::Miss),
+                RayWork::default(),
+            ),
+        };
+        false
+    }
+
+    /// Whether lockstep batches are cut into bundles traced through restricted fields.
+    fn culls(&self) -> bool {
+        self.cull && self.field.node_count() >= CULL_MIN_NODES
+    }
+
+    /// Gives the `pending` hits their normals and materials (one
+    /// [`Self::normals_material_x8`]) and writes them to `out`. Out of line: the lockstep
+    /// loop's per-ray callback stays small enough to inline.
+    #[inline(never)]
+    fn flush_normals(
+        &self,
+        scope: Scope<'_>,
+        pending: &mut Vec<PendingHit>,
+        out: &mut [TraceResult],
     ) {
-        let full = |p, d, len| self.field.segment_step(p, d, len);
-        if !self.cull || self.field.node_count() < CULL_MIN_NODES {
-            self.lockstep_with(
-                rays,
-                0,
-                refine,
-                &mut done,
-                |p| self.field.distance_lanes(p),
-                full,
+        let mut hits = [(Vec3::ZERO, Vec3::ZERO, 0.0); 8];
+        for (h, p) in hits.iter_mut().zip(pending.iter()) {
+            *h = p.3;
+        }
+        let nm = self.normals_material_x8(scope, &hits[..pending.len()]);
+        for (&(i, t, work, (p, _, _)), &(normal, material)) in pending.iter().zip(&nm) {
+            out[i] = TraceResult::found(
+                Hit {
+                    t,
+                    position: p,
+                    normal,
+                    material,
+                },
+                work,
             );
+        }
+        pending.clear();
+    }
+
+    /// Traces `rays` 8 at a time in lockstep; `report` receives each finished ray
+    /// ([`Event::Done`]) and the end of each bundle ([`Event::BundleEnd`]), with the field
+    /// the bundle was traced through. With culling on, bundles of up to [`CULL_BUNDLE`]
+    /// consecutive rays sharing an origin are traced through the field restricted to their
+    /// cone; otherwise all of `rays` is one bundle.
+    fn lockstep(&self, rays: &[Ray], refine: bool, mut report: impl FnMut(Scope<'_>, Event<'_>)) {
+        if !self.culls() {
+            self.lockstep_whole(rays, 0, refine, &mut report);
             return;
         }
         let mut restricted = Restricted::default();
@@ -582,25 +665,40 @@ impl SdfGeometry {
             match self.cone_of(bundle) {
                 Some(cone) => {
                     self.field.restrict_to(&cone, &mut restricted);
+                    let scope = Scope::Restricted(&restricted);
                     self.lockstep_with(
                         bundle,
                         k * CULL_BUNDLE,
                         refine,
-                        &mut done,
+                        &mut |i, m, t| report(scope, Event::Done(i, m, t)),
                         |p| self.field.restricted_distance_lanes(&restricted, p),
                         |p, d, len| self.field.restricted_segment_step(&restricted, p, d, len),
                     );
+                    report(scope, Event::BundleEnd);
                 }
-                None => self.lockstep_with(
-                    bundle,
-                    k * CULL_BUNDLE,
-                    refine,
-                    &mut done,
-                    |p| self.field.distance_lanes(p),
-                    full,
-                ),
+                None => self.lockstep_whole(bundle, k * CULL_BUNDLE, refine, &mut report),
             }
         }
+    }
+
+    /// [`Self::lockstep`] of one bundle through the whole field.
+    #[inline(always)]
+    fn lockstep_whole(
+        &self,
+        rays: &[Ray],
+        first_index: usize,
+        refine: bool,
+        report: &mut impl FnMut(Scope<'_>, Event<'_>),
+    ) {
+        self.lockstep_with(
+            rays,
+            first_index,
+            refine,
+            &mut |i, m, t| report(Scope::Whole, Event::Done(i, m, t)),
+            |p| self.field.distance_lanes(p),
+            |p, d, len| self.field.segment_step(p, d, len),
+        );
+        report(Scope::Whole, Event::BundleEnd);
     }
 
     /// The cone of a bundle of rays sharing an origin, widened by twice the hit shell (a ray
@@ -743,50 +841,38 @@ impl Geometry for SdfGeometry {
         }
         // Hits wait here for their normals, computed 8 at a time.
         let mut pending: Vec<PendingHit> = Vec::with_capacity(8);
-        let flush = |pending: &mut Vec<PendingHit>, out: &mut [TraceResult]| {
-            let mut hits = [(Vec3::ZERO, Vec3::ZERO, 0.0); 8];
-            for (h, p) in hits.iter_mut().zip(pending.iter()) {
-                *h = p.3;
+        // Every pending hit comes from one bundle or from whole-field bundles: a bundle's end
+        // flushes them.
+        let flush = |scope: Scope<'_>, pending: &mut Vec<PendingHit>, out: &mut [TraceResult]| {
+            if !pending.is_empty() {
+                self.flush_normals(scope, pending, out);
             }
-            let nm = self.normals_material_x8(&hits[..pending.len()]);
-            for (&(i, t, work, (p, _, _)), &(normal, material)) in pending.iter().zip(&nm) {
-                out[i] = TraceResult::found(
-                    Hit {
-                        t,
-                        position: p,
-                        normal,
-                        material,
-                    },
-                    work,
-                );
-            }
-            pending.clear();
         };
-        self.lockstep(rays, true, |i, m, t| {
-            out[i] = match m {
-                Some(m) if t == Termination::Hit => {
-                    let (p, h) = self.hit_point(m);
-                    let work = RayWork {
-                        steps: m.evals,
-                        ..RayWork::default()
-                    };
-                    pending.push((i, m.t, work, (p, m.dir(), h)));
-                    if pending.len() == 8 {
-                        flush(&mut pending, out);
+        if !self.culls() {
+            // The whole field for every ray (the common case of small scenes), without the
+            // bundle events.
+            self.lockstep_with(
+                rays,
+                0,
+                true,
+                &mut |i, m, t| {
+                    if self.record((i, m, t), &mut pending, out) {
+                        flush(Scope::Whole, &mut pending, out);
                     }
-                    return;
-                }
-                Some(m) => self.finish(m, t),
-                // A ray that never started marching (March::new refused it) has no hit.
-                None => TraceResult::not_found(
-                    NoHit::try_from(t).unwrap_or(NoHit::Miss),
-                    RayWork::default(),
-                ),
-            };
-        });
-        if !pending.is_empty() {
-            flush(&mut pending, out);
+                },
+                |p| self.field.distance_lanes(p),
+                |p, d, len| self.field.segment_step(p, d, len),
+            );
+            return flush(Scope::Whole, &mut pending, out);
         }
+        self.lockstep(rays, true, |scope, event| match event {
+            Event::BundleEnd => flush(scope, &mut pending, out),
+            Event::Done(i, m, t) => {
+                if self.record((i, m, t), &mut pending, out) {
+                    flush(scope, &mut pending, out);
+                }
+            }
+        });
     }
 
     fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
@@ -801,7 +887,10 @@ impl Geometry for SdfGeometry {
             }
             return;
         }
-        self.lockstep(rays, false, |i, m, t| {
+        self.lockstep(rays, false, |_, event| {
+            let Event::Done(i, m, t) = event else {
+                return;
+            };
             out[i] = match m {
                 Some(m) => Self::occ(m, t),
                 None => OcclusionResult {
