@@ -12,9 +12,13 @@ Run:    /tmp/embree-venv/bin/python scripts/anchor_embree.py MESH.obj [--rounds 
 Each round times Embree (1 warm-up, REPEATS timed, median) then each marchmesh BVH in a
 fresh process (build, 1 warm-up, REPEATS timed, median); the ratios use per-round medians
 (median over rounds), so load from other processes hits both sides alike. Both sides time
-the CPU time of the tracing thread (Python's thread_time, Linux schedstat in anchor_rays:
-embreex calls rtcIntersect1 ray by ray on the calling thread), so time spent descheduled on a
-loaded machine counts on neither side. State the load
+the CPU time of the tracing thread (Python's thread_time, CLOCK_THREAD_CPUTIME_ID in
+anchor_rays: embreex calls rtcIntersect1 ray by ray on the calling thread), so time spent
+descheduled on a loaded machine counts on neither side. (anchor_rays read
+/proc/thread-self/schedstat before 2026-11-23, which advances only at 4 ms scheduler ticks:
+its full-dragon repeats read either 6.94 or 7.81 Mrays/s, figures before then are coarse.)
+embreex exposes neither rtcSetSceneBuildQuality nor a device config string, so Embree runs
+its defaults (medium build quality; huge pages on Linux, per the rtcNewDevice docs). State the load
 average printed at the end beside any figure quoted.
 """
 
