@@ -14,10 +14,17 @@ fn main() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(SdfOptions::DEFAULT.mesh_grid_resolution);
-    let opts = SdfOptions {
+    // EPS_PX and MAX_STEPS override the hit shell and the step budget (candidate defaults).
+    let mut opts = SdfOptions {
         mesh_grid_resolution: res,
         ..SdfOptions::DEFAULT
     };
+    if let Some(k) = std::env::var("EPS_PX").ok().and_then(|v| v.parse().ok()) {
+        opts.hit_epsilon = marchmesh_sdf::HitEpsilon::PixelCone(k);
+    }
+    if let Some(n) = std::env::var("MAX_STEPS").ok().and_then(|v| v.parse().ok()) {
+        opts.max_steps = n;
+    }
     let backend =
         |s: &Scene| marchmesh_sdf::build(s, &opts).map(|g| Box::new(g) as Box<dyn Geometry>);
     let reference = |s: &Scene| {

@@ -2,7 +2,7 @@
 //! ([`marchmesh_field::Field`], render space, f32) and sphere traced.
 //!
 //! * Hit test in two stages (see `march.rs`): a sample closer than the cone epsilon
-//!   ([`HitEpsilon::PixelCone`], a quarter of the pixel footprint by default) does not end
+//!   ([`HitEpsilon::PixelCone`], a twentieth of the pixel footprint by default) does not end
 //!   the ray; the tracer then decides hit or near miss with secant predictions of the
 //!   crossing and regula falsi on a sign change, to 1e-3 of the epsilon. Silhouettes are
 //!   therefore not dilated by the epsilon (0.00% silhouette mismatch against the exact

@@ -32,7 +32,9 @@
 //!   distance by `1 - sin(theta)` per step (at 0.01 degree every ray exhausted 512 steps);
 //!   with `lambda = sin(theta)` the step reaches the surface at once. Entered from `March`
 //!   only when progress is slow (after [`SEGMENT_MIN_EVALS`] evaluations, a distance that
-//!   shrank by less than [`SEGMENT_RATIO`]), so ordinary rays stay on the 8-lane plain path;
+//!   changed by less than a factor [`SEGMENT_RATIO`] either way), or from the shell when a
+//!   ray recedes from a surface (`SHELL_SEGMENT_WAIT`), so ordinary rays stay on the 8-lane
+//!   plain path;
 //!   left for `March` again when the bound gains nothing, for the shell logic below when it
 //!   gains nothing within `eps` of a surface. Every step is a safe step (never past a sign
 //!   change), so a sheet or a thin feature is not skipped; a hit is a sample below `thr`
@@ -82,10 +84,16 @@ const SWEEP_BUDGET: u32 = 32;
 /// 0.95; 32 with 0.95: 0.97, 0.99, 1.04 (within noise of plain; 13-18% fewer steps).
 pub(crate) const SEGMENT_MIN_EVALS: u32 = 32;
 
-/// Slow progress: a distance shrinking to more than this fraction of the previous one. A ray
-/// at angle `theta` to a plane keeps `1 - omega sin(theta)` per step (0.979 at 1 degree with
-/// omega 1.2), so this engages below about 2.4 degrees.
+/// Slow progress: a distance staying within this factor of the previous one, shrinking or
+/// growing. A ray at angle `theta` to a plane keeps `1 -+ omega sin(theta)` per step (0.979 at
+/// 1 degree with omega 1.2), so this engages below about 2.4 degrees, approaching or receding
+/// (a ray skimming away from a cylinder's cap used to crawl at steps of its height).
 pub(crate) const SEGMENT_RATIO: f32 = 0.95;
+
+/// Evaluations between two switches to segment tracing from the shell (receding samples,
+/// [`March::fine`]): a surface without a local bound (the global fallback) gains nothing, and
+/// each attempt costs one scalar segment query.
+const SHELL_SEGMENT_WAIT: u32 = 8;
 
 /// Each segment is this many times the last step (Galin et al. grow the segment by a
 /// constant factor): long enough that a bound valid far ahead lets the step grow
@@ -368,7 +376,7 @@ impl March {
     fn slow(&self, s: f32, p: &Params) -> bool {
         p.segment
             && self.evals >= self.seg_from
-            && s < self.r_prev
+            && s * SEGMENT_RATIO < self.r_prev
             && s > SEGMENT_RATIO * self.r_prev
     }
 
@@ -673,6 +681,18 @@ impl March {
             left: if receding { left.max(1) } else { left - 1 },
         };
         self.t = t + s.max(0.5 * eps);
+        if receding && p.segment && self.evals >= self.seg_from {
+            // A ray receding from a surface it passes within the shell, nearly parallel to it
+            // (skimming a cylinder's cap within 0.05 px: ~500 steps of its height), crawls at
+            // steps of its distance: segment tracing's local bound takes it away in a few.
+            // Should the bound gain nothing, the segment phase hands back to the shell logic
+            // and the next switch waits [`SHELL_SEGMENT_WAIT`] evaluations.
+            self.seg_from = self.evals + SHELL_SEGMENT_WAIT;
+            self.phase = Phase::Segment {
+                len: SEGMENT_GROWTH * s.max(0.5 * eps),
+                extra: 0,
+            };
+        }
         self.budget(p)
     }
 
@@ -885,7 +905,7 @@ impl Lanes8 {
         // Lanes whose progress is slow switch to segment tracing in their scalar `March`
         // (`March::slow`): they leave the fast path like an exhausted budget does.
         let slow_progress = F32x8::and(
-            F32x8::lt(s, self.r_prev),
+            F32x8::lt(s * c(SEGMENT_RATIO), self.r_prev),
             F32x8::lt(self.r_prev * c(SEGMENT_RATIO), s),
         );
         // Branch-free per lane (all-ones masks), so the loop vectorises: the same decision as

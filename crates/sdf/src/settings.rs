@@ -136,7 +136,7 @@ impl SdfSettings {
         };
         let (eps_px, eps_abs) = match o.hit_epsilon {
             HitEpsilon::PixelCone(k) => (k, None),
-            HitEpsilon::Absolute(e) => (0.25, Some(e)),
+            HitEpsilon::Absolute(e) => (crate::options::DEFAULT_EPS_PX, Some(e)),
         };
         SdfSettings {
             eps_px,

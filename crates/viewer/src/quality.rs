@@ -127,9 +127,10 @@ mod tests {
     #[test]
     fn sdf_knob_halves_the_pixel_epsilon() {
         let k = Knob::of(BackendKind::Sdf, &[]).expect("knob");
-        assert_eq!(k.option(0), Some(("eps_px".into(), "0.25".into())));
-        assert_eq!(k.option(1), Some(("eps_px".into(), "0.125".into())));
-        assert_eq!(k.option(-2), Some(("eps_px".into(), "1".into())));
+        // Level 0 is the backend's default hit shell (`SdfOptions::DEFAULT`, 0.05 px).
+        assert_eq!(k.option(0), Some(("eps_px".into(), "0.05".into())));
+        assert_eq!(k.option(1), Some(("eps_px".into(), "0.025".into())));
+        assert_eq!(k.option(-2), Some(("eps_px".into(), "0.2".into())));
         let k = Knob::of(BackendKind::Sdf, &pairs(&[("eps_abs", "0.01")])).expect("knob");
         assert_eq!(k.option(1), Some(("eps_abs".into(), "0.005".into())));
     }
@@ -157,6 +158,6 @@ mod tests {
         let s = spec(BackendKind::Sdf, &pairs(&[("max_steps", "64")]), &k, 1);
         assert_eq!(s.options.len(), 2);
         assert!(backend::check_options(&s).is_ok());
-        assert_eq!(k.describe(1), "eps_px=0.125 q+1");
+        assert_eq!(k.describe(1), "eps_px=0.025 q+1");
     }
 }

@@ -14,6 +14,7 @@
 //! * Plane: `lambda = |n . d|`, valid everywhere.
 //! * Box: only the axes whose `|x_i| - b_i` can be positive on the segment (outside) or the
 //!   largest (inside) carry the gradient, so `lambda = |d restricted to those axes|`.
+//! * Cylinder: as the box, with a radial and an axial term.
 //! * Sphere: `|df/ds| = |u| / sqrt(u^2 + w^2)` with `u` the position along the ray relative
 //!   to the centre's projection and `w` the ray's distance from the centre; largest at an end.
 //! * Other leaves (and smooth union, repetition, mesh grids): the global bound `|v| / |d|`,
@@ -127,6 +128,7 @@ impl<S: Scalar> Program<S> {
         match &ins.op {
             Op::Plane { n, .. } => leaf(V3::splat3(*n).dot(dl()).abs(), false),
             Op::Box { b } => leaf(box_lambda(q(), dl(), len, *b), true),
+            Op::Cylinder { r, h } => leaf(cylinder_lambda(q(), dl(), len, *r, *h), true),
             Op::Sphere { .. } => leaf(sphere_lambda(q(), dl(), len), true),
             Op::SphereAt { c, .. } => leaf(sphere_lambda(q() - V3::splat3(*c), dl(), len), true),
             Op::Union => {
@@ -270,6 +272,49 @@ fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
         if zero < hi || !never_largest {
             l2 = l2 + da[a] * da[a];
         }
+    }
+    l2.sqrt()
+}
+
+/// Bound on `|d . grad f|` for the capped cylinder of radius `r` and half height `h` along
+/// `y` (`shapes::cylinder`) over the segment `[q, q + len d]`, as [`box_lambda`] with two
+/// "axes": the radial term `|x_xz| - r` (gradient along the radial unit vector, so at most
+/// `|d_xz|`) and the cap term `|y| - h` (gradient along `y`). A term that can be neither
+/// positive nor the largest on the segment drops out. Over a cap the radial term is negative
+/// throughout, so a ray grazing the cap plane gets `lambda = |d_y|`: without this every ray
+/// skimming a cap within a few pixel footprints crawled at steps of its height (the
+/// conformance case `cylinder` exhausted 512 steps at a hit shell of 0.05 px).
+fn cylinder_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, r: S, h: S) -> S {
+    let zero = S::c(0.0);
+    let q1 = q + d.scale(len);
+    let rho = |x: S, z: S| (x * x + z * z).sqrt();
+    let (r0, r1) = (rho(q.x, q.z), rho(q1.x, q1.z));
+    let dxz2 = d.x * d.x + d.z * d.z;
+    // The radial distance is convex along the segment: largest at an end, smallest at the
+    // point closest to the axis (clamped to the segment).
+    let closest = if zero < dxz2 {
+        let s = (-(q.x * d.x + q.z * d.z) / dxz2).max(zero).min(len);
+        rho(q.x + d.x * s, q.z + d.z * s)
+    } else {
+        r0
+    };
+    let radial = (closest.min(r0).min(r1) - r, r0.max(r1) - r);
+    let (y0, y1) = (q.y.abs(), q1.y.abs());
+    let ylo = if (q.y < zero) != (q1.y < zero) {
+        zero
+    } else {
+        y0.min(y1)
+    };
+    let cap = (ylo - h, y0.max(y1) - h);
+    let floor = radial.0.max(cap.0);
+    let mut l2 = zero;
+    // Active when it may be positive or the largest; NaN counts as active (safe).
+    let (radial_never_largest, cap_never_largest) = (radial.1 < floor, cap.1 < floor);
+    if zero < radial.1 || !radial_never_largest {
+        l2 = l2 + dxz2;
+    }
+    if zero < cap.1 || !cap_never_largest {
+        l2 = l2 + d.y * d.y;
     }
     l2.sqrt()
 }
