@@ -326,17 +326,10 @@ impl WideBvh {
 
 /// Cost of testing one node's 8 child boxes, per unit of the node's surface area.
 const COST_NODE: f32 = 1.0;
-/// Cost of testing one triangle block, per unit of the leaf's surface area: 0.6 of a node,
-/// about the ratio of their instruction counts (callgrind, dragon_res3: ~85 instructions per
-/// SSE block test, ~140 per node visit with sorting, pushes and prefetches).
-const COST_BLOCK: f32 = 0.6;
-/// Most triangles a collapsed leaf may hold (two blocks). Against one block with
-/// `COST_BLOCK = 1` (callgrind, 1 thread, same rays as the Embree anchor): single rays take
-/// the same instructions (-0.4% full dragon, -0.1% dragon_res3, +0.1% bunny), 4x2 packets
-/// +1.4% bunny, -0.2% dragon_res3; on the full dragon 6% fewer simulated last-level misses;
-/// memory 83.6 / 82.6 / 81.3 B/tri instead of 92.4 / 89.7 / 89.6 (full dragon / dragon_res3
-/// / bunny). Timing under load 1-4 could not resolve the difference (+1.4%, noise +-25%).
-const MAX_LEAF_TRIS: u32 = 8;
+/// Cost of testing one triangle block, per unit of the leaf's surface area.
+const COST_BLOCK: f32 = 1.0;
+/// Most triangles a collapsed leaf may hold.
+const MAX_LEAF_TRIS: u32 = 4;
 
 /// How one Bvh2 subtree is represented with `k + 1` wide subtrees (`k` in `0..WIDTH`).
 #[derive(Clone, Copy)]
@@ -1177,7 +1170,7 @@ mod tests {
     }
 
     #[test]
-    fn collapse_fills_nodes_and_keeps_leaves_within_the_leaf_limit() {
+    fn collapse_fills_nodes_and_keeps_leaves_within_one_block() {
         let (w, _) = wide_of_random(
             3000,
             23,
