@@ -59,8 +59,22 @@ fn cases() -> Vec<(&'static str, Node)> {
             DVec3::new(2.0, 0.3, 1.0),
         ),
     );
+    let cylinder = NodeKind::Cylinder {
+        radius: 0.7,
+        half_height: 0.9,
+    };
+    let tilted_cylinder = node(
+        cylinder.clone(),
+        compose_transform(
+            DVec3::new(0.4, -0.3, 0.6),
+            DVec3::new(30.0, 10.0, 45.0),
+            DVec3::new(1.0, 1.0, 1.0),
+        ),
+    );
     let op = |k: NodeKind| node(k, DAffine3::IDENTITY);
     vec![
+        ("cylinder", at(cylinder, DVec3::new(-0.2, 0.1, 0.3))),
+        ("tilted_cylinder", tilted_cylinder),
         ("plane", ground.clone()),
         ("box", a.clone()),
         ("sphere", b.clone()),
@@ -185,6 +199,39 @@ fn grazing_rays_over_a_plane_and_a_box_top_step_to_the_surface() {
         // f32 as well (the tracer's precision).
         let (_, step) = ground.segment_step(p.as_vec3(), d.as_vec3(), 1.0);
         assert!(f64::from(step) < exact * 1.0001 && f64::from(step) > exact * 0.99);
+    }
+}
+
+#[test]
+fn rays_skimming_a_cylinder_cap_step_to_the_cap_or_past_it() {
+    // Cap at local y = 1 (radius 10, half height 1), the cylinder turned 30 degrees about z
+    // so that the region just above the cap lies inside its world bounding box: the step
+    // must come from the cylinder's own bound, not from clipping rays to the box. Rays start
+    // 1e-3 above the cap and descend at small angles along local z, meeting the cap's plane
+    // within its radius (at 0.01 degrees 5.7 units on).
+    let turn = DAffine3::from_rotation_z(30f64.to_radians());
+    let f = field(&node(
+        NodeKind::Cylinder {
+            radius: 10.0,
+            half_height: 1.0,
+        },
+        turn,
+    ));
+    for deg in [1.0f64, 0.1, 0.01] {
+        let (s, c) = deg.to_radians().sin_cos();
+        let d = turn.transform_vector3(DVec3::new(0.0, -s, c));
+        let p = turn.transform_point3(DVec3::new(0.0, 1.0 + 1e-3, -1.5));
+        // Where the ray meets the cap plane.
+        let down = 1e-3 / s;
+        let len = 1.0;
+        let (v, step) = f.segment_step_f64(p, d, len);
+        assert!((v - 1e-3).abs() < 1e-9, "value {v}");
+        // Never past the cap, and at least the segment (or the way down when shorter): the
+        // plain sphere-tracing step would be 1e-3.
+        assert!(
+            step <= down * (1.0 + 1e-6) && step >= len.min(down) * 0.99,
+            "{deg} deg: step {step}, cap at {down}"
+        );
     }
 }
 
