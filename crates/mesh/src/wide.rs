@@ -1064,6 +1064,30 @@ mod tests {
     use glam::Vec3A;
     use obvhs::triangle::Triangle;
 
+    #[test]
+    fn huge_buffers_hold_their_copy_on_both_paths() {
+        // Below and above `HUGE_MIN_BYTES` (the second goes to 2 MiB-aligned huge pages),
+        // and empty; clones are independent copies.
+        for n in [0usize, 1, 1000, HUGE_MIN_BYTES / 4 + 17] {
+            let items: Vec<u32> = (0..n as u32).map(|i| i.wrapping_mul(2654435761)).collect();
+            let buf = HugeBuf::from_slice(&items);
+            assert_eq!(&buf[..], &items[..], "{n} items");
+            if size_of_val(&items[..]) >= HUGE_MIN_BYTES {
+                assert_eq!(
+                    buf.as_ptr() as usize % HUGE_PAGE,
+                    0,
+                    "huge buffer alignment"
+                );
+            }
+            let copy = buf.clone();
+            drop(buf);
+            assert_eq!(&copy[..], &items[..], "{n} items, clone");
+        }
+        let blocks = HugeBuf::from_slice(&[EMPTY_BLOCK; 3]);
+        assert_eq!(blocks.len(), 3);
+        assert_eq!(blocks.as_ptr() as usize % align_of::<TriBlock>(), 0);
+    }
+
     /// A small deterministic pseudo-random sequence in [0, 1).
     fn lcg(state: &mut u64) -> f32 {
         *state = state
