@@ -64,6 +64,15 @@ impl BackgroundSampler {
         }
     }
 
+    /// The radiance of a plain colour background (the same in every direction), else `None`.
+    #[inline]
+    pub fn constant(&self) -> Option<Vec3> {
+        match self {
+            Self::Color(c) => Some(*c),
+            Self::Environment { .. } => None,
+        }
+    }
+
     /// Radiance seen along unit direction `dir` (nearest texel of the equirectangular map:
     /// `u = 0.5 + atan2(x, -z) / 2pi`, `v = acos(y) / pi`).
     #[inline]

@@ -238,6 +238,8 @@ pub struct GeometryReport {
 /// The batch methods exist so a backend can trace rays together (packets, lockstep sphere
 /// tracing); their default implementations loop over the single-ray methods. `out` has the
 /// same length as `rays`; implementations may panic if it does not (a programming error).
+/// They must write every element of `out`: the integrator reuses its result buffers from
+/// one wavefront to the next without clearing them.
 pub trait Geometry: Send + Sync {
     /// The closest hit within `[ray.t_min, ray.t_max]`.
     fn closest_hit(&self, ray: &Ray) -> TraceResult;

@@ -521,7 +521,7 @@ impl Shading {
     }
 }
 
-/// Resizes `out` to `len` default results, runs `trace` on it and returns the nanoseconds the
+/// Resizes `out` to `len` results (their old values stay: `trace` overwrites them all), runs `trace` on it and returns the nanoseconds the
 /// trace took: every batched geometry query of the integrators is timed through this, so the
 /// per-ray-type times in [`RenderStats::trace_time`] measure the geometry alone.
 pub(crate) fn timed<T: Clone + Default>(
@@ -529,7 +529,8 @@ pub(crate) fn timed<T: Clone + Default>(
     len: usize,
     trace: impl FnOnce(&mut [T]),
 ) -> u64 {
-    out.clear();
+    // Every query writes every element of its `out` (the [`Geometry`] contract), so the
+    // previous wavefront's results need not be cleared.
     out.resize(len, T::default());
     let start = Instant::now();
     trace(out);
@@ -617,6 +618,75 @@ pub(crate) fn resolve_vertex(
     vertex
 }
 
+/// The first pass over a wavefront's results: resolves every result without a hit as
+/// [`resolve_vertex`] would (counts, area light or background radiance added to its pixel's
+/// `sum`, AOVs of the first `aov_pixels` paths) and lists the indices of the hits in `hits`.
+/// Slices as arguments, so the loop keeps their addresses in registers.
+#[inline(never)]
+fn resolve_no_hits(
+    (paths, rays, results): (&[Path], &[Ray], &[TraceResult]),
+    band: &mut Band<'_>,
+    aov_pixels: usize,
+    sum: &mut [Vec3],
+    (sh, background): (&Shading, &BackgroundSampler),
+    hits: &mut Vec<u32>,
+    stats: &mut RenderStats,
+) {
+    hits.clear();
+    let Band {
+        depth,
+        normal,
+        material,
+        termination,
+        work,
+        ..
+    } = band;
+    // One length for every plane and `sum`, so one bounds check covers a pixel's stores.
+    let n = sum.len().min(depth.len());
+    let sum = &mut sum[..n];
+    let (depth, normal, material, termination, work) = (
+        &mut depth[..n],
+        &mut normal[..n],
+        &mut material[..n],
+        &mut termination[..n],
+        &mut work[..n],
+    );
+    let mut tally = RenderStats::default();
+    let constant_background = background.constant();
+    let count = paths.len();
+    let (rays, results) = (&rays[..count], &results[..count]);
+    for pi in 0..count {
+        let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
+        let ended = res.termination();
+        if ended == Termination::Hit {
+            hits.push(pi as u32);
+            continue;
+        }
+        tally.add_work(&res.work);
+        tally.add_termination(ended, false);
+        let emission = match sh.emitters.is_empty() {
+            true => None,
+            false => sh.emitter_before(ray, ray.t_max),
+        };
+        let radiance = match (emission, constant_background) {
+            (Some(e), _) => e,
+            (None, Some(c)) => c,
+            (None, None) => background.sample(ray.dir),
+        };
+        let px = path.pixel as usize;
+        assert!(px < n, "path pixel outside its band");
+        if pi < aov_pixels {
+            termination[px] = ended;
+            work[px] = res.work;
+            depth[px] = NO_HIT_DEPTH;
+            normal[px] = Vec3::ZERO;
+            material[px] = u32::MAX;
+        }
+        sum[px] += path.throughput * radiance;
+    }
+    stats.merge(&tally);
+}
+
 /// One path (one sample of one pixel) in the tile's wavefront; its ray is at the same index
 /// of the wavefront's rays.
 #[derive(Clone, Copy)]
@@ -651,6 +721,8 @@ pub(crate) struct Scratch {
     ao_points: Vec<SurfacePoint>,
     ao_point_pending: Vec<PendingLight>,
     visibility: Vec<Visibility>,
+    /// Indices into `paths` of the wavefront's rays that hit a surface.
+    hits: Vec<u32>,
     /// Colour sums, indexed like the band's pixels.
     sum: Vec<Vec3>,
 }
@@ -690,6 +762,7 @@ fn trace_tile(
         ao_points,
         ao_point_pending,
         visibility,
+        hits,
         sum,
     } = s;
     let (sh, geometry, background) = (f.sh, f.geometry, f.background);
@@ -706,9 +779,7 @@ fn trace_tile(
             }));
         }
     }
-    for pixels in band.rows_of(tile) {
-        sum[pixels.start as usize..pixels.end as usize].fill(Vec3::ZERO);
-    }
+    // `sum` was zeroed for the whole band (`trace_band`); each pixel is in one tile.
     stats.primary_rays += paths.len() as u64;
 
     // Geometry shortcuts: one cone per shading point and area light, one AO estimate per
@@ -729,12 +800,21 @@ fn trace_tile(
         ao_point_pending.clear();
         next.clear();
         next_rays.clear();
-        for (pi, ((path, ray), res)) in paths
-            .iter()
-            .zip(rays.iter())
-            .zip(results.iter())
-            .enumerate()
-        {
+        // Rays without a hit first (most camera rays of a small object), in a lean loop;
+        // the hits after, in order.
+        let aov_pixels = if depth == 0 { pixels } else { 0 };
+        resolve_no_hits(
+            (paths, rays, results),
+            band,
+            aov_pixels,
+            sum,
+            (sh, background),
+            hits,
+            stats,
+        );
+        for &pi in hits.iter() {
+            let pi = pi as usize;
+            let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
             let px = path.pixel as usize;
             let aov = (depth == 0 && pi < pixels).then_some((&mut *band, px));
             let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
