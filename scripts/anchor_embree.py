@@ -7,8 +7,9 @@ the render-space triangles (world minus camera position in f64, then f32) come f
 `anchor_rays` example, so both sides trace identical f32 data (docs: shared ANCHORS.md).
 
 Setup:  python3 -m venv /tmp/embree-venv && /tmp/embree-venv/bin/pip install embreex numpy
-Run:    /tmp/embree-venv/bin/python scripts/anchor_embree.py MESH.obj [--rounds 3]
-            [--repeats 15] [--bvh bvh2,wide1,wide,raw]
+Run:    /tmp/embree-venv/bin/python scripts/anchor_embree.py MESH.obj [MESH...] [--rounds 3]
+            [--repeats 15] [--bvh bvh2,wide1,wide,raw] [--json OUT.json]
+(scripts/anchor_embree.sh runs it on the committed meshes and writes bench-results/anchors/.)
 Each round times Embree (1 warm-up, REPEATS timed, median) then each marchmesh BVH in a
 fresh process (build, 1 warm-up, REPEATS timed, median); the ratios use per-round medians
 (median over rounds), so load from other processes hits both sides alike. Both sides time
@@ -23,6 +24,8 @@ average printed at the end beside any figure quoted.
 """
 
 import argparse
+import importlib.metadata
+import json
 import os
 import statistics
 import subprocess
@@ -62,9 +65,83 @@ def embree_round(scene, origins, dirs, repeats):
     return statistics.median(rates), hits
 
 
+def cpu_model():
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return "unknown"
+
+
+def git_commit():
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=ROOT, check=True, capture_output=True, text=True
+        )
+        return out.stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def load_average():
+    return " ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def anchor_mesh(mesh, kinds, rounds, repeats):
+    """Times Embree and each marchmesh tracer on MESH's camera rays in `rounds` interleaved
+    rounds; prints the table and returns the mesh's record for --json."""
+    with tempfile.TemporaryDirectory() as d:
+        print(run_example("export", mesh, d).strip(), file=sys.stderr)
+        tris = np.fromfile(os.path.join(d, "tris.f32"), dtype="<f4").reshape(-1, 3, 3)
+        rays = np.fromfile(os.path.join(d, "rays.f32"), dtype="<f4").reshape(-1, 6)
+    origins = np.ascontiguousarray(rays[:, :3])
+    dirs = np.ascontiguousarray(rays[:, 3:])
+    scene = rtcs.EmbreeScene()
+    TriangleMesh(scene, tris)
+    per = {"embree": [], **{k: [] for k in kinds}}
+    hits = {}
+    for r in range(rounds):
+        e, hits["embree"] = embree_round(scene, origins, dirs, repeats)
+        per["embree"].append(e)
+        line = f"round {r}: embree {e:.2f} ({hits['embree']} hits)"
+        for k in kinds:
+            lines = run_example("time", mesh, k, str(repeats)).split()
+            m = statistics.median(float(x) for x in lines[0::2])
+            per[k].append(m)
+            hits[k] = int(lines[1])
+            line += f"  {k} {m:.2f} ({lines[1]} hits)"
+        print(line, file=sys.stderr)
+    emb = statistics.median(per["embree"])
+    print(f"mesh: {mesh}  triangles: {len(tris)}  rays: {len(origins)}  threads: 1")
+    print(f"{'tracer':<10} {'Mrays/s':>8} {'x Embree':>9}")
+    print(f"{'embree':<10} {emb:>8.2f} {1.0:>9.3f}")
+    record = {
+        "mesh": os.path.relpath(os.path.abspath(mesh), ROOT),
+        "triangles": len(tris),
+        "rays": len(origins),
+        "embree": {"mrays_per_s_rounds": per["embree"], "mrays_per_s_median": emb},
+        "embree_hits": hits["embree"],
+        "tracers": {},
+    }
+    for k in kinds:
+        ratios = [m / e for m, e in zip(per[k], per["embree"])]
+        ratio = statistics.median(ratios)
+        print(f"{k:<10} {statistics.median(per[k]):>8.2f} {ratio:>9.3f}")
+        record["tracers"][k] = {
+            "mrays_per_s_rounds": per[k],
+            "mrays_per_s_median": statistics.median(per[k]),
+            "ratio_over_embree_per_round_median": ratio,
+            "hits": hits[k],
+        }
+    return record
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mesh")
+    ap.add_argument("mesh", nargs="+", help="OBJ/PLY/glTF meshes, each anchored in turn")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--repeats", type=int, default=15)
     ap.add_argument(
@@ -73,36 +150,50 @@ def main():
         help="marchmesh tracers: bvh2, cwbvh, wide1 (single rays), wide (row packets), wide4x2 "
         "(4x2-tile packets), wide8 (row batches, no packets), raw (obvhs Bvh2)",
     )
+    ap.add_argument(
+        "--json",
+        metavar="PATH",
+        help="also write every figure (per round) as JSON, the format `marchmesh bench "
+        "--anchor` and `marchmesh findings --anchor` read; refuses to overwrite a file",
+    )
     a = ap.parse_args()
+    if a.rounds < 1 or a.repeats < 1:
+        ap.error("--rounds and --repeats must be at least 1")
+    if a.json and os.path.lexists(a.json):
+        ap.error(f"--json {a.json}: exists (nothing was overwritten)")
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    with tempfile.TemporaryDirectory() as d:
-        print(run_example("export", a.mesh, d).strip(), file=sys.stderr)
-        tris = np.fromfile(os.path.join(d, "tris.f32"), dtype="<f4").reshape(-1, 3, 3)
-        rays = np.fromfile(os.path.join(d, "rays.f32"), dtype="<f4").reshape(-1, 6)
-    origins = np.ascontiguousarray(rays[:, :3])
-    dirs = np.ascontiguousarray(rays[:, 3:])
-    scene = rtcs.EmbreeScene()
-    TriangleMesh(scene, tris)
     kinds = [k for k in a.bvh.split(",") if k]
-    per = {"embree": [], **{k: [] for k in kinds}}
-    for r in range(a.rounds):
-        e, hits = embree_round(scene, origins, dirs, a.repeats)
-        per["embree"].append(e)
-        line = f"round {r}: embree {e:.2f} ({hits} hits)"
-        for k in kinds:
-            lines = run_example("time", a.mesh, k, str(a.repeats)).split()
-            m = statistics.median(float(x) for x in lines[0::2])
-            per[k].append(m)
-            line += f"  {k} {m:.2f} ({lines[1]} hits)"
-        print(line, file=sys.stderr)
-    emb = statistics.median(per["embree"])
-    print(f"mesh: {a.mesh}  triangles: {len(tris)}  rays: {len(origins)}  threads: 1")
-    print(f"{'tracer':<10} {'Mrays/s':>8} {'x Embree':>9}")
-    print(f"{'embree':<10} {emb:>8.2f} {1.0:>9.3f}")
-    for k in kinds:
-        ratios = [m / e for m, e in zip(per[k], per["embree"])]
-        print(f"{k:<10} {statistics.median(per[k]):>8.2f} {statistics.median(ratios):>9.3f}")
-    print("load average:", " ".join(f"{x:.2f}" for x in os.getloadavg()))
+    start = time.time()
+    load_start = load_average()
+    meshes = [anchor_mesh(m, kinds, a.rounds, a.repeats) for m in a.mesh]
+    load_end = load_average()
+    print("load average:", load_end)
+    if a.json:
+        try:
+            embree_version = "embreex " + importlib.metadata.version("embreex")
+        except importlib.metadata.PackageNotFoundError:
+            embree_version = "embreex (version unknown)"
+        record = {
+            "tool": "anchor-embree",
+            "embree_version": embree_version,
+            "unix_time": int(start),
+            "date_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(start)),
+            "cpu": cpu_model(),
+            "git_commit": git_commit(),
+            "load_average_start": load_start,
+            "load_average_end": load_end,
+            "threads": 1,
+            "rounds": a.rounds,
+            "repeats": a.repeats,
+            "protocol": "per mesh and round: Embree rtcIntersect1 (1 warm-up, REPEATS timed, "
+            "median), then each marchmesh tracer in a fresh anchor_rays process (build, 1 "
+            "warm-up, REPEATS timed, median); thread CPU time on both sides; ratios are "
+            "medians of per-round ratios",
+            "meshes": meshes,
+        }
+        with open(a.json, "x") as f:
+            json.dump(record, f, indent=2)
+            f.write("\n")
 
 
 if __name__ == "__main__":

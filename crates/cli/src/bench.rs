@@ -204,6 +204,13 @@ pub fn bench(args: BenchArgs) -> Result<()> {
                 .unwrap_or_default()
         );
     }
+    // Read before the run, so a bad anchor file fails in a second, not after the suite.
+    let anchors = args
+        .anchor
+        .iter()
+        .map(|p| marchmesh_harness::anchors::read_anchor(p))
+        .collect::<Result<Vec<_>, _>>()
+        .context("--anchor")?;
     let (run_id, dir) = report::create_run_dir(&args.out, &suite.name)
         .with_context(|| format!("creating a run folder in {}", args.out.display()))?;
     eprintln!(
@@ -234,6 +241,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         shard: args.shard.map(|s| s.to_string()),
         merged_from: Vec::new(),
         write_errors: Vec::new(),
+        anchors,
     };
     // The folder says from the start what is still missing.
     template
@@ -310,7 +318,12 @@ pub fn bench(args: BenchArgs) -> Result<()> {
 }
 
 /// `marchmesh findings RUN... --out FILE [--force]`.
-pub fn findings(runs: &[PathBuf], out: &Path, force: bool) -> Result<()> {
+pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) -> Result<()> {
+    let anchors = anchors
+        .iter()
+        .map(|p| marchmesh_harness::anchors::read_anchor(p))
+        .collect::<Result<Vec<_>, _>>()
+        .context("--anchor")?;
     let stem = out
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
@@ -342,9 +355,10 @@ pub fn findings(runs: &[PathBuf], out: &Path, force: bool) -> Result<()> {
             Ok(marchmesh_harness::findings::Run { name, results })
         })
         .collect::<Result<Vec<_>>>()?;
-    let text = marchmesh_harness::findings::write_findings(&inputs, &plots_dir, &plots_link)
-        .map_err(anyhow::Error::msg)
-        .context("writing the findings plots")?;
+    let text =
+        marchmesh_harness::findings::write_findings(&inputs, &anchors, &plots_dir, &plots_link)
+            .map_err(anyhow::Error::msg)
+            .context("writing the findings plots")?;
     let write = if force {
         marchmesh_safeio::replace_regular(out, text.as_bytes())
     } else {

@@ -54,6 +54,10 @@ enum Command {
         /// Replace an existing FILE and its plots.
         #[arg(long)]
         force: bool,
+        /// An external anchor run to show besides those the runs recorded (repeatable; see
+        /// `bench --anchor`).
+        #[arg(long, value_name = "FILE")]
+        anchor: Vec<PathBuf>,
     },
     /// Regenerate summary.md, plots/ and report.html of a run folder from its results.json.
     Report {
@@ -118,6 +122,11 @@ struct BenchArgs {
     /// rotation stay within this many MiB (by their reported memory); also each build's limit.
     #[arg(long, default_value_t = marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES >> 20)]
     memory_limit_mib: u64,
+    /// Record an external anchor run with this run (repeatable): the JSON of
+    /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf
+    /// backend vs fidget), shown in summary.md and the findings beside the verdicts.
+    #[arg(long, value_name = "FILE")]
+    anchor: Vec<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -194,7 +203,12 @@ fn main() {
         Command::Bench(args) => bench::bench(args),
         Command::Report { dir } => bench::report(&dir),
         Command::Merge { runs, out } => bench::merge(&runs, &out),
-        Command::Findings { runs, out, force } => bench::findings(&runs, &out, force),
+        Command::Findings {
+            runs,
+            out,
+            force,
+            anchor,
+        } => bench::findings(&runs, &anchor, &out, force),
         Command::Compare { a, b } => bench::compare(&a, &b),
         Command::Stability(args) => bench::stability(args),
         Command::View(args) => view::view(args),

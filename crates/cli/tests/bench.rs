@@ -31,7 +31,13 @@ fn only_run(out: &Path) -> PathBuf {
 fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
     let out = tmp("smoke");
     let out_s = out.to_str().unwrap();
-    let (ok, stdout, stderr) = marchmesh(&["bench", "--suite", "smoke", "--out", out_s], &repo());
+    let anchor = "bench-results/anchors/fidget-20261123T231703Z.json";
+    let (ok, stdout, stderr) = marchmesh(
+        &[
+            "bench", "--suite", "smoke", "--out", out_s, "--anchor", anchor,
+        ],
+        &repo(),
+    );
     assert!(ok, "bench failed:\n{stdout}\n{stderr}");
     let run = only_run(&out);
     let name = run.file_name().unwrap().to_string_lossy().into_owned();
@@ -68,6 +74,15 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
         assert!(!v.is_empty() && v != "unknown", "{what} = {v:?}");
     }
     assert!(p.logical_cores >= 1);
+
+    // The anchor is recorded and shown.
+    assert_eq!(res.anchors.len(), 1);
+    assert_eq!(res.anchors[0].backend, "sdf");
+    let summary = std::fs::read_to_string(run.join("summary.md")).unwrap();
+    assert!(
+        summary.contains("## Each backend against its anchor") && summary.contains(anchor),
+        "{summary}"
+    );
 
     // CSV: same rows, every column filled unless the row says why it may be empty.
     let csv_rows = results::read_csv(&run.join("results.csv")).unwrap();
@@ -205,6 +220,27 @@ fn bad_suites_and_filters_are_clear_errors() {
     assert!(stderr.contains("no configuration"), "{stderr}");
     let (ok, _, stderr) = marchmesh(&["report", dir.to_str().unwrap()], &dir);
     assert!(!ok && stderr.contains("results.json"), "{stderr}");
+    // A bad anchor file fails before any run folder is made.
+    let not_anchor = dir.join("not-an-anchor.json");
+    std::fs::write(&not_anchor, r#"{"tool": "nothing"}"#).unwrap();
+    let runs = dir.join("runs");
+    let (ok, _, stderr) = marchmesh(
+        &[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            runs.to_str().unwrap(),
+            "--anchor",
+            not_anchor.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(!ok && stderr.contains("not-an-anchor.json"), "{stderr}");
+    assert!(
+        !runs.exists(),
+        "no run folder for a run that could not start"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

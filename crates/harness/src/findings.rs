@@ -740,10 +740,16 @@ struct Plot {
 }
 
 /// The findings document for `runs`, and its plots written into `plots_dir` (linked as
-/// `plots_link/NAME.svg`). Deterministic: the same runs give the same bytes.
+/// `plots_link/NAME.svg`). Its anchor section lists the anchors the runs recorded, then
+/// `more_anchors`. Deterministic: the same inputs give the same bytes.
 ///
 /// Errors: a plot cannot be written.
-pub fn write_findings(runs: &[Run], plots_dir: &Path, plots_link: &str) -> Result<String, String> {
+pub fn write_findings(
+    runs: &[Run],
+    more_anchors: &[crate::anchors::Anchor],
+    plots_dir: &Path,
+    plots_link: &str,
+) -> Result<String, String> {
     let points = newest_points(runs);
     let mut plots = Vec::new();
     let mut sections = Vec::new();
@@ -866,6 +872,20 @@ pub fn write_findings(runs: &[Run], plots_dir: &Path, plots_link: &str) -> Resul
             Clock::for_run(&r.results).name()
         );
     }
+    // How far each backend is from its field's best, as the runs recorded it.
+    let mut anchors: Vec<crate::anchors::Anchor> = Vec::new();
+    for a in runs
+        .iter()
+        .flat_map(|r| &r.results.anchors)
+        .chain(more_anchors)
+    {
+        if !anchors.contains(a) {
+            anchors.push(a.clone());
+        }
+    }
+    if !anchors.is_empty() {
+        let _ = write!(s, "\n{}", crate::anchors::anchors_markdown(&anchors));
+    }
     // Categorical axes (scene kind: primitives vs CSG and smooth blends; workload: camera and
     // shadow rays vs soft shadows, ambient occlusion, path tracing): each scene's headline.
     let mut heads = String::new();
@@ -986,7 +1006,7 @@ mod tests {
             results: results(rows),
         }];
         let dir = std::env::temp_dir().join(format!("marchmesh-findings-{}", std::process::id()));
-        let doc = write_findings(&runs, &dir, "plots").unwrap();
+        let doc = write_findings(&runs, &[], &dir, "plots").unwrap();
         assert!(
             doc.contains("from mesh to sdf between 100 and 10000 copies (the number in the scene name) (interpolated 346,"),
             "{doc}"
@@ -998,7 +1018,7 @@ mod tests {
         std::fs::write(dir.join("old_axis.svg"), "<svg/>").unwrap();
         std::fs::write(dir.join("notes.txt"), "mine").unwrap();
         // Same input, same bytes.
-        assert_eq!(write_findings(&runs, &dir, "plots").unwrap(), doc);
+        assert_eq!(write_findings(&runs, &[], &dir, "plots").unwrap(), doc);
         assert!(!dir.join("old_axis.svg").exists());
         assert!(dir.join("notes.txt").is_file());
         std::fs::remove_dir_all(&dir).ok();

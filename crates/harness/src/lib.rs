@@ -33,6 +33,7 @@
 // The counting allocator is the one place that needs unsafe code (GlobalAlloc is an unsafe trait).
 #[allow(unsafe_code)]
 pub mod alloc;
+pub mod anchors;
 pub mod backend;
 pub mod bench;
 pub mod findings;

@@ -319,6 +319,10 @@ pub struct Results {
     /// Files of the run (images) that could not be written, with the reason.
     #[serde(default)]
     pub write_errors: Vec<String>,
+    /// External anchor runs recorded with this run (`marchmesh bench --anchor`): each
+    /// backend against the best known implementation of its representation.
+    #[serde(default)]
+    pub anchors: Vec<crate::anchors::Anchor>,
 }
 
 /// One input of a merged run.
@@ -622,6 +626,7 @@ impl Results {
             shard: None,
             merged_from: Vec::new(),
             write_errors: Vec::new(),
+            anchors: Vec::new(),
         };
         for (_, r) in inputs {
             out.merged_from.push(MergedShard {
@@ -649,6 +654,11 @@ impl Results {
             out.timings.extend(r.timings);
             out.missing.extend(r.missing);
             out.write_errors.extend(r.write_errors);
+            for a in r.anchors {
+                if !out.anchors.contains(&a) {
+                    out.anchors.push(a);
+                }
+            }
         }
         Ok(out)
     }
@@ -755,6 +765,7 @@ pub(crate) mod tests_support {
             shard: None,
             merged_from: vec![],
             write_errors: vec![],
+            anchors: vec![],
         }
     }
 }

@@ -251,6 +251,7 @@ pub fn summary_markdown(res: &Results) -> String {
             s.push('\n');
         }
     }
+    s.push_str(&crate::anchors::anchors_markdown(&res.anchors));
     s
 }
 

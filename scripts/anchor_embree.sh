@@ -1,0 +1,58 @@
+#!/usr/bin/env bash
+# The Embree anchor (issue 16): Embree 4's single-ray rtcIntersect1 (the embreex package) and
+# the mesh backend's tracers on the exact same camera rays of each committed mesh, interleaved,
+# 1 thread (scripts/anchor_embree.py does the timing; this wrapper picks the meshes, sets up
+# the Python environment and files the results).
+#
+#   scripts/anchor_embree.sh [--large] [extra anchor_embree.py flags, e.g. --rounds 5 --repeats 9]
+#
+# --large adds the full Stanford dragon (871k triangles; scripts/fetch_dragon.sh, or
+# ../shared/data/dragon_full.obj.gz when present). Writes into bench-results/anchors/:
+#   embree-<UTC stamp>.json   every figure per round (read by `marchmesh bench --anchor` and
+#                             `marchmesh findings --anchor`)
+#   embree-<UTC stamp>.md     the printed tables
+# The Python environment is EMBREE_VENV (default /tmp/embree-venv), created with embreex and
+# numpy from the Python package index when missing. CARGO_TARGET_DIR is honoured.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+venv="${EMBREE_VENV:-/tmp/embree-venv}"
+out="$root/bench-results/anchors"
+stamp="$(date -u +%Y%m%dT%H%M%SZ)"
+
+meshes=("$root/scenes/meshes/bunny.obj" "$root/scenes/meshes/dragon_res3.obj")
+if [ "${1:-}" = "--large" ]; then
+    shift
+    dragon="${DRAGON_OBJ:-/tmp/dragon.obj}"
+    if [ ! -s "$dragon" ]; then
+        shared="$root/../shared/data/dragon_full.obj.gz"
+        if [ -s "$shared" ]; then
+            gunzip -c "$shared" >"$dragon.tmp" && mv "$dragon.tmp" "$dragon"
+        else
+            echo "no full dragon at $dragon or $shared: run scripts/fetch_dragon.sh and set DRAGON_OBJ" >&2
+            exit 1
+        fi
+    fi
+    meshes+=("$dragon")
+fi
+
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+    "$venv/bin/pip" install --quiet embreex numpy
+fi
+(cd "$root" && cargo build --release --quiet -p marchmesh-mesh --example anchor_rays)
+mkdir -p "$out"
+echo "load at start: $(uptime)"
+"$venv/bin/python" "$root/scripts/anchor_embree.py" "${meshes[@]}" --bvh wide1,wide4x2 \
+    --json "$out/embree-$stamp.json" "$@" | tee "$out/embree-$stamp.md.tmp"
+{
+    echo "# Embree anchor, $stamp"
+    echo
+    echo "Command: scripts/anchor_embree.sh $*"
+    echo
+    echo '```'
+    cat "$out/embree-$stamp.md.tmp"
+    echo '```'
+} >"$out/embree-$stamp.md"
+rm -f "$out/embree-$stamp.md.tmp"
+echo "load at end: $(uptime)"
+echo "wrote $out/embree-$stamp.json and .md"
