@@ -74,13 +74,27 @@ pub struct StabilityReport<'a> {
 }
 
 /// The safe ranges per family and configuration: for each verdict, the swept values that got it.
+/// A backend run in one configuration in a family is named by the backend alone (`mesh`
+/// for `mesh[tess_px=0.05]`); one run in several (`sdf` and `sdf[segment=false]`) keeps the
+/// configurations apart, so each line's values are one configuration's.
 pub fn ranges(rows: &[Row]) -> BTreeMap<(String, String), BTreeMap<&'static str, Vec<f64>>> {
+    let mut configurations: BTreeMap<(&str, &str), std::collections::BTreeSet<&str>> =
+        BTreeMap::new();
+    for r in rows {
+        configurations
+            .entry((&r.family, &r.backend))
+            .or_default()
+            .insert(&r.configuration);
+    }
     let mut out: BTreeMap<(String, String), BTreeMap<&'static str, Vec<f64>>> = BTreeMap::new();
     for r in rows {
-        let label = if r.configuration.contains('[') {
-            r.backend.clone()
-        } else {
+        let several = configurations
+            .get(&(r.family.as_str(), r.backend.as_str()))
+            .is_some_and(|c| c.len() > 1);
+        let label = if several {
             r.configuration.clone()
+        } else {
+            r.backend.clone()
         };
         out.entry((r.family.clone(), label))
             .or_default()
@@ -116,10 +130,10 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
          The mesh backend runs at a 0.05 px chord budget (its accuracy setting) so that its \
          tessellation error does not hide the numerical effects.\n"
     );
-    let _ = writeln!(s, "## Ranges per family and backend\n");
+    let _ = writeln!(s, "## Ranges per family and configuration\n");
     let _ = writeln!(
         s,
-        "| family | backend | exact | degraded | broken | refused |"
+        "| family | configuration | exact | degraded | broken | refused |"
     );
     let _ = writeln!(s, "|---|---|---|---|---|---|");
     for ((family, backend), by) in ranges(rows) {
