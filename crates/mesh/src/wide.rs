@@ -22,6 +22,7 @@
 
 use std::mem::MaybeUninit;
 
+use glam::Vec3A;
 use marchmesh_core::RayWork;
 use obvhs::{bvh2::Bvh2, ray::Ray, rt_triangle::RtTriangle};
 
@@ -187,9 +188,11 @@ impl WideBvh {
         if self.avx {
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
             return unsafe {
-                match self.prefetch {
-                    true => closest_avx::<true>(self, ray, work),
-                    false => closest_avx::<false>(self, ray, work),
+                match (self.prefetch, ray.origin == Vec3A::ZERO) {
+                    (true, false) => closest_avx::<Avx, true>(self, ray, work),
+                    (false, false) => closest_avx::<Avx, false>(self, ray, work),
+                    (true, true) => closest_avx::<AvxAtOrigin, true>(self, ray, work),
+                    (false, true) => closest_avx::<AvxAtOrigin, false>(self, ray, work),
                 }
             };
         }
@@ -731,7 +734,12 @@ impl WideBvh {
         #[cfg(target_arch = "x86_64")]
         if self.avx {
             // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
-            return unsafe { interleaved_avx(self, rays, work) };
+            return unsafe {
+                match rays.iter().all(|r| r.origin == Vec3A::ZERO) {
+                    true => interleaved_avx::<AvxAtOrigin>(self, rays, work),
+                    false => interleaved_avx::<Avx>(self, rays, work),
+                }
+            };
         }
         self.interleaved_with::<Portable>(rays, work)
     }
@@ -819,12 +827,12 @@ impl WideBvh {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx,popcnt")]
-unsafe fn interleaved_avx(
+unsafe fn interleaved_avx<N: NodeTest>(
     bvh: &WideBvh,
     rays: &mut [Ray; INTERLEAVE],
     work: &mut [RayWork; INTERLEAVE],
 ) -> [Option<(u32, f32)>; INTERLEAVE] {
-    bvh.interleaved_with::<Avx>(rays, work)
+    bvh.interleaved_with::<N>(rays, work)
 }
 
 /// Whether the 256-bit node test can run (AVX with POPCNT, which every AVX CPU has).
@@ -841,12 +849,12 @@ fn detect_avx() -> bool {
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx,popcnt")]
-unsafe fn closest_avx<const PREFETCH: bool>(
+unsafe fn closest_avx<N: NodeTest, const PREFETCH: bool>(
     bvh: &WideBvh,
     ray: &mut Ray,
     work: &mut RayWork,
 ) -> Option<(u32, f32)> {
-    bvh.closest_with::<Avx, PREFETCH>(ray, work)
+    bvh.closest_with::<N, PREFETCH>(ray, work)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -910,6 +918,42 @@ impl NodeTest for Avx {
                 let hi = _mm256_load_ps(node.hi[axis].as_ptr());
                 let t1 = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
                 let t2 = _mm256_mul_ps(_mm256_sub_ps(hi, o), inv);
+                t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
+                t_out = _mm256_min_ps(t_out, _mm256_max_ps(t1, t2));
+            }
+            let ok = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, t_in),
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, _mm256_setzero_ps()),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t_in, _mm256_set1_ps(ray.tmax)),
+                ),
+            );
+            let mut entry = [0.0f32; WIDTH];
+            _mm256_storeu_ps(entry.as_mut_ptr(), t_in);
+            (_mm256_movemask_ps(ok) as u32, entry)
+        }
+    }
+}
+
+/// [`Avx`] for rays starting at the origin of render space (every camera ray: render space
+/// is centred on the camera): `lo - 0` is `lo`, so each plane distance is one product,
+/// bit for bit the same as [`Avx`]'s but for the sign of a zero.
+#[cfg(target_arch = "x86_64")]
+struct AvxAtOrigin;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeTest for AvxAtOrigin {
+    #[inline(always)]
+    fn test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
+        use std::arch::x86_64::*;
+        // SAFETY: as for `Avx::test`.
+        unsafe {
+            let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
+            let mut t_out = _mm256_set1_ps(f32::INFINITY);
+            for axis in 0..3 {
+                let inv = _mm256_set1_ps(ray.inv_direction[axis]);
+                let t1 = _mm256_mul_ps(_mm256_load_ps(node.lo[axis].as_ptr()), inv);
+                let t2 = _mm256_mul_ps(_mm256_load_ps(node.hi[axis].as_ptr()), inv);
                 t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
                 t_out = _mm256_min_ps(t_out, _mm256_max_ps(t1, t2));
             }
@@ -1115,7 +1159,6 @@ pub(crate) fn entered_children<const ANY: bool>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Vec3A;
     use obvhs::triangle::Triangle;
 
     #[test]
@@ -1380,9 +1423,68 @@ mod tests {
         }
     }
 
+    #[test]
+    fn rays_from_the_origin_get_the_same_node_tests() {
+        // Camera rays start at the origin of render space and take `AvxAtOrigin`: same
+        // masks as obvhs and the same entry distances as `Avx` (as numbers), including
+        // axis-aligned directions, whose inverse obvhs clamps to +-1/EPSILON.
+        #[cfg(target_arch = "x86_64")]
+        if detect_avx() {
+            let tris = random_tris(300, 7);
+            let boxes: Vec<_> = tris.iter().map(|t| t.aabb()).collect();
+            let mut s = 9u64;
+            let mut entered = 0;
+            for chunk in boxes.chunks(WIDTH) {
+                let mut node = EMPTY_NODE;
+                for (lane, b) in chunk.iter().enumerate() {
+                    for axis in 0..3 {
+                        node.lo[axis][lane] = b.min[axis];
+                        node.hi[axis][lane] = b.max[axis];
+                    }
+                }
+                let mut dirs: Vec<Vec3A> = (0..100)
+                    .map(|_| {
+                        let target = Vec3A::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 4.0 - 2.0;
+                        target.normalize()
+                    })
+                    .collect();
+                dirs.extend([Vec3A::X, Vec3A::NEG_Y, Vec3A::Z, Vec3A::new(-0.0, 0.0, 1.0)]);
+                for d in dirs {
+                    let ray = Ray::new(Vec3A::ZERO, d, 0.0, 3.0);
+                    let mut expected = 0u32;
+                    for (lane, b) in chunk.iter().enumerate() {
+                        if b.intersect_ray(&ray) < ray.tmax {
+                            expected |= 1 << lane;
+                        }
+                    }
+                    // SAFETY: AVX detected above.
+                    let (general, at_origin) =
+                        unsafe { (avx_test(&node, &ray), avx_at_origin_test(&node, &ray)) };
+                    assert_eq!(general.0, expected);
+                    assert_eq!(at_origin.0, expected);
+                    for lane in 0..WIDTH {
+                        let (a, b) = (at_origin.1[lane], general.1[lane]);
+                        assert!(a == b || (a.is_nan() && b.is_nan()), "{a} vs {b}");
+                    }
+                    entered += expected.count_ones();
+                }
+            }
+            assert!(
+                entered > 100,
+                "{entered} boxes entered: the rays must reach the boxes"
+            );
+        }
+    }
+
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,popcnt")]
     unsafe fn avx_test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
         Avx::test(node, ray)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,popcnt")]
+    unsafe fn avx_at_origin_test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
+        AvxAtOrigin::test(node, ray)
     }
 }
