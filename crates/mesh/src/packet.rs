@@ -118,7 +118,13 @@ pub(crate) fn closest8(
     #[cfg(target_arch = "x86_64")]
     if bvh.avx {
         // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
-        return Some(unsafe { avx::closest8(bvh, &bounds, rays, visits, tests) });
+        return Some(unsafe {
+            // Camera rays start at the origin of render space: no origin to subtract.
+            match bounds.origin == [0.0; 3] {
+                true => avx::closest8::<true>(bvh, &bounds, rays, visits, tests),
+                false => avx::closest8::<false>(bvh, &bounds, rays, visits, tests),
+            }
+        });
     }
     Some(closest8_with(bvh, &bounds, rays, visits, tests))
 }
@@ -240,7 +246,7 @@ mod avx {
     /// # Safety
     /// The CPU must support AVX and POPCNT.
     #[target_feature(enable = "avx,popcnt")]
-    pub(super) unsafe fn closest8(
+    pub(super) unsafe fn closest8<const AT_ORIGIN: bool>(
         bvh: &WideBvh,
         bounds: &Bounds,
         rays: &mut [Ray; PACKET],
@@ -287,7 +293,7 @@ mod avx {
                     }
                 } else if let Some(node) = bvh.nodes.get(cur as usize) {
                     *visits += 1;
-                    let (mut mask, dist) = interval_test(bounds, node, tmax);
+                    let (mut mask, dist) = interval_test::<AT_ORIGIN>(bounds, node, tmax);
                     let mut leaves = mask & leaf_lanes(node);
                     mask &= !leaves;
                     while leaves != 0 {
@@ -297,7 +303,7 @@ mod avx {
                         let Some(blocks) = bvh.blocks.get(first..first + count) else {
                             continue;
                         };
-                        let enter = box_test(&soa, node, lane);
+                        let enter = box_test::<AT_ORIGIN>(&soa, node, lane);
                         if enter != 0 {
                             leaf(&mut soa, enter, first, blocks, tests);
                             tmax = hmax(soa.tmax);
@@ -355,9 +361,14 @@ mod avx {
         }
     }
 
-    /// [`Bounds::test`] on the 8 lanes at once; empty lanes are never set.
+    /// [`Bounds::test`] on the 8 lanes at once; empty lanes are never set. `AT_ORIGIN`:
+    /// the origin is 0 and not subtracted (`plane - 0` is `plane`, but for a zero's sign).
     #[inline(always)]
-    unsafe fn interval_test(b: &Bounds, node: &WideNode, tmax: f32) -> (u32, [f32; WIDTH]) {
+    unsafe fn interval_test<const AT_ORIGIN: bool>(
+        b: &Bounds,
+        node: &WideNode,
+        tmax: f32,
+    ) -> (u32, [f32; WIDTH]) {
         // SAFETY: AVX is enabled in every caller (see `closest8`); loads are in bounds.
         unsafe {
             let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
@@ -368,8 +379,14 @@ mod avx {
                     _mm256_set1_ps(b.inv_lo[axis]),
                     _mm256_set1_ps(b.inv_hi[axis]),
                 );
-                let lo = _mm256_sub_ps(_mm256_load_ps(node.lo[axis].as_ptr()), o);
-                let hi = _mm256_sub_ps(_mm256_load_ps(node.hi[axis].as_ptr()), o);
+                let (lo, hi) = (
+                    _mm256_load_ps(node.lo[axis].as_ptr()),
+                    _mm256_load_ps(node.hi[axis].as_ptr()),
+                );
+                let (lo, hi) = match AT_ORIGIN {
+                    true => (lo, hi),
+                    false => (_mm256_sub_ps(lo, o), _mm256_sub_ps(hi, o)),
+                };
                 let (p, q) = (_mm256_mul_ps(lo, il), _mm256_mul_ps(lo, ih));
                 let (r, s) = (_mm256_mul_ps(hi, il), _mm256_mul_ps(hi, ih));
                 t_in = _mm256_max_ps(
@@ -401,16 +418,23 @@ mod avx {
     }
 
     /// Rays of the packet entering child box `lane` before their own `tmax`: obvhs' slab
-    /// test (`Aabb::intersect_ray`, as [`super::enters`]) per lane.
+    /// test (`Aabb::intersect_ray`, as [`super::enters`]) per lane; `AT_ORIGIN` as for
+    /// [`interval_test`].
     #[inline(always)]
-    unsafe fn box_test(soa: &Soa, node: &WideNode, lane: usize) -> u32 {
+    unsafe fn box_test<const AT_ORIGIN: bool>(soa: &Soa, node: &WideNode, lane: usize) -> u32 {
         // SAFETY: AVX is enabled in every caller (see `closest8`); loads are in bounds.
         unsafe {
             let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
             let mut t_out = _mm256_set1_ps(f32::INFINITY);
             for axis in 0..3 {
-                let a = _mm256_set1_ps(node.lo[axis][lane] - soa.origin[axis]);
-                let b = _mm256_set1_ps(node.hi[axis][lane] - soa.origin[axis]);
+                let (a, b) = match AT_ORIGIN {
+                    true => (node.lo[axis][lane], node.hi[axis][lane]),
+                    false => (
+                        node.lo[axis][lane] - soa.origin[axis],
+                        node.hi[axis][lane] - soa.origin[axis],
+                    ),
+                };
+                let (a, b) = (_mm256_set1_ps(a), _mm256_set1_ps(b));
                 let t1 = _mm256_mul_ps(a, soa.inv[axis]);
                 let t2 = _mm256_mul_ps(b, soa.inv[axis]);
                 t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
