@@ -145,6 +145,10 @@ pub const PLANE_SOFTNESS_CELLS: f64 = 0.1;
 /// 5.36, 0.3: 5.90).
 pub const PLANE_CORRECTION_CELLS: f64 = 0.1;
 
+/// Least agreement `|sum w n| / sum w` of the corners' weighted normals for
+/// [`SparseGrid::stored_normal`] to answer.
+pub const STORED_NORMAL_AGREEMENT: f64 = 0.99;
+
 /// Octahedral code of a unit vector (Meyer et al. 2010, "On floating-point normal vectors";
 /// Cigolle et al. 2014): the vector projected onto the octahedron `|x| + |y| + |z| = 1`,
 /// the lower half folded over, `x` and `y` in 8 bits each (low byte `x`). About 0.3 degrees
@@ -726,10 +730,20 @@ impl SparseGrid {
     /// normal code is missing (then the caller keeps `tri`).
     #[inline]
     fn planes(&self, base: usize, s: usize, f: DVec3, tri: f64) -> Option<f64> {
+        let (num, den, _) = self.corner_planes(base, s, f)?;
+        let c = PLANE_CORRECTION_CELLS;
+        Some(tri + c * ((num / den - tri) / c).tanh())
+    }
+
+    /// The weighted sums of [`SparseGrid::planes`]' blend at `f` in the cell whose
+    /// `(0, 0, 0)` sample is at `base`: `(sum w e, sum w, sum w n)` over the 8 corners
+    /// (`e` in cells). `None` when the weights vanish or a sample or normal code is missing.
+    #[inline]
+    fn corner_planes(&self, base: usize, s: usize, f: DVec3) -> Option<(f64, f64, DVec3)> {
         let (scale, off) = self.decode();
         let inv_h = 1.0 / self.cell_size as f64;
         let sig2 = PLANE_SOFTNESS_CELLS * PLANE_SOFTNESS_CELLS;
-        let (mut num, mut den) = (0.0, 0.0);
+        let (mut num, mut den, mut normal) = (0.0, 0.0, DVec3::ZERO);
         for c in 0..8usize {
             let o = [c & 1, (c >> 1) & 1, c >> 2];
             let at = base + o[0] + s * (o[1] + s * o[2]);
@@ -750,12 +764,67 @@ impl SparseGrid {
             let w = t / (q * q);
             num += w * e;
             den += w;
+            normal += w * n;
         }
         if !(den > 0.0 && den.is_finite()) {
             return None;
         }
-        let c = PLANE_CORRECTION_CELLS;
-        Some(tri + c * ((num / den - tri) / c).tanh())
+        Some((num, den, normal))
+    }
+
+    /// The surface normal the grid stores near `p` (mesh local frame), for
+    /// [`Reconstruction::Normals`] grids within [`TRICUBIC_ZONE_CELLS`] of the surface: the
+    /// corners' closest-triangle normals blended with the weights of their tangent planes
+    /// at `p` (the planes through `p` dominate, so a point on a facet gets that facet's
+    /// normal rather than the smooth field's gradient), unit length, pointing to increasing
+    /// distance. `None` for other reconstructions, outside the lattice box, in an empty
+    /// brick, farther from the surface, or where the blend vanishes (the caller then
+    /// differentiates the field).
+    pub fn stored_normal(&self, p: Vec3) -> Option<Vec3> {
+        if self.reconstruction != Reconstruction::Normals {
+            return None;
+        }
+        let c = self.lattice_cells();
+        let maxc = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+        let g = (p.as_dvec3() - self.min.as_dvec3()) * (1.0 / self.cell_size as f64);
+        if !(g.cmpge(DVec3::ZERO).all() && g.cmple(maxc).all()) {
+            return None;
+        }
+        let bs = BRICK as f64;
+        let gb = g * (1.0 / bs);
+        let bi = [
+            (gb.x as u32).min(self.bricks[0] - 1),
+            (gb.y as u32).min(self.bricks[1] - 1),
+            (gb.z as u32).min(self.bricks[2] - 1),
+        ];
+        let w = self.cells[(bi[0] + self.bricks[0] * (bi[1] + self.bricks[1] * bi[2])) as usize];
+        if w & EMPTY != 0 {
+            return None;
+        }
+        let local = g - DVec3::new(bi[0] as f64, bi[1] as f64, bi[2] as f64) * bs;
+        let i = (local.x as usize).min(BRICK as usize - 1);
+        let j = (local.y as usize).min(BRICK as usize - 1);
+        let k = (local.z as usize).min(BRICK as usize - 1);
+        let f = local - DVec3::new(i as f64, j as f64, k as f64);
+        let s = self.brick_edge();
+        let base = w as usize * s * s * s + i + s * (j + s * k);
+        let (scale, off) = self.decode();
+        let tri = match &self.samples {
+            Samples::F32(v) => trilinear(v, base, s, f),
+            Samples::U16(v) => trilinear(v, base, s, f),
+            Samples::U8(v) => trilinear(v, base, s, f),
+        } * scale
+            + off;
+        if tri.abs() >= TRICUBIC_ZONE_CELLS * self.cell_size as f64 {
+            return None;
+        }
+        let (_, den, n) = self.corner_planes(base, s, f)?;
+        // Corners that disagree (a crease or a fold of the scan within the cell): no
+        // stored answer, the field's gradient averages them better.
+        if n.length() < STORED_NORMAL_AGREEMENT * den {
+            return None;
+        }
+        n.try_normalize().map(|n| n.as_vec3())
     }
 
     /// Sample indices of the 4^3 tricubic stencil of local cell `cell` (`0..BRICK` per axis)
@@ -1187,6 +1256,26 @@ mod tests {
             vec![encode_octahedral(Vec3::X); n],
         )
         .unwrap()
+    }
+
+    #[test]
+    fn stored_normals_answer_near_the_surface_of_normals_grids_only() {
+        // The plane x = 2.3 with every normal +x: the blend is +x near it; nothing far from
+        // it (4.4 cells), outside the lattice, or from a grid without normals.
+        for q in [Quantization::F32, Quantization::U8] {
+            let g = linear_normals(q);
+            for y in [0.3, 1.0, 3.1] {
+                let n = g.stored_normal(Vec3::new(2.3, y, 1.7)).expect("a normal");
+                // Octahedral codes of 2 x 8 bits hold a direction to about 0.3 degrees.
+                assert!((n.length() - 1.0).abs() < 1e-5, "{n:?}");
+                assert!(n.angle_between(Vec3::X).to_degrees() < 0.5, "{n:?}");
+            }
+            assert_eq!(g.stored_normal(Vec3::new(0.1, 1.0, 1.0)), None);
+            assert_eq!(g.stored_normal(Vec3::new(2.3, -1.0, 1.0)), None);
+            assert_eq!(g.stored_normal(Vec3::new(f32::NAN, 1.0, 1.0)), None);
+            let plain = linear(Reconstruction::Trilinear, q);
+            assert_eq!(plain.stored_normal(Vec3::new(2.3, 1.0, 1.0)), None);
+        }
     }
 
     #[test]

@@ -204,6 +204,15 @@ impl GridSampler for Grid {
             Grid::Sparse(g) => g.memory_bytes(),
         }
     }
+    fn stores_normals(&self) -> bool {
+        matches!(self, Grid::Sparse(g) if g.reconstruction() == marchmesh_bake::Reconstruction::Normals)
+    }
+    fn stored_normal(&self, x: f32, y: f32, z: f32) -> Option<[f32; 3]> {
+        match self {
+            Grid::Dense(_) => None,
+            Grid::Sparse(g) => g.stored_normal(Vec3::new(x, y, z)).map(|n| n.to_array()),
+        }
+    }
 }
 
 impl MeshResolver for Meshes<'_> {
@@ -400,6 +409,25 @@ impl Field {
         } else {
             prog.eval::<T, M>(p, &self.grid_refs())
         }
+    }
+
+    /// Whether a baked mesh stores surface normals (sparse grids with `recon=normals`), so
+    /// [`Field::stored_normal`] can answer.
+    pub fn stores_normals(&self) -> bool {
+        self.grids.iter().any(|g| g.stores_normals())
+    }
+
+    /// The unit normal a baked mesh stores at the surface point `p`
+    /// ([`program::Program::stored_normal`]): a facet's own normal where the field's
+    /// gradient would be the smooth grid's. `None` where the surface is not a mesh grid
+    /// storing normals or the path to it is not plain unions.
+    pub fn stored_normal(&self, p: Vec3) -> Option<Vec3> {
+        if !self.stores_normals() {
+            return None;
+        }
+        self.p32
+            .stored_normal(p.to_array(), &self.grid_refs())
+            .map(Vec3::from_array)
     }
 
     /// Signed distance bound at `p` (f32). 1e30 for an empty field.

@@ -187,6 +187,58 @@ pub struct Instr<S> {
     pub op: Op<S>,
 }
 
+impl Program<f32> {
+    /// The normal a baked mesh stores at the surface point `p` (root's parent frame), when
+    /// the surface there is a mesh grid's: the nearest child is followed down through plain
+    /// unions to a [`Op::Mesh`] leaf, whose [`GridSampler::stored_normal`] is carried back
+    /// up through the nodes' frames (a gradient maps by the transpose of `to_local`'s
+    /// linear part). `None` when the path meets any other operation (CSG, smooth blends,
+    /// repetition, an analytic leaf) or the grid has no normal there: the caller then
+    /// differentiates the field. Unit length.
+    pub fn stored_normal(&self, p: [f32; 3], grids: &[&dyn GridSampler]) -> Option<[f32; 3]> {
+        if self.instrs.is_empty() {
+            return None;
+        }
+        let n = self.stored_normal_at(0, V3::new(p[0], p[1], p[2]), grids)?;
+        let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        (len > 0.0 && len.is_finite()).then(|| n.map(|c| c / len))
+    }
+
+    /// [`Program::stored_normal`] below node `i`, `p` in its parent's frame.
+    fn stored_normal_at(
+        &self,
+        i: usize,
+        p: V3<f32>,
+        grids: &[&dyn GridSampler],
+    ) -> Option<[f32; 3]> {
+        let ins = self.instrs.get(i)?;
+        let q = ins.to_local.apply(p);
+        let local = match &ins.op {
+            Op::Mesh { grid } => grids.get(*grid as usize)?.stored_normal(q.x, q.y, q.z)?,
+            Op::Union => {
+                let (mut best, mut best_d) = (None, f32::INFINITY);
+                let mut j = i + 1;
+                while j < ins.end as usize {
+                    let d = self.child::<f32, false>(j, q, Ctx::Plain, grids).0;
+                    if d < best_d {
+                        (best, best_d) = (Some(j), d);
+                    }
+                    j = self.instrs.get(j)?.end as usize;
+                }
+                self.stored_normal_at(best?, q, grids)?
+            }
+            _ => return None,
+        };
+        Some(match &ins.to_local.lin {
+            None => local,
+            // The gradient in the parent frame is lin^T times the local one (row-major).
+            Some(m) => {
+                [0, 1, 2].map(|c| m[c] * local[0] + m[3 + c] * local[1] + m[6 + c] * local[2])
+            }
+        })
+    }
+}
+
 impl Instr<f64> {
     /// Makes the node read points in its parent's frame unchanged (identity transform,
     /// distance scale 1): for leaves whose parameters were already expressed in the parent
@@ -208,6 +260,17 @@ pub trait GridSampler: Send + Sync {
     fn sample_f32(&self, x: f32, y: f32, z: f32) -> f32;
     /// Exact bytes held.
     fn memory_bytes(&self) -> u64;
+    /// Whether the grid stores surface normals ([`GridSampler::stored_normal`] can answer);
+    /// `false` by default.
+    fn stores_normals(&self) -> bool {
+        false
+    }
+    /// The unit surface normal the grid stores near a local point (pointing to increasing
+    /// distance), if it stores normals and the point is near its surface; `None` otherwise
+    /// (the default).
+    fn stored_normal(&self, _x: f32, _y: f32, _z: f32) -> Option<[f32; 3]> {
+        None
+    }
 }
 
 /// A compiled program in scalar type `S`.

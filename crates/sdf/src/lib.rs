@@ -353,6 +353,11 @@ impl SdfGeometry {
     /// [`SdfGeometry::normal_at`] and the material, both from one 8-lane evaluation: the
     /// material is the field's at `p - 2 h dir`, just in front of the hit along the ray.
     fn normal_material(&self, p: Vec3, dir: Vec3, h: f32) -> (Vec3, MaterialId) {
+        // A baked mesh that stores its facets' normals (`recon=normals`) gives the facet's
+        // normal, where differences of the smooth field would round the facet edges off.
+        if let Some(n) = self.field.stored_normal(p) {
+            return (n, self.field.distance_material(p - dir * (2.0 * h)).1);
+        }
         let (x, y, z) = (Vec3::X * h, Vec3::Y * h, Vec3::Z * h);
         let (d, m) = self.field.distance_material_x8([
             p + x,
