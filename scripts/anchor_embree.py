@@ -119,7 +119,12 @@ def anchor_mesh(mesh, kinds, rounds, repeats):
     print(f"{'tracer':<10} {'Mrays/s':>8} {'x Embree':>9}")
     print(f"{'embree':<10} {emb:>8.2f} {1.0:>9.3f}")
     record = {
-        "mesh": os.path.relpath(os.path.abspath(mesh), ROOT),
+        # Relative to the repository when inside it, else absolute (e.g. the full dragon).
+        "mesh": (
+            rel
+            if not (rel := os.path.relpath(os.path.abspath(mesh), ROOT)).startswith("..")
+            else os.path.abspath(mesh)
+        ),
         "triangles": len(tris),
         "rays": len(origins),
         "embree": {"mrays_per_s_rounds": per["embree"], "mrays_per_s_median": emb},

@@ -272,10 +272,14 @@ pub fn anchors_markdown(anchors: &[Anchor]) -> String {
             a.tool
         );
         for e in &a.entries {
+            // The file name says which mesh or scene; the JSON keeps the whole path.
+            let subject = std::path::Path::new(&e.subject)
+                .file_name()
+                .map_or_else(|| e.subject.clone(), |n| n.to_string_lossy().into_owned());
             let _ = writeln!(
                 s,
                 "| {} | {} | {:.2} {} | {:.2} {} | **{:.2}** |",
-                e.subject, e.tracer, e.ours, e.unit, e.anchor, e.unit, e.ratio
+                subject, e.tracer, e.ours, e.unit, e.anchor, e.unit, e.ratio
             );
         }
         let _ = writeln!(s);
@@ -318,7 +322,7 @@ mod tests {
         let md = anchors_markdown(&[a]);
         assert!(
             md.contains(
-                "| scenes/meshes/bunny.obj | wide4x2 | 18.70 Mrays/s | 11.00 Mrays/s | **1.70** |"
+                "| bunny.obj | wide4x2 | 18.70 Mrays/s | 11.00 Mrays/s | **1.70** |"
             ),
             "{md}"
         );
