@@ -321,9 +321,7 @@ mod tests {
         );
         let md = anchors_markdown(&[a]);
         assert!(
-            md.contains(
-                "| bunny.obj | wide4x2 | 18.70 Mrays/s | 11.00 Mrays/s | **1.70** |"
-            ),
+            md.contains("| bunny.obj | wide4x2 | 18.70 Mrays/s | 11.00 Mrays/s | **1.70** |"),
             "{md}"
         );
     }
