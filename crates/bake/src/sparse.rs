@@ -361,6 +361,10 @@ pub struct SparseGrid {
     normals: Vec<u16>,
 }
 
+/// A lattice cell inside a brick: local cell `[i, j, k]` (`0..BRICK` per axis), the fraction
+/// within it, and the sample index of its `(0, 0, 0)` corner (apron included).
+type BrickCell = ([usize; 3], DVec3, usize);
+
 impl SparseGrid {
     /// Assembles a grid from its parts, checking every invariant the sampler relies on
     /// (positive finite cell and clamp, finite min, `cells` sized for `bricks`, samples a
@@ -659,17 +663,10 @@ impl SparseGrid {
     /// The value at lattice coordinates `g` (cells, inside the box).
     #[inline]
     fn value_in_box(&self, g: DVec3) -> f64 {
-        let [bx, by, _] = self.bricks;
         let bs = BRICK as f64;
-        let gb = g * (1.0 / bs); // exact: BRICK is a power of two
-        let bi = [
-            (gb.x as u32).min(self.bricks[0] - 1),
-            (gb.y as u32).min(self.bricks[1] - 1),
-            (gb.z as u32).min(self.bricks[2] - 1),
-        ];
-        let w = self.cells[(bi[0] + bx * (bi[1] + by * bi[2])) as usize];
         let h = self.cell_size as f64;
-        if w & EMPTY != 0 {
+        let (bi, w, cell) = self.cell_at(g);
+        let Some(([i, j, k], f, base)) = cell else {
             let bound = (w & BOUND_MAX) as f64 / BOUND_STEPS;
             let centre = DVec3::new(
                 bi[0] as f64 * bs + 0.5 * bs,
@@ -678,22 +675,10 @@ impl SparseGrid {
             );
             let d = (bound - (g - centre).length()).max(self.band_voxels as f64) * h;
             return if w & INSIDE != 0 { -d } else { d };
-        }
-        let local = g - DVec3::new(bi[0] as f64, bi[1] as f64, bi[2] as f64) * bs;
-        let i = (local.x as usize).min(BRICK as usize - 1);
-        let j = (local.y as usize).min(BRICK as usize - 1);
-        let k = (local.z as usize).min(BRICK as usize - 1);
-        let f = local - DVec3::new(i as f64, j as f64, k as f64);
+        };
         let s = self.brick_edge();
-        let a = self.reconstruction.apron() as usize;
-        let base = w as usize * s * s * s + (i + a) + s * ((j + a) + s * (k + a));
         let (scale, off) = self.decode();
-        let tri = match &self.samples {
-            Samples::F32(v) => trilinear(v, base, s, f),
-            Samples::U16(v) => trilinear(v, base, s, f),
-            Samples::U8(v) => trilinear(v, base, s, f),
-        } * scale
-            + off;
+        let tri = self.trilinear_at(base, f);
         if self.reconstruction == Reconstruction::Trilinear || tri.abs() >= TRICUBIC_ZONE_CELLS * h
         {
             return tri;
@@ -790,16 +775,36 @@ impl SparseGrid {
         if !(g.cmpge(DVec3::ZERO).all() && g.cmple(maxc).all()) {
             return None;
         }
+        let (_, _, Some((_, f, base))) = self.cell_at(g) else {
+            return None;
+        };
+        if self.trilinear_at(base, f).abs() >= TRICUBIC_ZONE_CELLS * self.cell_size as f64 {
+            return None;
+        }
+        let (_, den, n) = self.corner_planes(base, self.brick_edge(), f)?;
+        // Corners that disagree (a crease or a fold of the scan within the cell): no
+        // stored answer, the field's gradient averages them better.
+        if n.length() < STORED_NORMAL_AGREEMENT * den {
+            return None;
+        }
+        n.try_normalize().map(|n| n.as_vec3())
+    }
+
+    /// Where lattice point `g` (cells, inside the box) falls: its brick cell `bi`, that
+    /// cell's word, and unless the brick cell is empty the [`BrickCell`].
+    #[inline(always)]
+    fn cell_at(&self, g: DVec3) -> ([u32; 3], u32, Option<BrickCell>) {
+        let [bx, by, _] = self.bricks;
         let bs = BRICK as f64;
-        let gb = g * (1.0 / bs);
+        let gb = g * (1.0 / bs); // exact: BRICK is a power of two
         let bi = [
             (gb.x as u32).min(self.bricks[0] - 1),
             (gb.y as u32).min(self.bricks[1] - 1),
             (gb.z as u32).min(self.bricks[2] - 1),
         ];
-        let w = self.cells[(bi[0] + self.bricks[0] * (bi[1] + self.bricks[1] * bi[2])) as usize];
+        let w = self.cells[(bi[0] + bx * (bi[1] + by * bi[2])) as usize];
         if w & EMPTY != 0 {
-            return None;
+            return (bi, w, None);
         }
         let local = g - DVec3::new(bi[0] as f64, bi[1] as f64, bi[2] as f64) * bs;
         let i = (local.x as usize).min(BRICK as usize - 1);
@@ -807,24 +812,23 @@ impl SparseGrid {
         let k = (local.z as usize).min(BRICK as usize - 1);
         let f = local - DVec3::new(i as f64, j as f64, k as f64);
         let s = self.brick_edge();
-        let base = w as usize * s * s * s + i + s * (j + s * k);
+        let a = self.reconstruction.apron() as usize;
+        let base = w as usize * s * s * s + (i + a) + s * ((j + a) + s * (k + a));
+        (bi, w, Some(([i, j, k], f, base)))
+    }
+
+    /// The trilinear value (world units) of the cell whose `(0, 0, 0)` sample is at `base`,
+    /// at fraction `f`.
+    #[inline(always)]
+    fn trilinear_at(&self, base: usize, f: DVec3) -> f64 {
+        let s = self.brick_edge();
         let (scale, off) = self.decode();
-        let tri = match &self.samples {
+        (match &self.samples {
             Samples::F32(v) => trilinear(v, base, s, f),
             Samples::U16(v) => trilinear(v, base, s, f),
             Samples::U8(v) => trilinear(v, base, s, f),
-        } * scale
-            + off;
-        if tri.abs() >= TRICUBIC_ZONE_CELLS * self.cell_size as f64 {
-            return None;
-        }
-        let (_, den, n) = self.corner_planes(base, s, f)?;
-        // Corners that disagree (a crease or a fold of the scan within the cell): no
-        // stored answer, the field's gradient averages them better.
-        if n.length() < STORED_NORMAL_AGREEMENT * den {
-            return None;
-        }
-        n.try_normalize().map(|n| n.as_vec3())
+        }) * scale
+            + off
     }
 
     /// Sample indices of the 4^3 tricubic stencil of local cell `cell` (`0..BRICK` per axis)

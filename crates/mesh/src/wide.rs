@@ -910,33 +910,7 @@ struct Avx;
 impl NodeTest for Avx {
     #[inline(always)]
     fn test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
-        use std::arch::x86_64::*;
-        // SAFETY: inlined only into AVX-enabled callers (see `closest_avx`); loads are from
-        // 32-byte aligned arrays of 8 f32.
-        unsafe {
-            let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
-            let mut t_out = _mm256_set1_ps(f32::INFINITY);
-            for axis in 0..3 {
-                let o = _mm256_set1_ps(ray.origin[axis]);
-                let inv = _mm256_set1_ps(ray.inv_direction[axis]);
-                let lo = _mm256_load_ps(node.lo[axis].as_ptr());
-                let hi = _mm256_load_ps(node.hi[axis].as_ptr());
-                let t1 = _mm256_mul_ps(_mm256_sub_ps(lo, o), inv);
-                let t2 = _mm256_mul_ps(_mm256_sub_ps(hi, o), inv);
-                t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
-                t_out = _mm256_min_ps(t_out, _mm256_max_ps(t1, t2));
-            }
-            let ok = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, t_in),
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, _mm256_setzero_ps()),
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(t_in, _mm256_set1_ps(ray.tmax)),
-                ),
-            );
-            let mut entry = [0.0f32; WIDTH];
-            _mm256_storeu_ps(entry.as_mut_ptr(), t_in);
-            (_mm256_movemask_ps(ok) as u32, entry)
-        }
+        avx_node_test::<false>(node, ray)
     }
 }
 
@@ -950,29 +924,47 @@ struct AvxAtOrigin;
 impl NodeTest for AvxAtOrigin {
     #[inline(always)]
     fn test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
-        use std::arch::x86_64::*;
-        // SAFETY: as for `Avx::test`.
-        unsafe {
-            let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
-            let mut t_out = _mm256_set1_ps(f32::INFINITY);
-            for axis in 0..3 {
-                let inv = _mm256_set1_ps(ray.inv_direction[axis]);
-                let t1 = _mm256_mul_ps(_mm256_load_ps(node.lo[axis].as_ptr()), inv);
-                let t2 = _mm256_mul_ps(_mm256_load_ps(node.hi[axis].as_ptr()), inv);
-                t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
-                t_out = _mm256_min_ps(t_out, _mm256_max_ps(t1, t2));
-            }
-            let ok = _mm256_and_ps(
-                _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, t_in),
-                _mm256_and_ps(
-                    _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, _mm256_setzero_ps()),
-                    _mm256_cmp_ps::<_CMP_LT_OQ>(t_in, _mm256_set1_ps(ray.tmax)),
-                ),
-            );
-            let mut entry = [0.0f32; WIDTH];
-            _mm256_storeu_ps(entry.as_mut_ptr(), t_in);
-            (_mm256_movemask_ps(ok) as u32, entry)
+        avx_node_test::<true>(node, ray)
+    }
+}
+
+/// The 8-lane slab test of [`Avx`] (`AT_ORIGIN = false`) and [`AvxAtOrigin`] (`true`: the
+/// ray's origin is 0 and not subtracted).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn avx_node_test<const AT_ORIGIN: bool>(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
+    use std::arch::x86_64::*;
+    // SAFETY: inlined only into AVX-enabled callers (see `closest_avx`); loads are from
+    // 32-byte aligned arrays of 8 f32.
+    unsafe {
+        let mut t_in = _mm256_set1_ps(f32::NEG_INFINITY);
+        let mut t_out = _mm256_set1_ps(f32::INFINITY);
+        for axis in 0..3 {
+            let inv = _mm256_set1_ps(ray.inv_direction[axis]);
+            let lo = _mm256_load_ps(node.lo[axis].as_ptr());
+            let hi = _mm256_load_ps(node.hi[axis].as_ptr());
+            let (lo, hi) = match AT_ORIGIN {
+                true => (lo, hi),
+                false => {
+                    let o = _mm256_set1_ps(ray.origin[axis]);
+                    (_mm256_sub_ps(lo, o), _mm256_sub_ps(hi, o))
+                }
+            };
+            let t1 = _mm256_mul_ps(lo, inv);
+            let t2 = _mm256_mul_ps(hi, inv);
+            t_in = _mm256_max_ps(t_in, _mm256_min_ps(t1, t2));
+            t_out = _mm256_min_ps(t_out, _mm256_max_ps(t1, t2));
         }
+        let ok = _mm256_and_ps(
+            _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, t_in),
+            _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, _mm256_setzero_ps()),
+                _mm256_cmp_ps::<_CMP_LT_OQ>(t_in, _mm256_set1_ps(ray.tmax)),
+            ),
+        );
+        let mut entry = [0.0f32; WIDTH];
+        _mm256_storeu_ps(entry.as_mut_ptr(), t_in);
+        (_mm256_movemask_ps(ok) as u32, entry)
     }
 }
 
