@@ -299,6 +299,19 @@ impl Field {
         self.segment_in(&r.prog, p, dir, len)
     }
 
+    /// [`Field::restricted_segment_step`] on eight lanes (as [`Field::segment_lanes`]);
+    /// `None` when the restriction has no tape.
+    #[inline]
+    pub fn restricted_segment_lanes(
+        &self,
+        r: &Restricted,
+        p: V3<F32x8>,
+        d: V3<F32x8>,
+        len: F32x8,
+    ) -> Option<(F32x8, F32x8)> {
+        r.taped.then(|| r.tape.segment(p, d, len))
+    }
+
     /// The scalar distance under a restriction (same values per point as
     /// [`Field::restricted_distance_x8`]).
     #[inline]

@@ -185,6 +185,10 @@ impl Lane for $name {
         <$t as Lane>::or(a, b)
     }
     #[inline]
+    fn not(m: $mask) -> $mask {
+        <$t as Lane>::not(m)
+    }
+    #[inline]
     fn any(m: $mask) -> bool {
         <$t as Lane>::any(m)
     }

@@ -52,6 +52,8 @@ pub trait Lane:
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Lane-wise or.
     fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    /// Lane-wise negation (`!m`: a comparison involving NaN is false, its negation true).
+    fn not(m: Self::Mask) -> Self::Mask;
     /// True if any lane is set.
     fn any(m: Self::Mask) -> bool;
     /// True if every lane is set.
@@ -132,6 +134,10 @@ macro_rules! scalar_lane {
             #[inline(always)]
             fn or(a: bool, b: bool) -> bool {
                 a | b
+            }
+            #[inline(always)]
+            fn not(m: bool) -> bool {
+                !m
             }
             #[inline(always)]
             fn any(m: bool) -> bool {
@@ -297,6 +303,10 @@ impl Lane for F32x8 {
             r[i] = a.0[i] | b.0[i];
         }
         M8(r)
+    }
+    #[inline(always)]
+    fn not(m: M8) -> M8 {
+        M8(m.0.map(|b| !b))
     }
     #[inline(always)]
     fn any(m: M8) -> bool {

@@ -513,6 +513,14 @@ impl Field {
         }
     }
 
+    /// [`Field::segment_step`] on eight lanes (points `p`, directions `d`, segment lengths
+    /// `len`), per lane the same value and step bit for bit; `None` when the field has no
+    /// [`tape`] (the scalar query serves it).
+    #[inline]
+    pub fn segment_lanes(&self, p: V3<F32x8>, d: V3<F32x8>, len: F32x8) -> Option<(F32x8, F32x8)> {
+        self.tape.as_ref().map(|t| t.segment(p, d, len))
+    }
+
     /// Distances and their gradients at eight points, by forward-mode differentiation of
     /// the f32 program ([`Dual8`]): the exact gradient of the evaluated expression (at a
     /// crease, of the branch the evaluation took; 0 where the distance is 0 on an unsigned

@@ -62,7 +62,7 @@ impl<S: Scalar> Affine<S> {
 
     /// The linear part alone (directions: `lin * d`).
     #[inline(always)]
-    fn apply_linear<T: Lane<S = S>>(&self, d: V3<T>) -> V3<T> {
+    pub(crate) fn apply_linear<T: Lane<S = S>>(&self, d: V3<T>) -> V3<T> {
         match &self.lin {
             None => d,
             Some(m) => {

@@ -16,6 +16,7 @@ use glam::Vec3;
 
 use crate::dual::Dual1;
 use crate::lane::{F32x8, Lane, V3};
+use crate::program::segment::{bounded_step, fallback, leaf_lambda, leaf_step};
 use crate::program::{Affine, Instr, Op, Program};
 use crate::shapes;
 
@@ -193,6 +194,42 @@ impl Tape {
         }
     }
 
+    /// Per lane the value and a segment-tracing safe step along `d` over `len`, bit for bit
+    /// [`Program::segment`]'s on the program the tape was built from (the same formulas in
+    /// the same order; the union's members in the program's order, where [`Tape::eval`]
+    /// visits a pair nearer first: a member's skip decides its step). What lockstep bundles
+    /// use for their segment-tracing lanes instead of one interpreter call per lane.
+    #[inline]
+    pub fn segment<T: Lane<S = f32>>(&self, p: V3<T>, d: V3<T>, len: T) -> (T, T) {
+        let (v, s) = match &self.root {
+            None => seg_bounded(&self.leaves[0], p, d, len, None),
+            Some(root) => {
+                let union = || self.seg_union(root, p, d, len);
+                match &root.bound {
+                    None => union(),
+                    Some(b) => bounded_step((b.lo, b.hi, b.tau), None, p, d, union),
+                }
+            }
+        };
+        (v, s.max(fallback(v, d)))
+    }
+
+    /// The root union's value and safe step (without its own bound), `p` and `d` in the
+    /// root's parent frame: every member must stay positive, so the smallest member step.
+    #[inline(always)]
+    fn seg_union<T: Lane<S = f32>>(&self, root: &Root, p: V3<T>, d: V3<T>, len: T) -> (T, T) {
+        let q = root.to_local.apply(p);
+        let dl = root.to_local.apply_linear(d);
+        let (mut best, mut step) = seg_bounded(&self.leaves[0], q, dl, len, None);
+        for l in &self.leaves[1..] {
+            let (v, s) = seg_bounded(l, q, dl, len, Some(best));
+            best = best.min(v);
+            step = step.min(s);
+        }
+        let v = best * T::splat(root.dscale);
+        (v, T::select(T::lt(T::c(0.0), v), step, fallback(v, d)))
+    }
+
     /// Per lane, the analytic gradient of the leaf nearest to the point: the leaf whose value
     /// the union's running minimum takes last (as [`Tape::eval`] picks materials), then
     /// that leaf's distance alone differentiated in [`Dual1`] through the root's frame.
@@ -298,6 +335,29 @@ fn bounded<T: Lane<S = f32>, const M: bool>(
     let cc = c.min(tau);
     let g = T::select(outside, l.max(cc), cc);
     (T::select(skip, l, g), mat)
+}
+
+/// [`bounded`] with a safe step (`Program::seg_child` of a leaf).
+#[inline(always)]
+fn seg_bounded<T: Lane<S = f32>>(
+    leaf: &Leaf,
+    p: V3<T>,
+    d: V3<T>,
+    len: T,
+    below: Option<T>,
+) -> (T, T) {
+    let node = || {
+        let v = value(leaf, p);
+        let dl = leaf.to_local.apply_linear(d);
+        match leaf_lambda(&leaf.op, || leaf.to_local.apply(p), dl, len) {
+            Some(lambda) => (v, leaf_step(v, lambda, dl.len(), len, d)),
+            None => (v, fallback(v, d)),
+        }
+    };
+    match &leaf.bound {
+        None => node(),
+        Some(b) => bounded_step((b.lo, b.hi, b.tau), below, p, d, node),
+    }
 }
 
 /// A leaf's value (`Program::node` for a leaf), `p` in its parent's frame.

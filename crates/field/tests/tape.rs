@@ -1,9 +1,11 @@
 //! The flattened tape ([`marchmesh_field::tape`]) against the interpreter: bit for bit the
 //! same distances and materials on unions of analytic leaves (bounded and unbounded, the
 //! nearer-first pair, a single leaf); and the forward-mode gradient
-//! ([`Field::distance_gradient_x8`]) against f64 central differences.
+//! ([`Field::distance_gradient_x8`]) against f64 central differences; the 8-lane segment
+//! step ([`Field::segment_lanes`]) bit for bit the interpreter's ([`Field::segment_step`]).
 
 use glam::{DAffine3, DVec3, Vec3};
+use marchmesh_field::lane::{F32x8, V3};
 use marchmesh_field::{Field, FieldOptions};
 use marchmesh_scene::{Node, NodeKind, compose_transform};
 use proptest::prelude::*;
@@ -166,6 +168,40 @@ proptest! {
                     prop_assert!((g[i].as_dvec3() - want).length() < 2e-3,
                         "{} lane {}: {} vs {}", name, i, g[i], want);
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn lane_segment_steps_are_bit_for_bit_the_interpreter(
+        p in pt(),
+        dir in pt(),
+        axis in 0usize..4,
+        spread in 0.0f64..2.0,
+        len in 0.001f64..20.0,
+    ) {
+        // Some rays parallel to the boxes' slabs (`axis` < 3 zeroes one component).
+        let mut dir = dir - DVec3::new(0.0, 0.0, 3.0);
+        if axis < 3 {
+            dir[axis] = 0.0;
+        }
+        for (name, f) in cases() {
+            let pts: [Vec3; 8] = std::array::from_fn(|i| {
+                (p + DVec3::new(i as f64 * 0.37, -(i as f64) * 0.21, 0.1) * spread).as_vec3()
+            });
+            let dirs: [Vec3; 8] = std::array::from_fn(|i| {
+                (dir + DVec3::new(0.0, i as f64 * 0.1, 0.0) * spread).as_vec3()
+            });
+            let lens: [f32; 8] = std::array::from_fn(|i| (len * (1.0 + i as f64 * 0.5)) as f32);
+            let (v, s) = f
+                .segment_lanes(V3::from_points(pts), V3::from_points(dirs), F32x8(lens))
+                .expect("a tape");
+            for i in 0..8 {
+                let (sv, ss) = f.segment_step(pts[i], dirs[i], lens[i]);
+                prop_assert_eq!((v.0[i].to_bits(), s.0[i].to_bits()), (sv.to_bits(), ss.to_bits()),
+                    "{} lane {}: ({}, {}) vs ({}, {})", name, i, v.0[i], s.0[i], sv, ss);
+                // The value is the distance (lockstep bundles use it as such).
+                prop_assert_eq!(v.0[i].to_bits(), f.distance(pts[i]).to_bits(), "{} lane {}", name, i);
             }
         }
     }

@@ -678,6 +678,7 @@ impl SdfGeometry {
                         &mut |i, m, t| report(scope, Event::Done(i, m, t)),
                         |p| self.field.restricted_distance_lanes(&restricted, p),
                         |p, d, len| self.field.restricted_segment_step(&restricted, p, d, len),
+                        |p, d, len| self.field.restricted_segment_lanes(&restricted, p, d, len),
                     );
                     report(scope, Event::BundleEnd);
                 }
@@ -702,6 +703,7 @@ impl SdfGeometry {
             &mut |i, m, t| report(Scope::Whole, Event::Done(i, m, t)),
             |p| self.field.distance_lanes(p),
             |p, d, len| self.field.segment_step(p, d, len),
+            |p, d, len| self.field.segment_lanes(p, d, len),
         );
         report(Scope::Whole, Event::BundleEnd);
     }
@@ -729,8 +731,11 @@ impl SdfGeometry {
 
     /// The lockstep loop over `rays` (indices reported from `first_index`) with the 8-lane
     /// distance function `distance`: plain marching steps run on all lanes at once
-    /// ([`Lanes8::step`]), every other decision in the lane's scalar [`March`], which takes
-    /// its segment-tracing samples from `segment` (scalar).
+    /// ([`Lanes8::step`]), every other decision in the lane's scalar [`March`]. Lanes in the
+    /// segment-tracing phase take their samples from one 8-lane `segment_lanes` query per
+    /// iteration (bit for bit the scalar `segment`'s, and its values are the other lanes'
+    /// distances), or from `segment` one lane at a time where that returns `None` (no tape).
+    #[allow(clippy::too_many_arguments)]
     fn lockstep_with(
         &self,
         rays: &[Ray],
@@ -739,6 +744,7 @@ impl SdfGeometry {
         done: &mut impl FnMut(usize, Option<&March>, Termination),
         distance: impl Fn(V3<F32x8>) -> F32x8,
         segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
+        segment_lanes: impl Fn(V3<F32x8>, V3<F32x8>, F32x8) -> Option<(F32x8, F32x8)>,
     ) {
         let no_scalar = |_: Vec3| f32::NAN;
         let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
@@ -768,7 +774,18 @@ impl SdfGeometry {
             soa.seat(k, lane.as_ref().map(|l| &l.1));
         }
         while lanes.iter().any(Option::is_some) {
-            let d = distance(soa.points());
+            let points = soa.points();
+            let segmenting = soa.segmenting();
+            let seg = if segmenting != 0 {
+                segment_lanes(points, soa.dirs(), soa.segment_lens())
+            } else {
+                None
+            };
+            // A segment query's value is the distance, bit for bit: no second evaluation.
+            let d = match seg {
+                Some((v, _)) => v,
+                None => distance(points),
+            };
             let slow = soa.step(d, &self.params);
             for (k, lane) in lanes.iter_mut().enumerate() {
                 if slow & (1 << k) == 0 {
@@ -778,7 +795,13 @@ impl SdfGeometry {
                     continue;
                 };
                 soa.store(k, m);
-                match Self::advance(m, &self.params, Some(d.0[k]), &no_scalar, &segment) {
+                let next_step = match seg {
+                    Some((v, step)) if segmenting & (1 << k) != 0 => {
+                        m.feed_segment(v.0[k], step.0[k], &self.params)
+                    }
+                    _ => Self::advance(m, &self.params, Some(d.0[k]), &no_scalar, &segment),
+                };
+                match next_step {
                     Next::Continue => soa.load(k, m),
                     Next::Done(t) => {
                         done(*i, Some(m), t);
@@ -867,6 +890,7 @@ impl Geometry for SdfGeometry {
                 },
                 |p| self.field.distance_lanes(p),
                 |p, d, len| self.field.segment_step(p, d, len),
+                |p, d, len| self.field.segment_lanes(p, d, len),
             );
             return flush(Scope::Whole, &mut pending, out);
         }

@@ -817,6 +817,11 @@ pub(crate) struct Lanes8 {
     /// Lane holds a ray in the `Start` phase whose state lives here (all ones): its first
     /// sample, when it is a plain step into `March`, is taken here too.
     start: M8,
+    /// Per lane the segment its ray's next sample wants ([`March::segment_len`]; 0 when
+    /// the ray is not segment tracing).
+    seg_len: F32x8,
+    /// Bit `k`: lane `k`'s ray is segment tracing.
+    segmenting: u8,
 }
 
 impl Lanes8 {
@@ -834,6 +839,9 @@ impl Lanes8 {
         self.sign.0[k] = m.sign;
         self.t_end.0[k] = m.t_end;
         self.t.0[k] = m.t;
+        let seg = m.segment_len();
+        self.seg_len.0[k] = seg.unwrap_or(0.0);
+        self.segmenting = (self.segmenting & !(1 << k)) | (u8::from(seg.is_some()) << k);
         let (plain, start) = (m.plain(), m.start());
         self.fast.0[k] = if plain.is_some() { !0 } else { 0 };
         self.start.0[k] = if start.is_some() { !0 } else { 0 };
@@ -855,6 +863,7 @@ impl Lanes8 {
             None => {
                 self.fast.0[k] = 0;
                 self.start.0[k] = 0;
+                self.segmenting &= !(1 << k);
             }
         }
     }
@@ -871,6 +880,26 @@ impl Lanes8 {
                 evals: self.evals[k],
             });
         }
+    }
+
+    /// Bit `k`: lane `k`'s ray is segment tracing (its next sample is a
+    /// `Field::segment_step` over [`Lanes8::segment_lens`]).
+    #[inline]
+    pub fn segmenting(&self) -> u8 {
+        self.segmenting
+    }
+
+    /// Per lane the segment length a segment-tracing ray's next sample wants (0 on other
+    /// lanes).
+    #[inline]
+    pub fn segment_lens(&self) -> F32x8 {
+        self.seg_len
+    }
+
+    /// The eight ray directions (as [`March::dir`]).
+    #[inline]
+    pub fn dirs(&self) -> V3<F32x8> {
+        self.dir
     }
 
     /// The eight points to evaluate (`o + dir * t`, as [`March::point`]).

@@ -198,24 +198,9 @@ fn over_relaxation_never_steps_through_a_thin_surface() {
     }
 }
 
-#[test]
-fn lockstep_batches_equal_single_rays() {
-    let s = scene(
-        r#"{"shape": {"torus": {"major_radius": 1, "minor_radius": 0.3}}, "transform": {"rotate_deg": [-60, 0, 0]}},
-           {"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}},
-           {"shape": {"smooth_union": {"blend_radius": 0.3, "children": [{"shape": {"sphere": {"radius": 0.4}}, "transform": {"translate": [1, 1, 0]}}, {"shape": {"box": {"half_extents": [0.3, 0.3, 0.3]}}, "transform": {"translate": [1.4, 1, 0]}}]}}}"#,
-        "",
-    );
-    // Without culling the lockstep path runs the same arithmetic as single rays: bit for
-    // bit the same results (culling changes the step sizes; see the next test).
-    let g = build(
-        &s,
-        &SdfOptions {
-            cull: false,
-            ..SdfOptions::DEFAULT
-        },
-    )
-    .unwrap();
+/// Traces 1000 rays from the origin through `g` in lockstep (closest and occlusion) and
+/// one at a time, asserts bit-for-bit equal results and returns the total steps.
+fn assert_lockstep_equals_single_rays(g: &impl Geometry, name: &str) -> u64 {
     let rays: Vec<Ray> = (0..1000)
         .map(|i| {
             let x = (i % 37) as f32 / 37.0 - 0.5;
@@ -231,10 +216,50 @@ fn lockstep_batches_equal_single_rays() {
     g.closest_hits(&rays, &mut batch);
     let mut occ = vec![Default::default(); rays.len()];
     g.occluded_many(&rays, &mut occ);
+    let mut steps = 0u64;
     for (i, r) in rays.iter().enumerate() {
-        assert_eq!(batch[i], g.closest_hit(r), "ray {i}");
-        assert_eq!(occ[i], g.occluded(r), "ray {i}");
+        assert_eq!(batch[i], g.closest_hit(r), "{name}: ray {i}");
+        assert_eq!(occ[i], g.occluded(r), "{name}: ray {i}");
+        steps += u64::from(batch[i].work.steps);
     }
+    steps
+}
+
+#[test]
+fn lockstep_batches_equal_single_rays() {
+    // Without culling the lockstep path runs the same arithmetic as single rays: bit for
+    // bit the same results (culling changes the step sizes; see the next test).
+    let no_cull = |segment: bool| SdfOptions {
+        cull: false,
+        segment,
+        ..SdfOptions::DEFAULT
+    };
+    // A smooth union: the interpreter, scalar segment steps.
+    let s = scene(
+        r#"{"shape": {"torus": {"major_radius": 1, "minor_radius": 0.3}}, "transform": {"rotate_deg": [-60, 0, 0]}},
+           {"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}},
+           {"shape": {"smooth_union": {"blend_radius": 0.3, "children": [{"shape": {"sphere": {"radius": 0.4}}, "transform": {"translate": [1, 1, 0]}}, {"shape": {"box": {"half_extents": [0.3, 0.3, 0.3]}}, "transform": {"translate": [1.4, 1, 0]}}]}}}"#,
+        "",
+    );
+    assert_lockstep_equals_single_rays(&build(&s, &no_cull(true)).unwrap(), "smooth union");
+    // A union of leaves with local bounds (a tape: 8-lane segment steps), rays grazing the
+    // ground, the box top and the cylinder cap, so segment tracing engages.
+    let s = scene(
+        r#"{"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [-0.8, 0.2, 3]}},
+           {"shape": {"box": {"half_extents": [0.6, 0.25, 0.4]}}, "transform": {"translate": [0.7, -0.2, 3.5], "rotate_deg": [0, 25, 0]}},
+           {"shape": {"cylinder": {"radius": 0.3, "height": 0.4}}, "transform": {"translate": [0, 0.05, 6]}},
+           {"shape": {"plane": {}}, "transform": {"translate": [0, -0.45, 0]}}"#,
+        "",
+    );
+    let with = assert_lockstep_equals_single_rays(&build(&s, &no_cull(true)).unwrap(), "tape");
+    let without = assert_lockstep_equals_single_rays(
+        &build(&s, &no_cull(false)).unwrap(),
+        "tape without segment tracing",
+    );
+    assert!(
+        with * 10 < without * 9,
+        "segment tracing engaged: {with} vs {without} steps"
+    );
 }
 
 #[test]

@@ -29,7 +29,7 @@
 //! sphere-tracing step; bounds get a relative margin for rounding ([`LAMBDA_MARGIN`]).
 
 use super::{Ctx, GridSampler, Op, Program};
-use crate::lane::{Scalar, V3};
+use crate::lane::{Lane, Scalar, V3};
 use crate::shapes;
 
 /// Relative and absolute (times `|d|`) margin added to every directional bound, so rounding
@@ -68,33 +68,13 @@ impl<S: Scalar> Program<S> {
         if !ins.has_bound {
             return self.seg_node(i, p, d, len, above, grids);
         }
-        let zero = S::c(0.0);
-        let l = shapes::box_distance(p, V3::splat3(ins.lo), V3::splat3(ins.hi));
-        let outside = zero < l;
-        let tau = ins.tau;
-        let mut skip = outside && tau <= l;
-        if let Ctx::Below(thr) = ctx {
-            skip |= outside && thr <= l;
-        }
-        // Outside the box the subtree's value is >= l > 0 until the ray enters the box.
-        let enter = if outside {
-            ray_box_enter(p, d, ins.lo, ins.hi)
-        } else {
-            zero
+        let below = match ctx {
+            Ctx::Below(thr) => Some(thr),
+            _ => None,
         };
-        if skip {
-            return (l, enter);
-        }
-        let (c, sc) = self.seg_node(i, p, d, len, above, grids);
-        let cc = c.min(tau);
-        let g = if outside { l.max(cc) } else { cc };
-        let step = if zero < g {
-            // `max(l, min(c, tau))` stays positive while either term does.
-            enter.max(if zero < c { sc } else { zero })
-        } else {
-            fallback(g, d)
-        };
-        (g, step)
+        bounded_step((ins.lo, ins.hi, ins.tau), below, p, d, || {
+            self.seg_node(i, p, d, len, above, grids)
+        })
     }
 
     /// [`Program::node`] with a safe step (in the ray parameter, which every frame shares).
@@ -112,27 +92,14 @@ impl<S: Scalar> Program<S> {
         let end = ins.end as usize;
         let q = || ins.to_local.apply(p);
         let dl = || ins.to_local.apply_linear(d);
-        // A leaf: the interpreter's value, the step from its directional bound `lambda`
-        // (local frame; valid on `[0, len]` when `on_segment`).
-        let leaf = |lambda: S, on_segment: bool| -> (S, S) {
+        let dl = dl();
+        if let Some(lambda) = leaf_lambda(&ins.op, q, dl, len) {
             let (v, _) = self.node::<S, false>(i, p, above, grids);
-            let dn = dl().len();
-            let m = S::c(LAMBDA_MARGIN);
-            let lam = lambda + lambda * m + dn * m;
-            let mut s = v.abs() / lam;
-            if on_segment {
-                s = s.min(len);
-            }
-            (v, s.max(fallback(v, d)))
-        };
+            return (v, leaf_step(v, lambda, dl.len(), len, d));
+        }
         match &ins.op {
-            Op::Plane { n, .. } => leaf(V3::splat3(*n).dot(dl()).abs(), false),
-            Op::Box { b } => leaf(box_lambda(q(), dl(), len, *b), true),
-            Op::Cylinder { r, h } => leaf(cylinder_lambda(q(), dl(), len, *r, *h), true),
-            Op::Sphere { .. } => leaf(sphere_lambda(q(), dl(), len), true),
-            Op::SphereAt { c, .. } => leaf(sphere_lambda(q() - V3::splat3(*c), dl(), len), true),
             Op::Union => {
-                let (q, dl) = (q(), dl());
+                let q = q();
                 let inf = S::c(f64::INFINITY);
                 let mut j = i + 1;
                 let (mut best, mut step) = match above {
@@ -156,7 +123,7 @@ impl<S: Scalar> Program<S> {
                 (v, s)
             }
             Op::Intersection => {
-                let (q, dl) = (q(), dl());
+                let q = q();
                 let mut j = i + 1;
                 let mut best = S::c(f64::NEG_INFINITY);
                 let mut step = zero;
@@ -173,7 +140,7 @@ impl<S: Scalar> Program<S> {
                 (v, if zero < v { step } else { fallback(v, d) })
             }
             Op::Subtraction => {
-                let (q, dl) = (q(), dl());
+                let q = q();
                 let mut j = i + 1;
                 let (mut best, first_step) = self.seg_child(j, q, dl, len, Ctx::Plain, grids);
                 let mut step = if zero < best { first_step } else { zero };
@@ -202,60 +169,151 @@ impl<S: Scalar> Program<S> {
 }
 
 /// The global (1-Lipschitz) safe step `|v| / |d|`; 0 for NaN.
-#[inline]
-fn fallback<S: Scalar>(v: S, d: V3<S>) -> S {
+#[inline(always)]
+pub(crate) fn fallback<T: Lane>(v: T, d: V3<T>) -> T {
     let s = v.abs() / d.len();
-    if s >= S::c(0.0) { s } else { S::c(0.0) }
+    let zero = T::c(0.0);
+    T::select(T::le(zero, s), s, zero)
+}
+
+/// Per lane `(a < 0) != (b < 0)`.
+#[inline(always)]
+fn signs_differ<T: Lane>(a: T, b: T) -> T::Mask {
+    let zero = T::c(0.0);
+    let (na, nb) = (T::lt(a, zero), T::lt(b, zero));
+    T::or(T::and(na, T::not(nb)), T::and(T::not(na), nb))
 }
 
 /// The ray parameter `s >= 0` where `p + s d` first enters the box `[lo, hi]` (infinite
 /// bounds allowed), or infinity when it never does. `p` is outside the box.
-fn ray_box_enter<S: Scalar>(p: V3<S>, d: V3<S>, lo: [S; 3], hi: [S; 3]) -> S {
-    let zero = S::c(0.0);
-    let inf = S::c(f64::INFINITY);
+#[inline(always)]
+pub(crate) fn ray_box_enter<T: Lane>(p: V3<T>, d: V3<T>, lo: [T::S; 3], hi: [T::S; 3]) -> T {
+    let zero = T::c(0.0);
+    let inf = T::c(f64::INFINITY);
     let mut enter = zero;
     let mut exit = inf;
+    let mut miss = T::lt(zero, zero);
     for (pa, da, l, h) in [
         (p.x, d.x, lo[0], hi[0]),
         (p.y, d.y, lo[1], hi[1]),
         (p.z, d.z, lo[2], hi[2]),
     ] {
-        if da == zero {
-            if pa < l || pa > h {
-                return inf;
-            }
-            continue;
-        }
+        let (l, h) = (T::splat(l), T::splat(h));
+        // Parallel to the slab: inside it or never in the box.
+        let flat = T::and(T::le(da, zero), T::le(zero, da));
+        miss = T::or(miss, T::and(flat, T::or(T::lt(pa, l), T::lt(h, pa))));
         let a = (l - pa) / da;
         let b = (h - pa) / da;
-        let (n, f) = if a < b { (a, b) } else { (b, a) };
+        let ordered = T::lt(a, b);
+        let (n, f) = (T::select(ordered, a, b), T::select(ordered, b, a));
         // NaN (an infinite bound at an infinite position) leaves the interval as it is.
-        if n > enter {
-            enter = n;
-        }
-        if f < exit {
-            exit = f;
-        }
+        let live = T::not(flat);
+        enter = T::select(T::and(live, T::lt(enter, n)), n, enter);
+        exit = T::select(T::and(live, T::lt(f, exit)), f, exit);
     }
-    if exit < enter { inf } else { enter }
+    T::select(T::or(miss, T::lt(exit, enter)), inf, enter)
+}
+
+/// A bounded node's value and safe step (`Program::child` with a safe step): `lo`, `hi`
+/// its box and `tau` its skip distance in the parent's frame, `below` the running minimum
+/// of an enclosing union it is skipped against, `node` the unbounded node's value and step.
+/// Outside the box the node's value is at least the box distance, positive until the ray
+/// enters the box (an exact slab test).
+#[inline(always)]
+pub(crate) fn bounded_step<T: Lane>(
+    (lo, hi, tau): ([T::S; 3], [T::S; 3], T::S),
+    below: Option<T>,
+    p: V3<T>,
+    d: V3<T>,
+    node: impl FnOnce() -> (T, T),
+) -> (T, T) {
+    let zero = T::c(0.0);
+    let l = shapes::box_distance(p, V3::splat3(lo), V3::splat3(hi));
+    let outside = T::lt(zero, l);
+    let tau = T::splat(tau);
+    let mut skip = T::and(outside, T::le(tau, l));
+    if let Some(thr) = below {
+        skip = T::or(skip, T::and(outside, T::le(thr, l)));
+    }
+    let enter = if T::any(outside) {
+        T::select(outside, ray_box_enter(p, d, lo, hi), zero)
+    } else {
+        zero
+    };
+    if T::all(skip) {
+        return (l, enter);
+    }
+    let (c, sc) = node();
+    let cc = c.min(tau);
+    let g = T::select(outside, l.max(cc), cc);
+    // `max(l, min(c, tau))` stays positive while either term does.
+    let positive = enter.max(T::select(T::lt(zero, c), sc, zero));
+    let step = T::select(T::lt(zero, g), positive, fallback(g, d));
+    (T::select(skip, l, g), T::select(skip, enter, step))
+}
+
+/// The directional bound `lambda` of leaf `op` over the segment `[q, q + len d]` (local
+/// frame, `q` computed only for leaves that need it) and whether it holds only on the
+/// segment; `None` for leaves without a local bound (the global bound serves them) and for
+/// inner nodes.
+#[inline(always)]
+pub(crate) fn leaf_lambda<T: Lane>(
+    op: &Op<T::S>,
+    q: impl FnOnce() -> V3<T>,
+    d: V3<T>,
+    len: T,
+) -> Option<(T, bool)> {
+    Some(match op {
+        Op::Plane { n, .. } => (V3::splat3(*n).dot(d).abs(), false),
+        Op::Box { b } => (box_lambda(q(), d, len, *b), true),
+        Op::Cylinder { r, h } => (cylinder_lambda(q(), d, len, *r, *h), true),
+        Op::Sphere { .. } => (sphere_lambda(q(), d, len), true),
+        Op::SphereAt { c, .. } => (sphere_lambda(q() - V3::splat3(*c), d, len), true),
+        Op::Ellipsoid { .. }
+        | Op::Torus { .. }
+        | Op::Triangle(_)
+        | Op::Mesh { .. }
+        | Op::Union
+        | Op::Intersection
+        | Op::Subtraction
+        | Op::SmoothUnion { .. }
+        | Op::Repeat { .. } => return None,
+    })
+}
+
+/// A leaf's safe step from its value `v` and directional bound `lambda` (local frame,
+/// `dn` the local direction's length; clamped to `len` when the bound holds only on the
+/// segment), never below the global bound along `d` (the parent frame's direction).
+#[inline(always)]
+pub(crate) fn leaf_step<T: Lane>(
+    v: T,
+    (lambda, on_segment): (T, bool),
+    dn: T,
+    len: T,
+    d: V3<T>,
+) -> T {
+    let m = T::c(LAMBDA_MARGIN);
+    let lam = lambda + lambda * m + dn * m;
+    let mut s = v.abs() / lam;
+    if on_segment {
+        s = s.min(len);
+    }
+    s.max(fallback(v, d))
 }
 
 /// Bound on `|d . grad f|` for the box of half extents `b` at the origin over the segment
 /// `[q, q + len d]`: outside the box the gradient lies on the axes with `|x_i| > b_i`, inside
 /// on the axis of the largest `|x_i| - b_i`; axes that can be neither on the segment drop
 /// out of `|d|`.
-fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
-    let zero = S::c(0.0);
+#[inline(always)]
+fn box_lambda<T: Lane>(q: V3<T>, d: V3<T>, len: T, b: [T::S; 3]) -> T {
+    let zero = T::c(0.0);
     let q1 = q + d.scale(len);
-    let range = |a0: S, a1: S, b: S| -> (S, S) {
+    let range = |a0: T, a1: T, b: T::S| -> (T, T) {
         let (x0, x1) = (a0.abs(), a1.abs());
         let hi = x0.max(x1);
-        let lo = if (a0 < zero) != (a1 < zero) {
-            zero
-        } else {
-            x0.min(x1)
-        };
-        (lo - b, hi - b)
+        let lo = T::select(signs_differ(a0, a1), zero, x0.min(x1));
+        (lo - T::splat(b), hi - T::splat(b))
     };
     let r = [
         range(q.x, q1.x, b[0]),
@@ -268,10 +326,8 @@ fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
     for a in 0..3 {
         let (_, hi) = r[a];
         // Active when it may be positive or the largest; NaN counts as active (safe).
-        let never_largest = hi < floor;
-        if zero < hi || !never_largest {
-            l2 = l2 + da[a] * da[a];
-        }
+        let active = T::or(T::lt(zero, hi), T::not(T::lt(hi, floor)));
+        l2 = T::select(active, l2 + da[a] * da[a], l2);
     }
     l2.sqrt()
 }
@@ -284,55 +340,44 @@ fn box_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, b: [S; 3]) -> S {
 /// throughout, so a ray grazing the cap plane gets `lambda = |d_y|`: without this every ray
 /// skimming a cap within a few pixel footprints crawled at steps of its height (the
 /// conformance case `cylinder` exhausted 512 steps at a hit shell of 0.05 px).
-fn cylinder_lambda<S: Scalar>(q: V3<S>, d: V3<S>, len: S, r: S, h: S) -> S {
-    let zero = S::c(0.0);
+#[inline(always)]
+fn cylinder_lambda<T: Lane>(q: V3<T>, d: V3<T>, len: T, r: T::S, h: T::S) -> T {
+    let zero = T::c(0.0);
     let q1 = q + d.scale(len);
-    let rho = |x: S, z: S| (x * x + z * z).sqrt();
+    let rho = |x: T, z: T| (x * x + z * z).sqrt();
     let (r0, r1) = (rho(q.x, q.z), rho(q1.x, q1.z));
     let dxz2 = d.x * d.x + d.z * d.z;
     // The radial distance is convex along the segment: largest at an end, smallest at the
     // point closest to the axis (clamped to the segment).
-    let closest = if zero < dxz2 {
-        let s = (-(q.x * d.x + q.z * d.z) / dxz2).max(zero).min(len);
-        rho(q.x + d.x * s, q.z + d.z * s)
-    } else {
-        r0
-    };
+    let s = (-(q.x * d.x + q.z * d.z) / dxz2).max(zero).min(len);
+    let closest = T::select(T::lt(zero, dxz2), rho(q.x + d.x * s, q.z + d.z * s), r0);
+    let (r, h) = (T::splat(r), T::splat(h));
     let radial = (closest.min(r0).min(r1) - r, r0.max(r1) - r);
     let (y0, y1) = (q.y.abs(), q1.y.abs());
-    let ylo = if (q.y < zero) != (q1.y < zero) {
-        zero
-    } else {
-        y0.min(y1)
-    };
+    let ylo = T::select(signs_differ(q.y, q1.y), zero, y0.min(y1));
     let cap = (ylo - h, y0.max(y1) - h);
     let floor = radial.0.max(cap.0);
-    let mut l2 = zero;
     // Active when it may be positive or the largest; NaN counts as active (safe).
-    let (radial_never_largest, cap_never_largest) = (radial.1 < floor, cap.1 < floor);
-    if zero < radial.1 || !radial_never_largest {
-        l2 = l2 + dxz2;
-    }
-    if zero < cap.1 || !cap_never_largest {
-        l2 = l2 + d.y * d.y;
-    }
+    let active = |hi: T| T::or(T::lt(zero, hi), T::not(T::lt(hi, floor)));
+    let mut l2 = zero;
+    l2 = T::select(active(radial.1), l2 + dxz2, l2);
+    l2 = T::select(active(cap.1), l2 + d.y * d.y, l2);
     l2.sqrt()
 }
 
 /// Bound on `|d . grad |x - c||` over the segment `[a, a + len d]` with `a = q - c`: with
 /// `e = d / |d|`, `u = (a + s d) . e` and `w = |a x e|` (the ray's distance from the centre),
 /// the derivative is `|d| |u| / sqrt(u^2 + w^2)`, increasing in `|u|`, so largest at an end.
-fn sphere_lambda<S: Scalar>(a: V3<S>, d: V3<S>, len: S) -> S {
+#[inline(always)]
+fn sphere_lambda<T: Lane>(a: V3<T>, d: V3<T>, len: T) -> T {
+    let zero = T::c(0.0);
     let dn = d.len();
-    let positive = dn > S::c(0.0);
-    if !positive {
-        return S::c(0.0);
-    }
-    let e = d.scale(S::c(1.0) / dn);
+    let e = d.scale(T::c(1.0) / dn);
     let u0 = a.dot(e);
     let u1 = u0 + len * dn;
     let u = u0.abs().max(u1.abs());
     let w = a.cross(e).len();
     let r = (u * u + w * w).sqrt();
-    if r > S::c(0.0) { dn * (u / r) } else { dn }
+    let lambda = T::select(T::lt(zero, r), dn * (u / r), dn);
+    T::select(T::lt(zero, dn), lambda, zero)
 }
