@@ -547,6 +547,22 @@ impl Field {
         Some((d.v, Vec3::new(d.d.x, d.d.y, d.d.z)))
     }
 
+    /// Normals' gradients at eight points on surfaces: per lane the analytic gradient of
+    /// the leaf nearest to the point ([`Tape::nearest_gradients`]: at a hit, the surface
+    /// hit), far cheaper than [`Field::distance_gradient_x8`] on a tape of several leaves
+    /// and the same away from ties and bounds. `None` when the field has no [`tape`].
+    #[inline]
+    pub fn nearest_gradients_x8(&self, p: [Vec3; 8]) -> Option<[Vec3; 8]> {
+        let t = self.tape.as_ref()?;
+        Some(t.nearest_gradients(V3::from_points(p)))
+    }
+
+    /// [`Field::nearest_gradients_x8`] at one point (bit for bit a lane's result).
+    #[inline]
+    pub fn nearest_gradient(&self, p: Vec3) -> Option<Vec3> {
+        Some(self.tape.as_ref()?.nearest_gradient(p))
+    }
+
     /// Whether the 8-lane evaluations run a flattened [`tape`] (a union of at most
     /// [`Tape::MAX_LEAVES`] analytic leaves) rather than the interpreter.
     pub fn has_tape(&self) -> bool {

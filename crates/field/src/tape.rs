@@ -239,30 +239,48 @@ impl Tape {
     /// root's box, or past a bounded leaf's skip distance, gets the leaf's own gradient
     /// rather than the box distance's), so it is for points on or near a surface.
     pub fn nearest_gradients(&self, p: V3<F32x8>) -> [Vec3; 8] {
-        let nearest: [u32; 8] = match &self.root {
-            None => [0; 8],
+        let nearest = self.nearest::<F32x8>(p);
+        std::array::from_fn(|k| {
+            self.leaf_gradient(nearest[k], Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k]))
+        })
+    }
+
+    /// [`Tape::nearest_gradients`] at one point (bit for bit a lane's result: the same
+    /// operations per lane).
+    pub fn nearest_gradient(&self, p: Vec3) -> Vec3 {
+        let nearest = self.nearest::<f32>(V3::new(p.x, p.y, p.z));
+        self.leaf_gradient(nearest, p)
+    }
+
+    /// Per lane the index of the leaf the union's running minimum takes last.
+    #[inline(always)]
+    fn nearest<T: Lane<S = f32>>(&self, p: V3<T>) -> T::Mat {
+        match &self.root {
+            None => T::mat_splat(0),
             Some(root) => {
                 let q = root.to_local.apply(p);
-                let (mut best, _) = bounded::<F32x8, false>(&self.leaves[0], q, None);
-                let mut at = [0u32; 8];
+                let (mut best, _) = bounded::<T, false>(&self.leaves[0], q, None);
+                let mut at = T::mat_splat(0);
                 for (k, l) in self.leaves.iter().enumerate().skip(1) {
-                    let (d, _) = bounded::<F32x8, false>(l, q, Some(best));
-                    let take = F32x8::lt(d, best);
+                    let (d, _) = bounded::<T, false>(l, q, Some(best));
+                    let take = T::lt(d, best);
                     best = best.min(d);
-                    at = F32x8::mat_select(take, [k as u32; 8], at);
+                    at = T::mat_select(take, T::mat_splat(k as u32), at);
                 }
                 at
             }
+        }
+    }
+
+    /// The analytic gradient of leaf `k`'s distance alone at `p` (through the root's frame).
+    fn leaf_gradient(&self, k: u32, p: Vec3) -> Vec3 {
+        let x = Dual1::seed(V3::new(p.x, p.y, p.z));
+        let leaf = &self.leaves[k as usize];
+        let d = match &self.root {
+            None => value(leaf, x),
+            Some(root) => value(leaf, root.to_local.apply(x)) * Dual1::splat(root.dscale),
         };
-        std::array::from_fn(|k| {
-            let x = Dual1::seed(V3::new(p.x.0[k], p.y.0[k], p.z.0[k]));
-            let leaf = &self.leaves[nearest[k] as usize];
-            let d = match &self.root {
-                None => value(leaf, x),
-                Some(root) => value(leaf, root.to_local.apply(x)) * Dual1::splat(root.dscale),
-            };
-            Vec3::new(d.d.x, d.d.y, d.d.z)
-        })
+        Vec3::new(d.d.x, d.d.y, d.d.z)
     }
 
     /// The root union's value (without its own bound), `p` in the root's parent frame.

@@ -153,6 +153,13 @@ proptest! {
             let pts: [Vec3; 8] = std::array::from_fn(|i| (p + DVec3::new(0.0, 0.0, i as f64 * 0.05)).as_vec3());
             let (d, g) = f.distance_gradient_x8(pts).expect("no mesh grids");
             prop_assert_eq!(d, f.distance_x8(pts), "{}", name);
+            // The nearest leaf's gradient: one point at a time bit for bit the lanes'.
+            let near = f.nearest_gradients_x8(pts).expect("a tape");
+            for i in 0..8 {
+                let one = f.nearest_gradient(pts[i]).expect("a tape");
+                prop_assert_eq!(one.to_array().map(f32::to_bits), near[i].to_array().map(f32::to_bits),
+                    "{} lane {}", name, i);
+            }
             for i in 0..8 {
                 let q = pts[i].as_dvec3();
                 let h = 1e-5;

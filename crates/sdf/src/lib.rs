@@ -388,13 +388,15 @@ impl SdfGeometry {
     }
 
     /// Normals and materials of up to 8 hits at once (`hits[..n]`: point, ray direction,
-    /// normal step). The normal is the field's analytic gradient at the point
-    /// ([`Field::distance_gradient_x8`], one forward-mode evaluation for all eight: as
-    /// accurate as the f32 distance, where central differences lose `ulp(|p|) / h`), the
-    /// material the field's at `p - 2 h dir` as in [`SdfGeometry::normal_material`] (one
-    /// 8-lane evaluation). A hit whose gradient is shorter than 0.9 or not finite (an
-    /// unsigned surface at its zero set, a smooth blend, an ellipsoid's bound, a mesh grid)
-    /// takes [`SdfGeometry::normal_material`] instead, with its straddle fallback.
+    /// normal step). The normal is the analytic gradient of the field's leaf nearest to the
+    /// point, the surface hit ([`Field::nearest_gradients_x8`]: one 8-lane evaluation to
+    /// find the leaf, then that leaf alone differentiated per lane; as accurate as the f32
+    /// distance, where central differences lose `ulp(|p|) / h`; a dual-number evaluation
+    /// of the whole tape cost twice as much on 4-5 leaves), the material the field's at
+    /// `p - 2 h dir` as in [`SdfGeometry::normal_material`] (one 8-lane evaluation). A hit
+    /// whose gradient is shorter than 0.9 or not finite (an unsigned surface at its zero
+    /// set, an ellipsoid's bound), or whose field has no tape (CSG, smooth blends, mesh
+    /// grids), takes [`SdfGeometry::normal_material`] instead, with its straddle fallback.
     ///
     /// Hits of a bundle traced through a restricted field (`scope`) take the gradient of the
     /// nearest kept leaf ([`Field::restricted_nearest_gradients_x8`]: the surface hit, whose
@@ -414,7 +416,7 @@ impl SdfGeometry {
         let hit = |k: usize| if k < n { hits[k] } else { first };
         let points = std::array::from_fn(|k| hit(k).0);
         let grads = match scope {
-            Scope::Whole => self.field.distance_gradient_x8(points).map(|(_, g)| g),
+            Scope::Whole => self.field.nearest_gradients_x8(points),
             Scope::Restricted(r) => self.field.restricted_nearest_gradients_x8(r, points),
         };
         let Some(g) = grads else {
@@ -458,7 +460,7 @@ impl SdfGeometry {
     /// The normal and material of one hit as [`SdfGeometry::normals_material_x8`] computes
     /// them (bit for bit: a single ray and the lockstep lanes report the same hit).
     fn normal_material_one(&self, p: Vec3, dir: Vec3, h: f32) -> (Vec3, MaterialId) {
-        if let Some((_, g)) = self.field.distance_gradient(p) {
+        if let Some(g) = self.field.nearest_gradient(p) {
             let len = g.length();
             if len >= 0.9 && len.is_finite() {
                 let (_, m) = self.field.distance_material(p - dir * (2.0 * h));
