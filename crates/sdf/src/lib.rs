@@ -789,10 +789,12 @@ impl SdfGeometry {
                 None => distance(points),
             };
             let slow = soa.step(d, &self.params);
-            for (k, lane) in lanes.iter_mut().enumerate() {
-                if slow & (1 << k) == 0 {
-                    continue;
-                }
+            // Only the lanes that did not advance (most iterations have none).
+            let mut pending = slow;
+            while pending != 0 {
+                let k = pending.trailing_zeros() as usize;
+                pending &= pending - 1;
+                let lane = &mut lanes[k];
                 let Some((i, m)) = lane.as_mut() else {
                     continue;
                 };
