@@ -536,17 +536,6 @@ impl Field {
         Some((d.v.0, g))
     }
 
-    /// [`Field::distance_gradient_x8`] at one point ([`Dual1`]: per lane the same
-    /// operations, so the same bits as the 8-lane result).
-    #[inline]
-    pub fn distance_gradient(&self, p: Vec3) -> Option<(f32, Vec3)> {
-        let t = self.tape.as_ref()?;
-        let d = t
-            .eval::<Dual1, false>(Dual1::seed(V3::new(p.x, p.y, p.z)))
-            .0;
-        Some((d.v, Vec3::new(d.d.x, d.d.y, d.d.z)))
-    }
-
     /// Normals' gradients at eight points on surfaces: per lane the analytic gradient of
     /// the leaf nearest to the point ([`Tape::nearest_gradients`]: at a hit, the surface
     /// hit), far cheaper than [`Field::distance_gradient_x8`] on a tape of several leaves

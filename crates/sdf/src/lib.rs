@@ -13,10 +13,10 @@
 //!   field is below `eps` they step by the (safe) field value and only count a hit if the
 //!   field drops below half of its starting value (another surface closing in, e.g. at a
 //!   contact), so a ray never re-hits the surface it leaves yet still sees contacts.
-//! * Normals: the field's analytic gradient at the hit, by forward-mode differentiation
-//!   ([`marchmesh_field::Dual8`]) of the flattened program ([`marchmesh_field::tape`]), for
-//!   the 8 hits of a lockstep batch in one evaluation (a single ray gets the same bits from
-//!   the scalar [`marchmesh_field::Dual1`]). Where there is no tape (CSG, repetition, mesh
+//! * Normals: the analytic gradient of the flattened program's ([`marchmesh_field::tape`])
+//!   leaf nearest to the hit, differentiated alone ([`marchmesh_field::Dual1`]); the 8 hits
+//!   of a lockstep batch find their leaves in one 8-lane evaluation, and a single ray gets
+//!   the same bits ([`marchmesh_field::Field::nearest_gradient`]). Where there is no tape (CSG, repetition, mesh
 //!   grids, large unions) or the gradient is shorter than 0.9 (an unsigned surface at its
 //!   zero set, a smooth blend, an ellipsoid's bound), central differences of the field with a
 //!   step that is a fraction of the pixel footprint ([`SdfOptions::normal_step`]), evaluated

@@ -77,11 +77,14 @@ const SWEEP_BUDGET: u32 = 32;
 
 /// Evaluations a ray spends sphere tracing before slow progress switches it to segment
 /// tracing (and the wait after a switch that gained nothing): rays that hit or leave within
-/// that many pay nothing for the mechanism, and a segment step (one scalar query) costs more
-/// than a plain 8-lane step. Measured on the default suite's scenes (256x256 primary rays,
-/// time ratio plain / segment, alternating rounds, load ~11.7 on 2 cores): 8 with ratio 0.9:
-/// seed-spheres 0.86, csg 1.00, primitives 0.98; 16 with 0.95 and the wait: 0.91, 1.15,
-/// 0.95; 32 with 0.95: 0.97, 0.99, 1.04 (within noise of plain; 13-18% fewer steps).
+/// that many pay nothing for the mechanism, and a segment step (the bounds on top of the
+/// distance, then a scalar decision) costs more than a plain 8-lane step. Measured on the
+/// default suite's scenes (256x256 primary rays, time ratio plain / segment, alternating
+/// rounds, load ~11.7 on 2 cores): 8 with ratio 0.9: seed-spheres 0.86, csg 1.00,
+/// primitives 0.98; 16 with 0.95 and the wait: 0.91, 1.15, 0.95; 32 with 0.95: 0.97, 0.99,
+/// 1.04 (within noise of plain; 13-18% fewer steps). Since segment samples of taped fields
+/// are 8-lane queries (`Tape::segment`), 16 and 8 were still 1.10x and 1.07x slower than 32
+/// on seed-spheres (the default suite's sdf levels, 1 thread, load 1.2-1.8).
 pub(crate) const SEGMENT_MIN_EVALS: u32 = 32;
 
 /// Slow progress: a distance staying within this factor of the previous one, shrinking or
@@ -92,7 +95,7 @@ pub(crate) const SEGMENT_RATIO: f32 = 0.95;
 
 /// Evaluations between two switches to segment tracing from the shell (receding samples,
 /// [`March::fine`]): a surface without a local bound (the global fallback) gains nothing, and
-/// each attempt costs one scalar segment query.
+/// each attempt costs one segment query.
 const SHELL_SEGMENT_WAIT: u32 = 8;
 
 /// Each segment is this many times the last step (Galin et al. grow the segment by a
