@@ -6,9 +6,10 @@
 //! issue 14 is measured (the image stays the same size and similar in coverage).
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
-//! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false] [versus=KEY=VALUE]`
+//! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false]
+//! [beams=true|false] [versus=KEY=VALUE]`
 //!
-//! `versus=cull=false` (or `lockstep=false`, `segment=false`) builds a second geometry with that option
+//! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.
@@ -49,6 +50,7 @@ fn run() -> Result<(), String> {
     let lockstep = flag(kv("lockstep"));
     let cull = flag(kv("cull"));
     let segment = flag(kv("segment"));
+    let beams = flag(kv("beams"));
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -60,6 +62,7 @@ fn run() -> Result<(), String> {
         lockstep,
         cull,
         segment,
+        beams,
         ..SdfOptions::DEFAULT
     };
     let g = build(&scene, &options).map_err(|e| e.to_string())?;
@@ -74,9 +77,11 @@ fn run() -> Result<(), String> {
                 "lockstep=true" => other.lockstep = true,
                 "segment=false" => other.segment = false,
                 "segment=true" => other.segment = true,
+                "beams=false" => other.beams = false,
+                "beams=true" => other.beams = true,
                 _ => {
                     return Err(format!(
-                        "versus: {spec}: expected cull=BOOL, lockstep=BOOL or segment=BOOL"
+                        "versus: {spec}: expected cull=BOOL, lockstep=BOOL, segment=BOOL or beams=BOOL"
                     ));
                 }
             }

@@ -27,6 +27,7 @@
 //! * [`Geometry::closest_hits`] / [`Geometry::occluded_many`] trace 8 rays in lockstep: one
 //!   8-lane field evaluation per step, a lane that finishes is refilled with the next ray.
 
+mod beam;
 mod cone;
 mod inside;
 mod march;
@@ -43,6 +44,7 @@ use marchmesh_core::{
 use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, MeshGrid, RayCone, Restricted, V3};
 use marchmesh_scene::{MaterialId, Scene};
 
+use beam::BEAM_BATCH;
 use inside::Inside;
 use march::{Lanes8, March, Next, Params};
 pub use options::{HitEpsilon, SdfOptions};
@@ -178,6 +180,8 @@ pub struct SdfGeometry {
     lockstep: bool,
     /// Restrict bundles of rays sharing an origin to what their cone reaches.
     cull: bool,
+    /// Start lockstep rays sharing an origin where their beam stops ([`SdfOptions::beams`]).
+    beams: bool,
     /// The one-query approximations enabled by the options.
     shortcuts: Shortcuts,
     /// Field taps per ambient-occlusion estimate.
@@ -323,6 +327,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         lockstep: opts.lockstep,
         // Without bounds (the naive level) nothing is culled either.
         cull: opts.cull && opts.bounds,
+        beams: opts.beams && opts.bounds,
         shortcuts: Shortcuts {
             cone_shadows: opts.cone_shadows,
             ambient_occlusion: opts.ao_taps > 0,
@@ -479,7 +484,7 @@ impl SdfGeometry {
         normal_material: impl Fn(Vec3, Vec3, f32) -> (Vec3, MaterialId),
     ) -> TraceResult {
         let work = RayWork {
-            steps: m.evals,
+            steps: m.work_steps(),
             ..RayWork::default()
         };
         if let Ok(why) = NoHit::try_from(term) {
@@ -512,7 +517,7 @@ impl SdfGeometry {
             occluded: term == Termination::Hit,
             termination: term,
             work: RayWork {
-                steps: m.evals,
+                steps: m.work_steps(),
                 ..RayWork::default()
             },
         }
@@ -607,7 +612,7 @@ impl SdfGeometry {
             Some(m) if t == Termination::Hit => {
                 let (p, h) = self.hit_point(m);
                 let work = RayWork {
-                    steps: m.evals,
+                    steps: m.work_steps(),
                     ..RayWork::default()
                 };
                 pending.push((i, m.t, work, (p, m.dir(), h)));
@@ -752,17 +757,43 @@ impl SdfGeometry {
         let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
         let mut soa = Lanes8::default();
         let mut next = 0usize;
-        let load = |next: &mut usize, done: &mut dyn FnMut(usize, Option<&March>, Termination)| {
-            while *next < rays.len() {
-                let i = *next;
-                *next += 1;
-                match March::new(&rays[i], &self.params, refine) {
-                    Ok(m) => return Some((first_index + i, m)),
-                    Err(t) => done(first_index + i, None, t.into()),
+        // With beams, rays are started [`BEAM_BATCH`] at a time, the batch's beams marched,
+        // and the lanes fed from `prepared` (rays `prepared_from..` of `rays`).
+        let beams = self.beams && beam::shares_origin(rays);
+        let mut prepared: [Option<March>; BEAM_BATCH] = [None; BEAM_BATCH];
+        let mut prepared_from = 0usize;
+        let mut load =
+            |next: &mut usize, done: &mut dyn FnMut(usize, Option<&March>, Termination)| {
+                while *next < rays.len() {
+                    let i = *next;
+                    *next += 1;
+                    if beams {
+                        if i == prepared_from + BEAM_BATCH || i == 0 {
+                            prepared_from = i;
+                            let batch = &rays[i..rays.len().min(i + BEAM_BATCH)];
+                            for (j, (slot, ray)) in prepared.iter_mut().zip(batch).enumerate() {
+                                *slot = March::new(ray, &self.params, refine)
+                                    .map_err(|t| done(first_index + i + j, None, t.into()))
+                                    .ok();
+                            }
+                            beam::advance_by_beams(
+                                &mut prepared[..batch.len()],
+                                &self.params,
+                                &distance,
+                            );
+                        }
+                        match prepared[i - prepared_from].take() {
+                            Some(m) => return Some((first_index + i, m)),
+                            None => continue,
+                        }
+                    }
+                    match March::new(&rays[i], &self.params, refine) {
+                        Ok(m) => return Some((first_index + i, m)),
+                        Err(t) => done(first_index + i, None, t.into()),
+                    }
                 }
-            }
-            None
-        };
+                None
+            };
         let Some(first) = load(&mut next, done) else {
             return;
         };

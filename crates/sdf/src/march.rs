@@ -194,6 +194,12 @@ pub(crate) struct March {
     seg_from: u32,
     /// Closest hit (find the crossing) or occlusion (any crossing will do).
     refine: bool,
+    /// The start [`March::advance_start`] moved the ray from (NaN when it did not): the
+    /// first sample falls back to it if the advanced start is not clear of every surface.
+    t_restart: f32,
+    /// Evaluations made for this ray and others together (its beam's), reported in its work
+    /// but not counted against its budget.
+    shared_evals: u32,
 }
 
 impl March {
@@ -243,7 +249,27 @@ impl March {
             evals: 0,
             seg_from: SEGMENT_MIN_EVALS,
             refine,
+            t_restart: f32::NAN,
+            shared_evals: 0,
         })
+    }
+
+    /// Moves a ray that has not been evaluated yet to start at `t` (ray parameter) when `t`
+    /// lies past its start: the caller vouches that the ray meets no surface before `t` and
+    /// stays at least a shell ([`March::eps`]) clear of every surface there (a beam's cone
+    /// march, `crate::beam`). A start beyond the ray's end is clamped to the end. If the
+    /// first sample there is nonetheless inside the shell (a field that is no strict
+    /// bound, such as a mesh grid, let the beam overshoot), the ray restarts from its own
+    /// start: the result is then the unadvanced ray's, one evaluation later. `t` NaN or not
+    /// past the start changes nothing.
+    #[inline]
+    pub fn advance_start(&mut self, t: f32) {
+        debug_assert!(self.phase == Phase::Start && self.evals == 0);
+        if t > self.t {
+            self.t_restart = self.t;
+            self.t = t.min(self.t_end);
+            self.t_prev = self.t;
+        }
     }
 
     /// The plain-marching state when the ray is in the `March` phase (the only state the
@@ -307,6 +333,30 @@ impl March {
     #[inline]
     pub fn dir(&self) -> Vec3 {
         self.dir
+    }
+
+    /// Charges `evals` shared evaluations (a beam's) to this ray's reported work.
+    #[inline]
+    pub fn charge_shared(&mut self, evals: u32) {
+        self.shared_evals += evals;
+    }
+
+    /// Field evaluations to report for this ray: its own and those charged to it.
+    #[inline]
+    pub fn work_steps(&self) -> u32 {
+        self.evals + self.shared_evals
+    }
+
+    /// The ray origin.
+    #[inline]
+    pub fn origin(&self) -> Vec3 {
+        self.o
+    }
+
+    /// `(t, t_end)`: where the ray is now and where its range ends (ray parameter).
+    #[inline]
+    pub fn range(&self) -> (f32, f32) {
+        (self.t, self.t_end)
     }
 
     /// Distance from the camera along the path so far (for footprints).
@@ -388,6 +438,16 @@ impl March {
         self.evals += 1;
         if d.is_nan() {
             return Next::Done(Termination::Miss);
+        }
+        if self.phase == Phase::Start && !self.t_restart.is_nan() {
+            // An advanced start (`advance_start`) must be clear of every surface; where it is
+            // not, the ray starts over from its own start.
+            let t0 = std::mem::replace(&mut self.t_restart, f32::NAN);
+            if d < self.eps(p) {
+                self.t = t0;
+                self.t_prev = t0;
+                return self.budget(p);
+            }
         }
         if self.phase == Phase::Start {
             // Start inside a solid: march to its exit surface with the sign flipped; but a

@@ -38,6 +38,9 @@ pub struct SdfSettings {
     /// In lockstep batches, trace bundles of primary rays through only the objects their
     /// cone can reach (false: the whole field for every ray).
     pub cull: bool,
+    /// In lockstep batches, march one cone per run of four camera rays and start the rays
+    /// where it stops (false: every ray from its origin).
+    pub beams: bool,
     /// Switch slowly progressing (grazing) rays to segment tracing with local directional
     /// Lipschitz bounds (false: plain sphere tracing throughout).
     pub segment: bool,
@@ -148,6 +151,7 @@ impl SdfSettings {
             normal_step: o.normal_step,
             lockstep: o.lockstep,
             cull: o.cull,
+            beams: o.beams,
             segment: o.segment,
             bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
@@ -186,6 +190,7 @@ impl SdfSettings {
             normal_step: self.normal_step,
             lockstep: self.lockstep,
             cull: self.cull,
+            beams: self.beams,
             segment: self.segment,
             bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,

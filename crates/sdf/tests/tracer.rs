@@ -227,10 +227,12 @@ fn assert_lockstep_equals_single_rays(g: &impl Geometry, name: &str) -> u64 {
 
 #[test]
 fn lockstep_batches_equal_single_rays() {
-    // Without culling the lockstep path runs the same arithmetic as single rays: bit for
-    // bit the same results (culling changes the step sizes; see the next test).
+    // Without culling and beams the lockstep path runs the same arithmetic as single rays:
+    // bit for bit the same results (culling and beams change the step sizes; see the
+    // culling and beam tests below).
     let no_cull = |segment: bool| SdfOptions {
         cull: false,
+        beams: false,
         segment,
         ..SdfOptions::DEFAULT
     };
@@ -636,4 +638,66 @@ fn without_bounds_the_picture_is_the_same() {
     let acc = marchmesh_core::compare(&b.framebuffer, &a.framebuffer).expect("same size");
     assert!(acc.silhouette_mismatch_pct <= 0.1, "{acc:?}");
     assert!(acc.depth_rel_p95 <= 1e-4, "{acc:?}");
+}
+
+#[test]
+fn beamed_camera_rays_find_the_same_hits_as_unbeamed_ones() {
+    // Spheres, a rotated box, a torus and a ground plane; camera rays in image rows (beams of
+    // four neighbouring rays), without culling so the beams are the only difference.
+    let s = scene(
+        r#"{"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [-0.8, 0.2, 3]}},
+           {"shape": {"box": {"half_extents": [0.6, 0.25, 0.4]}}, "transform": {"translate": [0.7, -0.2, 3.5], "rotate_deg": [0, 25, 0]}},
+           {"shape": {"torus": {"major_radius": 0.5, "minor_radius": 0.1}}, "transform": {"translate": [0, 0.6, 4], "rotate_deg": [70, 0, 0]}},
+           {"shape": {"plane": {}}, "transform": {"translate": [0, -0.45, 0]}}"#,
+        "",
+    );
+    let with = |beams: bool| {
+        build(
+            &s,
+            &SdfOptions {
+                cull: false,
+                beams,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .unwrap()
+    };
+    let (beamed, plain) = (with(true), with(false));
+    let (w, h) = (96, 64);
+    let rays: Vec<Ray> = (0..w * h)
+        .map(|i| {
+            let x = (i % w) as f32 / w as f32 - 0.5;
+            let y = (i / w) as f32 / h as f32 - 0.5;
+            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
+        })
+        .collect();
+    let mut a = vec![TraceResult::default(); rays.len()];
+    let mut b = vec![TraceResult::default(); rays.len()];
+    for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
+        beamed.closest_hits(row, out_a);
+        plain.closest_hits(row, out_b);
+    }
+    let (mut steps_a, mut steps_b, mut hits) = (0u64, 0u64, 0);
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        steps_a += u64::from(x.work.steps);
+        steps_b += u64::from(y.work.steps);
+        assert_eq!(x.termination(), y.termination(), "ray {i}");
+        if let (Some(p), Some(q)) = (x.hit(), y.hit()) {
+            hits += 1;
+            assert!(
+                (p.t - q.t).abs() <= 1e-4 * q.t,
+                "ray {i}: t {} vs {}",
+                p.t,
+                q.t
+            );
+            assert!(p.normal.dot(q.normal) > 0.9999, "ray {i}: normals");
+            assert_eq!(p.material, q.material, "ray {i}");
+        }
+    }
+    assert!(hits > 3000, "{hits} hits");
+    // The point of beams: fewer evaluations in all, the beams' own included.
+    assert!(
+        steps_a * 10 < steps_b * 9,
+        "beamed {steps_a} steps vs {steps_b}"
+    );
 }
