@@ -20,9 +20,13 @@
 //!   the predicted sample cover the jump (Keinert's overlap test): otherwise the gap between
 //!   them may hide a surface without an inside (a triangle, an open mesh: the field does not
 //!   change sign there), which `Sweep` looks for before the prediction is used.
-//! * `Sweep`: plain sphere tracing through such a gap, from the earlier sample's sphere to the
+//! * `Sweep`: tracing through such a gap, from the earlier sample's sphere to the
 //!   prediction's; a distance below the fine threshold there is a hit, reaching the
-//!   prediction's sphere clears the gap.
+//!   prediction's sphere clears the gap. With segment tracing on, each sample is a segment
+//!   query over the rest of the gap and the step its safe step (the field keeps its sign
+//!   over it, so no sheet is stepped over): where the field has local bounds one query
+//!   usually clears a gap that plain steps crossed in up to [`SWEEP_BUDGET`] (a ray
+//!   approaching a curved surface at a shallow angle, whose prediction undershoots).
 //! * `Bracket`: regula falsi (Illinois) on a sign change, to the fine threshold.
 //! * `Segment`: segment tracing (Galin et al. 2020, "Segment Tracing Using Local Lipschitz
 //!   Bounds"): the step is the field's safe step along the ray from local directional
@@ -144,6 +148,9 @@ enum Phase {
         s_land: f32,
         left: u32,
         evals: u32,
+        /// Steps are safe segment steps over the rest of the gap (`Params::segment`),
+        /// not plain distances.
+        segmented: bool,
     },
     /// Segment tracing: the caller evaluates [`Field::segment_step`] over `len` at the
     /// current point. `extra` counts samples below `thr` stepped past (see
@@ -319,6 +326,12 @@ impl March {
     pub fn segment_len(&self) -> Option<f32> {
         match self.phase {
             Phase::Segment { len, .. } => Some(len),
+            // The rest of the gap, up to the prediction (positive: a sweep ends before it).
+            Phase::Sweep {
+                t_land,
+                segmented: true,
+                ..
+            } => Some((t_land - self.t).max(f32::MIN_POSITIVE)),
             _ => None,
         }
     }
@@ -539,6 +552,7 @@ impl March {
                 s_land,
                 left,
                 evals,
+                segmented,
             } => {
                 if s < 0.0 {
                     // A solid after all: bracket from the last outside sample.
@@ -547,7 +561,8 @@ impl March {
                 if s <= self.thr(p) {
                     return Next::Done(Termination::Hit);
                 }
-                let next = self.t + s;
+                // A segment step (at least `s`) certifies its whole length at once.
+                let next = self.t + if segmented { seg_step.max(s) } else { s };
                 // Clear only with an overlap of more than the fine threshold: a sheet exactly
                 // where the two spheres touch is reached by the next step instead.
                 if next > t_land - s_land + self.thr(p) || evals >= SWEEP_BUDGET {
@@ -565,6 +580,7 @@ impl March {
                     s_land,
                     left,
                     evals: evals + 1,
+                    segmented,
                 };
                 self.t = next;
                 self.budget(p)
@@ -684,6 +700,7 @@ impl March {
                 s_land: s,
                 left,
                 evals: 0,
+                segmented: p.segment,
             };
             self.t_prev = ta;
             self.r_prev = sa;
