@@ -322,6 +322,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
             max_distance: max_distance as f32,
             bounds,
             segment: opts.segment,
+            segment_sweeps: opts.segment && field.has_tape(),
         },
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
@@ -686,6 +687,7 @@ impl SdfGeometry {
                         |p| self.field.restricted_distance_lanes(&restricted, p),
                         |p, d, len| self.field.restricted_segment_step(&restricted, p, d, len),
                         |p, d, len| self.field.restricted_segment_lanes(&restricted, p, d, len),
+                        restricted.is_taped(),
                     );
                     report(scope, Event::BundleEnd);
                 }
@@ -711,6 +713,7 @@ impl SdfGeometry {
             |p| self.field.distance_lanes(p),
             |p, d, len| self.field.segment_step(p, d, len),
             |p, d, len| self.field.segment_lanes(p, d, len),
+            self.field.has_tape(),
         );
         report(Scope::Whole, Event::BundleEnd);
     }
@@ -752,7 +755,14 @@ impl SdfGeometry {
         distance: impl Fn(V3<F32x8>) -> F32x8,
         segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
         segment_lanes: impl Fn(V3<F32x8>, V3<F32x8>, F32x8) -> Option<(F32x8, F32x8)>,
+        taped: bool,
     ) {
+        // Sweeps take segment steps only where `segment_lanes` answers for eight lanes at
+        // once (a scalar interpreter query per lane costs more than the plain steps saved).
+        let params = &Params {
+            segment_sweeps: self.params.segment_sweeps && taped,
+            ..self.params
+        };
         let no_scalar = |_: Vec3| f32::NAN;
         let mut lanes: [Option<(usize, March)>; 8] = [None; 8];
         let mut soa = Lanes8::default();
@@ -772,22 +782,18 @@ impl SdfGeometry {
                             prepared_from = i;
                             let batch = &rays[i..rays.len().min(i + BEAM_BATCH)];
                             for (j, (slot, ray)) in prepared.iter_mut().zip(batch).enumerate() {
-                                *slot = March::new(ray, &self.params, refine)
+                                *slot = March::new(ray, params, refine)
                                     .map_err(|t| done(first_index + i + j, None, t.into()))
                                     .ok();
                             }
-                            beam::advance_by_beams(
-                                &mut prepared[..batch.len()],
-                                &self.params,
-                                &distance,
-                            );
+                            beam::advance_by_beams(&mut prepared[..batch.len()], params, &distance);
                         }
                         match prepared[i - prepared_from].take() {
                             Some(m) => return Some((first_index + i, m)),
                             None => continue,
                         }
                     }
-                    match March::new(&rays[i], &self.params, refine) {
+                    match March::new(&rays[i], params, refine) {
                         Ok(m) => return Some((first_index + i, m)),
                         Err(t) => done(first_index + i, None, t.into()),
                     }
@@ -819,7 +825,7 @@ impl SdfGeometry {
                 Some((v, _)) => v,
                 None => distance(points),
             };
-            let slow = soa.step(d, &self.params);
+            let slow = soa.step(d, params);
             // Only the lanes that did not advance (most iterations have none).
             let mut pending = slow;
             while pending != 0 {
@@ -832,9 +838,9 @@ impl SdfGeometry {
                 soa.store(k, m);
                 let next_step = match seg {
                     Some((v, step)) if segmenting & (1 << k) != 0 => {
-                        m.feed_segment(v.0[k], step.0[k], &self.params)
+                        m.feed_segment(v.0[k], step.0[k], params)
                     }
-                    _ => Self::advance(m, &self.params, Some(d.0[k]), &no_scalar, &segment),
+                    _ => Self::advance(m, params, Some(d.0[k]), &no_scalar, &segment),
                 };
                 match next_step {
                     Next::Continue => soa.load(k, m),
@@ -926,6 +932,7 @@ impl Geometry for SdfGeometry {
                 |p| self.field.distance_lanes(p),
                 |p, d, len| self.field.segment_step(p, d, len),
                 |p, d, len| self.field.segment_lanes(p, d, len),
+                self.field.has_tape(),
             );
             return flush(Scope::Whole, &mut pending, out);
         }

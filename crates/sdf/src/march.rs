@@ -22,7 +22,8 @@
 //!   change sign there), which `Sweep` looks for before the prediction is used.
 //! * `Sweep`: tracing through such a gap, from the earlier sample's sphere to the
 //!   prediction's; a distance below the fine threshold there is a hit, reaching the
-//!   prediction's sphere clears the gap. With segment tracing on, each sample is a segment
+//!   prediction's sphere clears the gap. With segment tracing on (and an 8-lane tape to
+//!   answer the queries, [`Params::segment_sweeps`]), each sample is a segment
 //!   query over the rest of the gap and the step its safe step (the field keeps its sign
 //!   over it, so no sheet is stepped over): where the field has local bounds one query
 //!   usually clears a gap that plain steps crossed in up to [`SWEEP_BUDGET`] (a ray
@@ -71,6 +72,9 @@ pub(crate) struct Params {
     pub bounds: Option<(Vec3, Vec3)>,
     /// Switch slowly progressing rays to segment tracing (`Phase::Segment`).
     pub segment: bool,
+    /// Sweeps through a prediction's gap take segment steps (`segment`, and the field
+    /// answers segment queries eight lanes at a time).
+    pub segment_sweeps: bool,
 }
 
 /// Field evaluations one visit to the shell may spend deciding hit or near miss.
@@ -700,7 +704,7 @@ impl March {
                 s_land: s,
                 left,
                 evals: 0,
-                segmented: p.segment,
+                segmented: p.segment_sweeps,
             };
             self.t_prev = ta;
             self.r_prev = sa;

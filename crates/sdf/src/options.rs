@@ -97,7 +97,9 @@ pub struct SdfOptions {
     /// primitives 1.06; whole renders of the default suite (shadow and reflection rays have
     /// no common origin and gain nothing) csg 1.04, primitives 1.02, seed-spheres 1.04. The
     /// evaluations saved are cheap 8-lane plain steps through empty space, which is why
-    /// the time gains less than the evaluation count.
+    /// the time gains less than the evaluation count. Where rays take few steps anyway and
+    /// each evaluation covers many leaves (the fidget anchor's 100 and 1000 separate
+    /// spheres, 3.7 evaluations a ray) beams cost 2-5%.
     pub beams: bool,
     /// Switch rays whose sphere tracing progresses slowly (grazing a surface) to segment
     /// tracing with local directional Lipschitz bounds (Galin et al. 2020; default true):
