@@ -312,6 +312,12 @@ impl Field {
         r.taped.then(|| r.tape.segment(p, d, len))
     }
 
+    /// [`Field::recedes`] under a restriction made by [`Field::restrict_to`] on this field
+    /// (only for rays of the restricted bundle); false when the restriction has no tape.
+    pub fn restricted_recedes(&self, r: &Restricted, p: Vec3, dir: Vec3) -> bool {
+        r.taped && r.tape.recedes(p, dir)
+    }
+
     /// The scalar distance under a restriction (same values per point as
     /// [`Field::restricted_distance_x8`]).
     #[inline]

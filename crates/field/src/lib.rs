@@ -513,6 +513,13 @@ impl Field {
         }
     }
 
+    /// Whether the ray from `p` along `dir` can meet no surface any more ([`Tape::recedes`]:
+    /// every leaf convex and receding, or its box left behind); false when the field has no
+    /// [`tape`] (the question is then not answered, never wrongly answered yes).
+    pub fn recedes(&self, p: Vec3, dir: Vec3) -> bool {
+        self.tape.as_ref().is_some_and(|t| t.recedes(p, dir))
+    }
+
     /// [`Field::segment_step`] on eight lanes (points `p`, directions `d`, segment lengths
     /// `len`), per lane the same value and step bit for bit; `None` when the field has no
     /// [`tape`] (the scalar query serves it).

@@ -45,6 +45,9 @@ struct Leaf {
     to_local: Affine<f32>,
     dscale: f32,
     bound: Option<Bound>,
+    /// The node's box in its parent's frame (every node carries one, also where `bound`
+    /// is off because testing it costs more than the leaf): [`Tape::recedes`] uses it.
+    bbox: ([f32; 3], [f32; 3]),
     material: u32,
     op: Op<f32>,
 }
@@ -95,6 +98,7 @@ fn leaf(ins: &Instr<f32>) -> Leaf {
         to_local: ins.to_local.clone(),
         dscale: ins.dscale,
         bound: Bound::of(ins),
+        bbox: (ins.lo, ins.hi),
         material: ins.material,
         op: ins.op.clone(),
     }
@@ -228,6 +232,27 @@ impl Tape {
         }
         let v = best * T::splat(root.dscale);
         (v, T::select(T::lt(T::c(0.0), v), step, fallback(v, d)))
+    }
+
+    /// Whether the ray from `p` along `d` (no unit length needed) can meet no leaf of the
+    /// tape any more. A leaf is left behind when
+    /// - it is convex (sphere, plane, box, ellipsoid bound, capped cylinder) and its value
+    ///   grows along `d` at `p`: the distance to a convex set is a convex function along a
+    ///   line, so from a point where it grows it never shrinks again, and a value that is
+    ///   positive there never reaches 0; or
+    /// - the ray misses the leaf's bounding box from `p` on.
+    ///
+    /// Conservative: a torus or triangle whose box the ray still meets, a point on or in a
+    /// convex leaf, or a ray within about 0.006 degree of tangency answers false. Used to end
+    /// rays receding from everything (shadow rays climbing away from a ground, rays that
+    /// passed every object) instead of marching them to the end of their range.
+    pub fn recedes(&self, p: Vec3, d: Vec3) -> bool {
+        let (p, d) = (V3::new(p.x, p.y, p.z), V3::new(d.x, d.y, d.z));
+        let (q, dq) = match &self.root {
+            None => (p, d),
+            Some(root) => (root.to_local.apply(p), root.to_local.apply_linear(d)),
+        };
+        self.leaves.iter().all(|l| leaf_recedes(l, q, dq))
     }
 
     /// Per lane, the analytic gradient of the leaf nearest to the point: the leaf whose value
@@ -402,4 +427,73 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
         | Op::Repeat { .. } => T::c(f64::NAN),
     };
     d * T::splat(leaf.dscale)
+}
+
+/// [`Tape::recedes`] for one leaf, `q` and `dq` in the leaf's parent frame.
+fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>) -> bool {
+    let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
+    // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
+    // point is inside where the direction is not the outward one).
+    let outward: Option<V3<f32>> = match &l.op {
+        Op::Sphere { .. } => Some(lq),
+        Op::SphereAt { c, .. } => Some(lq - V3::splat3(*c)),
+        Op::Plane { n, .. } => Some(V3::splat3(*n)),
+        Op::Box { b } => {
+            let e = V3::new(
+                lq.x - lq.x.clamp(-b[0], b[0]),
+                lq.y - lq.y.clamp(-b[1], b[1]),
+                lq.z - lq.z.clamp(-b[2], b[2]),
+            );
+            (e.len2() > 0.0).then_some(e)
+        }
+        Op::Ellipsoid { inv_r, .. } => {
+            let w = V3::splat3(*inv_r);
+            Some(lq.mul_elem(w).mul_elem(w))
+        }
+        Op::Cylinder { r, h } => {
+            let rad = (lq.x * lq.x + lq.z * lq.z).sqrt();
+            let k = if rad > *r { 1.0 - *r / rad } else { 0.0 };
+            let e = V3::new(lq.x * k, lq.y - lq.y.clamp(-*h, *h), lq.z * k);
+            (e.len2() > 0.0).then_some(e)
+        }
+        Op::Torus { .. }
+        | Op::Triangle(_)
+        | Op::Mesh { .. }
+        | Op::Union
+        | Op::Intersection
+        | Op::Subtraction
+        | Op::SmoothUnion { .. }
+        | Op::Repeat { .. } => None,
+    };
+    if let Some(g) = outward {
+        // Growing, by more than rounding can fake: cos(angle to the surface) > 1e-4.
+        let along = g.dot(ld);
+        if along > 1e-4 * (g.len2() * ld.len2()).sqrt() {
+            return true;
+        }
+    }
+    leaves_box(q, dq, l.bbox)
+}
+
+/// Whether the ray `q + t dq`, `t >= 0`, misses the box `[lo, hi]` (slab test; a zero
+/// direction component outside its slab misses, inside it never bounds `t`).
+fn leaves_box(q: V3<f32>, dq: V3<f32>, (lo, hi): ([f32; 3], [f32; 3])) -> bool {
+    let (mut enter, mut exit) = (0.0f32, f32::INFINITY);
+    for (o, v, lo, hi) in [
+        (q.x, dq.x, lo[0], hi[0]),
+        (q.y, dq.y, lo[1], hi[1]),
+        (q.z, dq.z, lo[2], hi[2]),
+    ] {
+        if v == 0.0 {
+            if o < lo || o > hi {
+                return true;
+            }
+            continue;
+        }
+        let (a, c) = ((lo - o) / v, (hi - o) / v);
+        enter = enter.max(a.min(c));
+        exit = exit.min(a.max(c));
+    }
+    // NaN (a non-finite box or point) compares false: not provably missed.
+    exit < enter
 }

@@ -2,7 +2,8 @@
 //! same distances and materials on unions of analytic leaves (bounded and unbounded, the
 //! nearer-first pair, a single leaf); and the forward-mode gradient
 //! ([`Field::distance_gradient_x8`]) against f64 central differences; the 8-lane segment
-//! step ([`Field::segment_lanes`]) bit for bit the interpreter's ([`Field::segment_step`]).
+//! step ([`Field::segment_lanes`]) bit for bit the interpreter's ([`Field::segment_step`]);
+//! rays [`Field::recedes`] calls receding meet no surface.
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::lane::{F32x8, V3};
@@ -212,4 +213,48 @@ proptest! {
             }
         }
     }
+
+    #[test]
+    fn receding_rays_meet_no_surface(p in pt(), dir in pt(), axis in 0usize..4) {
+        let mut dir = dir - DVec3::new(0.0, 0.0, 3.0);
+        if axis < 3 {
+            dir[axis] = 0.0;
+        }
+        prop_assume!(dir.length() > 1e-3);
+        let unit = dir.normalize();
+        for (name, f) in cases() {
+            if !(f.distance_f64(p) > 1e-3 && f.recedes(p.as_vec3(), dir.as_vec3())) {
+                continue;
+            }
+            // Every sample out to 200 units (finer near the start) stays outside.
+            for k in 1..=4000 {
+                let t = 0.05 * f64::from(k) * (1.0 + f64::from(k) / 2000.0);
+                let d = f.distance_f64(p + unit * t);
+                prop_assert!(d > 0.0, "{}: {} at t = {} from {:?} along {:?}", name, d, t, p, dir);
+            }
+        }
+    }
+}
+
+#[test]
+fn rays_leaving_every_leaf_recede_and_others_do_not() {
+    let l = leaves();
+    let f = field(&union(l.clone()));
+    // Straight up from above the scene, past the plane (y = -2): away from everything.
+    let above = Vec3::new(0.0, 3.0, 3.0);
+    assert!(f.recedes(above, Vec3::Y));
+    // Up from just above the plane between the objects, tilted back towards the camera.
+    assert!(f.recedes(Vec3::new(0.0, -1.9, -2.0), Vec3::new(0.0, 1.0, -1.0)));
+    // Towards the sphere, and down towards the plane: not receding.
+    assert!(!f.recedes(Vec3::new(0.5, 0.2, 0.0), Vec3::Z));
+    assert!(!f.recedes(above, -Vec3::Y));
+    // A ray that still meets the torus's box: not provably receding.
+    assert!(!f.recedes(Vec3::new(0.0, -1.0, 0.0), Vec3::Z));
+    // Without a tape the question is not answered.
+    let csg = node(
+        NodeKind::Subtraction(l[..2].to_vec()),
+        DAffine3::IDENTITY,
+        0,
+    );
+    assert!(!field(&csg).recedes(above, Vec3::Y));
 }

@@ -7,9 +7,9 @@
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
 //! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false]
-//! [beams=true|false] [versus=KEY=VALUE]`
+//! [beams=true|false] [recede=true|false] [versus=KEY=VALUE]`
 //!
-//! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`) builds a second geometry with that option
+//! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.
@@ -51,6 +51,7 @@ fn run() -> Result<(), String> {
     let cull = flag(kv("cull"));
     let segment = flag(kv("segment"));
     let beams = flag(kv("beams"));
+    let recede = flag(kv("recede"));
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -63,6 +64,7 @@ fn run() -> Result<(), String> {
         cull,
         segment,
         beams,
+        recede,
         ..SdfOptions::DEFAULT
     };
     let g = build(&scene, &options).map_err(|e| e.to_string())?;
@@ -79,9 +81,11 @@ fn run() -> Result<(), String> {
                 "segment=true" => other.segment = true,
                 "beams=false" => other.beams = false,
                 "beams=true" => other.beams = true,
+                "recede=false" => other.recede = false,
+                "recede=true" => other.recede = true,
                 _ => {
                     return Err(format!(
-                        "versus: {spec}: expected cull=BOOL, lockstep=BOOL, segment=BOOL or beams=BOOL"
+                        "versus: {spec}: expected cull=, lockstep=, segment=, beams= or recede=BOOL"
                     ));
                 }
             }

@@ -194,6 +194,7 @@ mod tests {
             bounds: None,
             segment: false,
             segment_sweeps: false,
+            recede_checks: false,
         }
     }
 

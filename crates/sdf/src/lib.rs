@@ -323,6 +323,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
             bounds,
             segment: opts.segment,
             segment_sweeps: opts.segment && field.has_tape(),
+            recede_checks: opts.recede && opts.bounds && field.has_tape(),
         },
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
@@ -530,34 +531,44 @@ impl SdfGeometry {
             &self.params,
             |p| self.field.distance(p),
             |p, d, len| self.field.segment_step(p, d, len),
+            |p, d| self.field.recedes(p, d),
         )
     }
 
-    /// Marches `m` to its end with the distance function `distance` and, while it is
-    /// segment tracing, the safe-step function `segment(point, direction, length)`.
     /// [`Self::run_with`] on the distance to the nearest solid of `inside` (rays starting
     /// inside a solid), with plain steps: the per-object fields have no directional bounds.
     fn run_inside(m: &mut March, params: &Params, inside: &Inside) -> Termination {
         Self::run_with(
             m,
-            params,
+            // The per-object fields answer no receding checks either.
+            &Params {
+                recede_checks: false,
+                ..*params
+            },
             |p| inside.nearest(p).0,
             |p, _, _| {
                 let d = inside.nearest(p).0;
                 (d, d.abs())
             },
+            |_, _| false,
         )
     }
 
+    /// Marches `m` to its end with the distance function `distance`, while it is segment
+    /// tracing the safe-step function `segment(point, direction, length)`, and at its
+    /// receding checks `recedes(point, direction)` ([`Next::Check`]).
     fn run_with(
         m: &mut March,
         params: &Params,
         distance: impl Fn(Vec3) -> f32,
         segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
+        recedes: impl Fn(Vec3, Vec3) -> bool,
     ) -> Termination {
         loop {
-            if let Next::Done(t) = Self::advance(m, params, None, &distance, &segment) {
-                return t;
+            match Self::advance(m, params, None, &distance, &segment) {
+                Next::Done(t) => return t,
+                Next::Check if recedes(m.check_point(), m.dir()) => return m.receded(),
+                Next::Check | Next::Continue => {}
             }
         }
     }
@@ -687,6 +698,7 @@ impl SdfGeometry {
                         |p| self.field.restricted_distance_lanes(&restricted, p),
                         |p, d, len| self.field.restricted_segment_step(&restricted, p, d, len),
                         |p, d, len| self.field.restricted_segment_lanes(&restricted, p, d, len),
+                        |p, d| self.field.restricted_recedes(&restricted, p, d),
                         restricted.is_taped(),
                     );
                     report(scope, Event::BundleEnd);
@@ -713,6 +725,7 @@ impl SdfGeometry {
             |p| self.field.distance_lanes(p),
             |p, d, len| self.field.segment_step(p, d, len),
             |p, d, len| self.field.segment_lanes(p, d, len),
+            |p, d| self.field.recedes(p, d),
             self.field.has_tape(),
         );
         report(Scope::Whole, Event::BundleEnd);
@@ -755,12 +768,15 @@ impl SdfGeometry {
         distance: impl Fn(V3<F32x8>) -> F32x8,
         segment: impl Fn(Vec3, Vec3, f32) -> (f32, f32),
         segment_lanes: impl Fn(V3<F32x8>, V3<F32x8>, F32x8) -> Option<(F32x8, F32x8)>,
+        recedes: impl Fn(Vec3, Vec3) -> bool,
         taped: bool,
     ) {
         // Sweeps take segment steps only where `segment_lanes` answers for eight lanes at
-        // once (a scalar interpreter query per lane costs more than the plain steps saved).
+        // once (a scalar interpreter query per lane costs more than the plain steps saved),
+        // and receding checks need the tape too.
         let params = &Params {
             segment_sweeps: self.params.segment_sweeps && taped,
+            recede_checks: self.params.recede_checks && taped,
             ..self.params
         };
         let no_scalar = |_: Vec3| f32::NAN;
@@ -842,9 +858,14 @@ impl SdfGeometry {
                     }
                     _ => Self::advance(m, params, Some(d.0[k]), &no_scalar, &segment),
                 };
-                match next_step {
-                    Next::Continue => soa.load(k, m),
-                    Next::Done(t) => {
+                let finished = match next_step {
+                    Next::Continue => None,
+                    Next::Check => recedes(m.check_point(), m.dir()).then(|| m.receded()),
+                    Next::Done(t) => Some(t),
+                };
+                match finished {
+                    None => soa.load(k, m),
+                    Some(t) => {
                         done(*i, Some(m), t);
                         *lane = load(&mut next, done);
                         soa.seat(k, lane.as_ref().map(|l| &l.1));
@@ -932,6 +953,7 @@ impl Geometry for SdfGeometry {
                 |p| self.field.distance_lanes(p),
                 |p, d, len| self.field.segment_step(p, d, len),
                 |p, d, len| self.field.segment_lanes(p, d, len),
+                |p, d| self.field.recedes(p, d),
                 self.field.has_tape(),
             );
             return flush(Scope::Whole, &mut pending, out);

@@ -101,6 +101,15 @@ pub struct SdfOptions {
     /// each evaluation covers many leaves (the fidget anchor's 100 and 1000 separate
     /// spheres, 3.7 evaluations a ray) beams cost 2-5%.
     pub beams: bool,
+    /// End rays in plain marching that recede from every surface (default true): every
+    /// eighth evaluation a ray whose distance grew asks the field's
+    /// tape whether each leaf is convex and receding (the distance to a convex set is convex
+    /// along a line: once it grows it never shrinks) or has its box behind the ray
+    /// ([`marchmesh_field::Field::recedes`]), and ends as it would at the end of its range
+    /// when all are. Shadow rays climbing away from a ground and rays that passed every
+    /// object stop marching to the end of their range. Fields without a tape (CSG, mesh
+    /// grids) never answer yes. Needs `bounds` (the naive level has none).
+    pub recede: bool,
     /// Switch rays whose sphere tracing progresses slowly (grazing a surface) to segment
     /// tracing with local directional Lipschitz bounds (Galin et al. 2020; default true):
     /// at 0.1 and 0.01 degree over a plane or a box top every ray used to exhaust 512
@@ -153,6 +162,7 @@ impl SdfOptions {
         lockstep: true,
         cull: true,
         beams: true,
+        recede: true,
         segment: true,
         bounds: true,
         mesh_grid_resolution: 64,

@@ -41,6 +41,9 @@ pub struct SdfSettings {
     /// In lockstep batches, march one cone per run of four camera rays and start the rays
     /// where it stops (false: every ray from its origin).
     pub beams: bool,
+    /// End rays that recede from every surface (convex leaves growing, other leaves' boxes
+    /// behind) instead of marching them to the end of their range.
+    pub recede: bool,
     /// Switch slowly progressing (grazing) rays to segment tracing with local directional
     /// Lipschitz bounds (false: plain sphere tracing throughout).
     pub segment: bool,
@@ -152,6 +155,7 @@ impl SdfSettings {
             lockstep: o.lockstep,
             cull: o.cull,
             beams: o.beams,
+            recede: o.recede,
             segment: o.segment,
             bounds: o.bounds,
             grid_res: o.mesh_grid_resolution,
@@ -191,6 +195,7 @@ impl SdfSettings {
             lockstep: self.lockstep,
             cull: self.cull,
             beams: self.beams,
+            recede: self.recede,
             segment: self.segment,
             bounds: self.bounds,
             mesh_grid_resolution: self.grid_res,

@@ -643,7 +643,8 @@ fn without_bounds_the_picture_is_the_same() {
 #[test]
 fn beamed_camera_rays_find_the_same_hits_as_unbeamed_ones() {
     // Spheres, a rotated box, a torus and a ground plane; camera rays in image rows (beams of
-    // four neighbouring rays), without culling so the beams are the only difference.
+    // four neighbouring rays), without culling or receding checks so the beams are the only
+    // difference.
     let s = scene(
         r#"{"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [-0.8, 0.2, 3]}},
            {"shape": {"box": {"half_extents": [0.6, 0.25, 0.4]}}, "transform": {"translate": [0.7, -0.2, 3.5], "rotate_deg": [0, 25, 0]}},
@@ -656,6 +657,7 @@ fn beamed_camera_rays_find_the_same_hits_as_unbeamed_ones() {
             &s,
             &SdfOptions {
                 cull: false,
+                recede: false,
                 beams,
                 ..SdfOptions::DEFAULT
             },
@@ -699,5 +701,94 @@ fn beamed_camera_rays_find_the_same_hits_as_unbeamed_ones() {
     assert!(
         steps_a * 10 < steps_b * 9,
         "beamed {steps_a} steps vs {steps_b}"
+    );
+}
+
+#[test]
+fn receding_checks_change_no_result() {
+    // Spheres, a box, a cylinder and a ground plane (all convex: a tape that answers
+    // receding checks); camera rays in rows, and shadow rays from the ground towards a
+    // point light. Ending receding rays early must change no hit, no termination and no
+    // occlusion, only the work.
+    let s = scene(
+        r#"{"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [-0.8, 0.2, 3]}},
+           {"shape": {"box": {"half_extents": [0.6, 0.25, 0.4]}}, "transform": {"translate": [0.7, -0.2, 3.5], "rotate_deg": [0, 25, 0]}},
+           {"shape": {"cylinder": {"radius": 0.3, "height": 0.4}}, "transform": {"translate": [0, 0.3, 5]}},
+           {"shape": {"plane": {}}, "transform": {"translate": [0, -0.45, 0]}}"#,
+        "",
+    );
+    let with = |recede: bool| {
+        build(
+            &s,
+            &SdfOptions {
+                recede,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .unwrap()
+    };
+    let (on, off) = (with(true), with(false));
+    let (w, h) = (96, 64);
+    let rays: Vec<Ray> = (0..w * h)
+        .map(|i| {
+            let x = (i % w) as f32 / w as f32 - 0.5;
+            let y = (i / w) as f32 / h as f32 - 0.5;
+            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
+        })
+        .collect();
+    let mut a = vec![TraceResult::default(); rays.len()];
+    let mut b = vec![TraceResult::default(); rays.len()];
+    for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
+        on.closest_hits(row, out_a);
+        off.closest_hits(row, out_b);
+    }
+    let (mut steps_a, mut steps_b) = (0u64, 0u64);
+    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
+        assert_eq!(x.termination(), y.termination(), "camera ray {i}");
+        assert_eq!(x.hit(), y.hit(), "camera ray {i}");
+        steps_a += u64::from(x.work.steps);
+        steps_b += u64::from(y.work.steps);
+    }
+    // Shadow rays from ground points towards a light above the scene.
+    let light = Vec3::new(-1.0, 3.0, 2.0);
+    let shadow: Vec<Ray> = (0..2048)
+        .map(|i| {
+            let p = Vec3::new(
+                (i % 64) as f32 * 0.1 - 3.2,
+                -0.45,
+                (i / 64) as f32 * 0.25 + 1.0,
+            );
+            let to = light - p;
+            Ray {
+                origin: p,
+                dir: to.normalize(),
+                t_min: 1e-3,
+                t_max: to.length(),
+            }
+        })
+        .collect();
+    let mut oa = vec![marchmesh_core::OcclusionResult::default(); shadow.len()];
+    let mut ob = oa.clone();
+    on.occluded_many(&shadow, &mut oa);
+    off.occluded_many(&shadow, &mut ob);
+    let mut blocked = 0;
+    for (i, (x, y)) in oa.iter().zip(&ob).enumerate() {
+        assert_eq!(
+            (x.occluded, x.termination),
+            (y.occluded, y.termination),
+            "shadow ray {i}"
+        );
+        blocked += usize::from(x.occluded);
+        steps_a += u64::from(x.work.steps);
+        steps_b += u64::from(y.work.steps);
+    }
+    assert!(
+        blocked > 20 && blocked < 2000,
+        "{blocked} shadow rays blocked"
+    );
+    // The point: rays that recede from everything stop early.
+    assert!(
+        steps_a * 10 < steps_b * 9,
+        "with checks {steps_a} steps, without {steps_b}"
     );
 }
