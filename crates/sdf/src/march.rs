@@ -47,7 +47,10 @@
 //!   early.
 //! * `Escape`: a ray starting on a surface (secondary rays) first leaves that surface's shell
 //!   stepping by the (safe) distance; a hit there is a distance below half the starting
-//!   clearance (another surface closing in, e.g. at a contact).
+//!   clearance (another surface closing in, e.g. at a contact), or, for a ray starting
+//!   within rounding of its surface, a value inside by more than that rounding (a solid
+//!   touching the start surface, as where an object rests on a floor: stepping by `|d|`
+//!   would walk through it).
 
 use glam::Vec3;
 use marchmesh_core::{NoHit, Ray, Termination};
@@ -538,6 +541,16 @@ impl March {
             Phase::Escape { thr } => {
                 if s < thr {
                     // Another surface closing in: pin it down like any shell entry.
+                    return if self.refine {
+                        self.enter_shell(s, p)
+                    } else {
+                        Next::Done(Termination::Hit)
+                    };
+                }
+                if thr == f32::NEG_INFINITY && s < -4.0 * self.noise() {
+                    // Inside a solid by more than the rounding of the start: not the own
+                    // surface (left outward) but a solid touching it, as where an object
+                    // rests on a floor. Stepping on by |s| would walk through it.
                     return if self.refine {
                         self.enter_shell(s, p)
                     } else {

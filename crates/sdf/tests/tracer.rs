@@ -792,3 +792,35 @@ fn receding_checks_change_no_result() {
         "with checks {steps_a} steps, without {steps_b}"
     );
 }
+
+#[test]
+fn rays_leaving_a_floor_at_an_objects_foot_do_not_walk_through_the_object() {
+    // A box resting on a floor; a shadow ray starts on the floor right at the box's foot
+    // (within the rounding level of both surfaces) and heads up through the box. It starts
+    // "on its own surface", which lets it step through rounding-level negative values, but
+    // not through a solid: the box occludes it, single rays and lockstep batches alike.
+    let s = scene(
+        r#"{"shape": {"box": {"half_extents": [0.5, 0.5, 0.5]}}, "transform": {"translate": [0, 0.5, 3]}},
+           {"shape": {"plane": {}}}"#,
+        "",
+    );
+    let g = build(&s, &SdfOptions::DEFAULT).unwrap();
+    let rays: Vec<Ray> = (0..16)
+        .map(|i| Ray {
+            // Render space: the camera at z = -5 is the origin.
+            origin: Vec3::new(0.5 + 1e-6, 1e-6, 7.7 + i as f32 * 0.04),
+            dir: Vec3::new(-1.0, 1.0, 0.0).normalize(),
+            t_min: 0.0,
+            t_max: 5.0,
+        })
+        .collect();
+    for r in &rays {
+        let o = g.occluded(r);
+        assert!(o.occluded, "{r:?}: {:?}", o.termination);
+        let h = g.closest_hit(r);
+        assert!(h.hit().is_some_and(|h| h.t < 1e-3), "{r:?}: {h:?}");
+    }
+    let mut out = vec![marchmesh_core::OcclusionResult::default(); rays.len()];
+    g.occluded_many(&rays, &mut out);
+    assert!(out.iter().all(|o| o.occluded), "{out:?}");
+}
