@@ -252,7 +252,8 @@ impl Tape {
             None => (p, d),
             Some(root) => (root.to_local.apply(p), root.to_local.apply_linear(d)),
         };
-        self.leaves.iter().all(|l| leaf_recedes(l, q, dq))
+        let inv = V3::new(dq.x.recip(), dq.y.recip(), dq.z.recip());
+        self.leaves.iter().all(|l| leaf_recedes(l, q, dq, inv))
     }
 
     /// Per lane, the analytic gradient of the leaf nearest to the point: the leaf whose value
@@ -429,8 +430,9 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
     d * T::splat(leaf.dscale)
 }
 
-/// [`Tape::recedes`] for one leaf, `q` and `dq` in the leaf's parent frame.
-fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>) -> bool {
+/// [`Tape::recedes`] for one leaf, `q` and `dq` in the leaf's parent frame (`inv` the
+/// reciprocals of `dq`'s components).
+fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
     let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
     // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
     // point is inside where the direction is not the outward one).
@@ -468,21 +470,22 @@ fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>) -> bool {
     if let Some(g) = outward {
         // Growing, by more than rounding can fake: cos(angle to the surface) > 1e-4.
         let along = g.dot(ld);
-        if along > 1e-4 * (g.len2() * ld.len2()).sqrt() {
+        if along > 0.0 && along * along > 1e-8 * g.len2() * ld.len2() {
             return true;
         }
     }
-    leaves_box(q, dq, l.bbox)
+    leaves_box(q, dq, inv, l.bbox)
 }
 
-/// Whether the ray `q + t dq`, `t >= 0`, misses the box `[lo, hi]` (slab test; a zero
-/// direction component outside its slab misses, inside it never bounds `t`).
-fn leaves_box(q: V3<f32>, dq: V3<f32>, (lo, hi): ([f32; 3], [f32; 3])) -> bool {
+/// Whether the ray `q + t dq`, `t >= 0`, misses the box `[lo, hi]` (slab test with `inv`
+/// the reciprocals of `dq`; a zero direction component outside its slab misses, inside it
+/// never bounds `t`).
+fn leaves_box(q: V3<f32>, dq: V3<f32>, inv: V3<f32>, (lo, hi): ([f32; 3], [f32; 3])) -> bool {
     let (mut enter, mut exit) = (0.0f32, f32::INFINITY);
-    for (o, v, lo, hi) in [
-        (q.x, dq.x, lo[0], hi[0]),
-        (q.y, dq.y, lo[1], hi[1]),
-        (q.z, dq.z, lo[2], hi[2]),
+    for (o, v, w, lo, hi) in [
+        (q.x, dq.x, inv.x, lo[0], hi[0]),
+        (q.y, dq.y, inv.y, lo[1], hi[1]),
+        (q.z, dq.z, inv.z, lo[2], hi[2]),
     ] {
         if v == 0.0 {
             if o < lo || o > hi {
@@ -490,7 +493,7 @@ fn leaves_box(q: V3<f32>, dq: V3<f32>, (lo, hi): ([f32; 3], [f32; 3])) -> bool {
             }
             continue;
         }
-        let (a, c) = ((lo - o) / v, (hi - o) / v);
+        let (a, c) = ((lo - o) * w, (hi - o) * w);
         enter = enter.max(a.min(c));
         exit = exit.min(a.max(c));
     }
