@@ -40,6 +40,7 @@ pub mod cull;
 pub mod dual;
 pub mod lane;
 pub mod program;
+mod recede;
 pub mod shapes;
 pub mod tape;
 

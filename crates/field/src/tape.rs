@@ -18,6 +18,7 @@ use crate::dual::Dual1;
 use crate::lane::{F32x8, Lane, V3};
 use crate::program::segment::{bounded_step, fallback, leaf_lambda, leaf_step};
 use crate::program::{Affine, Instr, Op, Program};
+use crate::recede;
 use crate::shapes;
 
 /// A node's bound as the interpreter uses it (`Instr::has_bound`): its box and skip
@@ -252,7 +253,7 @@ impl Tape {
             None => (p, d),
             Some(root) => (root.to_local.apply(p), root.to_local.apply_linear(d)),
         };
-        let inv = V3::new(dq.x.recip(), dq.y.recip(), dq.z.recip());
+        let inv = recede::recip(dq);
         self.leaves.iter().all(|l| leaf_recedes(l, q, dq, inv))
     }
 
@@ -434,69 +435,5 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
 /// reciprocals of `dq`'s components).
 fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
     let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
-    // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
-    // point is inside where the direction is not the outward one).
-    let outward: Option<V3<f32>> = match &l.op {
-        Op::Sphere { .. } => Some(lq),
-        Op::SphereAt { c, .. } => Some(lq - V3::splat3(*c)),
-        Op::Plane { n, .. } => Some(V3::splat3(*n)),
-        Op::Box { b } => {
-            let e = V3::new(
-                lq.x - lq.x.clamp(-b[0], b[0]),
-                lq.y - lq.y.clamp(-b[1], b[1]),
-                lq.z - lq.z.clamp(-b[2], b[2]),
-            );
-            (e.len2() > 0.0).then_some(e)
-        }
-        Op::Ellipsoid { inv_r, .. } => {
-            let w = V3::splat3(*inv_r);
-            Some(lq.mul_elem(w).mul_elem(w))
-        }
-        Op::Cylinder { r, h } => {
-            let rad = (lq.x * lq.x + lq.z * lq.z).sqrt();
-            let k = if rad > *r { 1.0 - *r / rad } else { 0.0 };
-            let e = V3::new(lq.x * k, lq.y - lq.y.clamp(-*h, *h), lq.z * k);
-            (e.len2() > 0.0).then_some(e)
-        }
-        Op::Torus { .. }
-        | Op::Triangle(_)
-        | Op::Mesh { .. }
-        | Op::Union
-        | Op::Intersection
-        | Op::Subtraction
-        | Op::SmoothUnion { .. }
-        | Op::Repeat { .. } => None,
-    };
-    if let Some(g) = outward {
-        // Growing, by more than rounding can fake: cos(angle to the surface) > 1e-4.
-        let along = g.dot(ld);
-        if along > 0.0 && along * along > 1e-8 * g.len2() * ld.len2() {
-            return true;
-        }
-    }
-    leaves_box(q, dq, inv, l.bbox)
-}
-
-/// Whether the ray `q + t dq`, `t >= 0`, misses the box `[lo, hi]` (slab test with `inv`
-/// the reciprocals of `dq`; a zero direction component outside its slab misses, inside it
-/// never bounds `t`).
-fn leaves_box(q: V3<f32>, dq: V3<f32>, inv: V3<f32>, (lo, hi): ([f32; 3], [f32; 3])) -> bool {
-    let (mut enter, mut exit) = (0.0f32, f32::INFINITY);
-    for (o, v, w, lo, hi) in [
-        (q.x, dq.x, inv.x, lo[0], hi[0]),
-        (q.y, dq.y, inv.y, lo[1], hi[1]),
-        (q.z, dq.z, inv.z, lo[2], hi[2]),
-    ] {
-        if v == 0.0 {
-            if o < lo || o > hi {
-                return true;
-            }
-            continue;
-        }
-        let (a, c) = ((lo - o) * w, (hi - o) * w);
-        enter = enter.max(a.min(c));
-        exit = exit.min(a.max(c));
-    }
-    // NaN (a non-finite box or point) compares false: not provably missed.
-    exit < enter
+    recede::convex_leaf_recedes(&l.op, lq, ld) || recede::misses_box(q, dq, inv, l.bbox)
 }
