@@ -14,7 +14,7 @@
 //!   there. When not approaching, steps are `max(d, eps / 2)`; leaving the shell
 //!   (`d >= eps`) returns to `March`. Only a feature thinner than `eps / 2` can be stepped
 //!   over in the shell: the same merging the hit epsilon stands for. A visit to the shell
-//!   that cannot decide within 24 evaluations (a long passage nearly parallel to a surface,
+//!   that cannot decide within 48 evaluations (a long passage nearly parallel to a surface,
 //!   e.g. the horizon of a huge sphere) ends as a hit, as a plain epsilon test would.
 //!   A prediction is only trusted where the unbounding spheres of the sample before it and of
 //!   the predicted sample cover the jump (Keinert's overlap test): otherwise the gap between
@@ -98,8 +98,14 @@ pub(crate) fn recede_checkpoint(evals: u32) -> bool {
     evals.is_multiple_of(RECEDE_EVERY)
 }
 
-/// Field evaluations one visit to the shell may spend deciding hit or near miss.
-const FINE_BUDGET: u32 = 24;
+/// Field evaluations one visit to the shell may spend deciding hit or near miss (a visit
+/// that runs out ends as a hit). Measured on the default suite's sdf default level (1
+/// thread, load 1.1-1.3), 24 / 48 / 96: primitives PSNR 54.35 / 55.21 / 55.71 dB (shadow
+/// rays skimming the torus within the shell were called blocked), csg 58.17 and
+/// seed-spheres 57.05 dB throughout, render times and mean evaluations per ray unchanged
+/// (few rays spend it). At 96 plain sphere tracing (`segment=false`) over a box top at 1
+/// degree ran out of steps on 0.5% of its rays (degraded in the stability study), so 48.
+const FINE_BUDGET: u32 = 48;
 
 /// Field evaluations one sweep of a gap before a prediction may spend.
 const SWEEP_BUDGET: u32 = 32;
