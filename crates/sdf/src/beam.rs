@@ -171,10 +171,21 @@ pub(crate) fn advance_by_beams(
     }
 }
 
-/// Whether `rays` may share beams: a common origin (camera rays) and at least one full
-/// group.
-pub(crate) fn shares_origin(rays: &[Ray]) -> bool {
-    rays.len() >= BEAM_RAYS && rays.iter().all(|r| r.origin == rays[0].origin)
+/// Whether `rays` get beams: they share an origin (camera rays), make at least one full
+/// group, and the origin lies in the scene's box. From outside the box the rays are
+/// clipped to start next to what it bounds, with little empty space left to skip, while
+/// preparing the beams still costs its set-up: on the fidget anchor's 1 and 10 spheres seen
+/// from outside their box (1.7 and 3.5 evaluations a ray) beams made camera rays 15% and 8%
+/// slower, and seed-slab 7%.
+pub(crate) fn worth_it(rays: &[Ray], p: &Params) -> bool {
+    let Some(first) = rays.first() else {
+        return false;
+    };
+    let o = first.origin;
+    rays.len() >= BEAM_RAYS
+        && p.bounds
+            .is_none_or(|(lo, hi)| o.cmpge(lo).all() && o.cmple(hi).all())
+        && rays.iter().all(|r| r.origin == o)
 }
 
 #[cfg(test)]

@@ -785,7 +785,7 @@ impl SdfGeometry {
         let mut next = 0usize;
         // With beams, rays are started [`BEAM_BATCH`] at a time, the batch's beams marched,
         // and the lanes fed from `prepared` (rays `prepared_from..` of `rays`).
-        let beams = self.beams && beam::shares_origin(rays);
+        let beams = self.beams && beam::worth_it(rays, params);
         let mut prepared: [Option<March>; BEAM_BATCH] = [None; BEAM_BATCH];
         let mut prepared_from = 0usize;
         let mut load =

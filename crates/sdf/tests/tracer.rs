@@ -824,3 +824,41 @@ fn rays_leaving_a_floor_at_an_objects_foot_do_not_walk_through_the_object() {
     g.occluded_many(&rays, &mut out);
     assert!(out.iter().all(|o| o.occluded), "{out:?}");
 }
+
+#[test]
+fn cameras_outside_the_scene_box_get_no_beams() {
+    // Three spheres, the camera outside their box: the rays start clipped at the box, and
+    // beams are not prepared at all (same results and work with and without them).
+    let s = scene(
+        r#"{"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [-0.8, 0.2, 3]}},
+           {"shape": {"sphere": {"radius": 0.4}}, "transform": {"translate": [0.7, -0.2, 3.5]}},
+           {"shape": {"sphere": {"radius": 0.3}}, "transform": {"translate": [0, 0.3, 5]}}"#,
+        "",
+    );
+    let with = |beams: bool| {
+        build(
+            &s,
+            &SdfOptions {
+                beams,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .unwrap()
+    };
+    let (on, off) = (with(true), with(false));
+    let rays: Vec<Ray> = (0..64 * 32)
+        .map(|i| {
+            let x = (i % 64) as f32 / 64.0 - 0.5;
+            let y = (i / 64) as f32 / 32.0 - 0.5;
+            ray(Vec3::ZERO, Vec3::new(x * 0.6, y * 0.3, 1.0))
+        })
+        .collect();
+    let mut a = vec![TraceResult::default(); rays.len()];
+    let mut b = a.clone();
+    for ((row, out_a), out_b) in rays.chunks(64).zip(a.chunks_mut(64)).zip(b.chunks_mut(64)) {
+        on.closest_hits(row, out_a);
+        off.closest_hits(row, out_b);
+    }
+    assert!(a.iter().filter(|r| r.hit().is_some()).count() > 200);
+    assert_eq!(a, b);
+}
