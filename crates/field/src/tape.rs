@@ -435,5 +435,45 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
 /// reciprocals of `dq`'s components).
 fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
     let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
-    recede::convex_leaf_recedes(&l.op, lq, ld) || recede::misses_box(q, dq, inv, l.bbox)
+    // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
+    // point is inside where the direction is not the outward one).
+    let outward: Option<V3<f32>> = match &l.op {
+        Op::Sphere { .. } => Some(lq),
+        Op::SphereAt { c, .. } => Some(lq - V3::splat3(*c)),
+        Op::Plane { n, .. } => Some(V3::splat3(*n)),
+        Op::Box { b } => {
+            let e = V3::new(
+                lq.x - lq.x.clamp(-b[0], b[0]),
+                lq.y - lq.y.clamp(-b[1], b[1]),
+                lq.z - lq.z.clamp(-b[2], b[2]),
+            );
+            (e.len2() > 0.0).then_some(e)
+        }
+        Op::Ellipsoid { inv_r, .. } => {
+            let w = V3::splat3(*inv_r);
+            Some(lq.mul_elem(w).mul_elem(w))
+        }
+        Op::Cylinder { r, h } => {
+            let rad = (lq.x * lq.x + lq.z * lq.z).sqrt();
+            let k = if rad > *r { 1.0 - *r / rad } else { 0.0 };
+            let e = V3::new(lq.x * k, lq.y - lq.y.clamp(-*h, *h), lq.z * k);
+            (e.len2() > 0.0).then_some(e)
+        }
+        Op::Torus { .. }
+        | Op::Triangle(_)
+        | Op::Mesh { .. }
+        | Op::Union
+        | Op::Intersection
+        | Op::Subtraction
+        | Op::SmoothUnion { .. }
+        | Op::Repeat { .. } => None,
+    };
+    if let Some(g) = outward {
+        // Growing, by more than rounding can fake: cos(angle to the surface) > 1e-4.
+        let along = g.dot(ld);
+        if along > 0.0 && along * along > 1e-8 * g.len2() * ld.len2() {
+            return true;
+        }
+    }
+    recede::misses_box(q, dq, inv, l.bbox)
 }
