@@ -268,9 +268,9 @@ mod tests {
             assert_eq!(ra.0, Termination::Hit);
             assert_eq!(ra.0, rb.0);
             assert!((ra.1 - rb.1).abs() <= 1e-5 * ra.1, "t {} vs {}", ra.1, rb.1);
-            saved += ra.2 - rb.2;
+            saved += i64::from(ra.2) - i64::from(rb.2);
         }
-        assert!(saved > BEAM_BATCH as u32, "beams saved {saved} evaluations");
+        assert!(saved > BEAM_BATCH as i64, "beams saved {saved} evaluations");
     }
 
     #[test]
