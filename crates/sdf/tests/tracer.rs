@@ -25,6 +25,53 @@ fn ray(origin: Vec3, dir: Vec3) -> Ray {
     }
 }
 
+/// The closest hits of a 96x64 fan of camera rays from the origin, traced in image rows
+/// (as the integrator batches them, so culling and beams see bundles of one origin).
+fn camera_rows(g: &marchmesh_sdf::SdfGeometry) -> Vec<TraceResult> {
+    let (w, h) = (96, 64);
+    let rays: Vec<Ray> = (0..w * h)
+        .map(|i| {
+            let x = (i % w) as f32 / w as f32 - 0.5;
+            let y = (i / w) as f32 / h as f32 - 0.5;
+            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
+        })
+        .collect();
+    let mut out = vec![TraceResult::default(); rays.len()];
+    for (row, o) in rays.chunks(w).zip(out.chunks_mut(w)) {
+        g.closest_hits(row, o);
+    }
+    out
+}
+
+/// Asserts that two traces of the same rays agree to the refinement threshold (the same
+/// terminations; hits within 1e-4 relative depth, with the same normal and material) and
+/// returns their total steps and the number of hits.
+fn agree_to_refinement(a: &[TraceResult], b: &[TraceResult]) -> (u64, u64, usize) {
+    let (mut steps_a, mut steps_b, mut hits) = (0u64, 0u64, 0);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        steps_a += u64::from(x.work.steps);
+        steps_b += u64::from(y.work.steps);
+        assert_eq!(x.termination(), y.termination(), "ray {i}");
+        if let (Some(p), Some(q)) = (x.hit(), y.hit()) {
+            hits += 1;
+            assert!(
+                (p.t - q.t).abs() <= 1e-4 * q.t,
+                "ray {i}: t {} vs {}",
+                p.t,
+                q.t
+            );
+            assert!(
+                p.normal.dot(q.normal) > 0.9999,
+                "ray {i}: normals {:?} {:?}",
+                p.normal,
+                q.normal
+            );
+            assert_eq!(p.material, q.material, "ray {i}");
+        }
+    }
+    (steps_a, steps_b, hits)
+}
+
 /// Closed-form ray/sphere (centre `c`, radius `r`) first hit in f64.
 fn sphere_t(o: Vec3, d: Vec3, c: Vec3, r: f64) -> Option<f64> {
     let o = o.as_dvec3() - c.as_dvec3();
@@ -294,42 +341,8 @@ fn culled_bundles_find_the_same_hits_as_the_whole_field() {
             .unwrap()
         };
         let (culled, whole) = (with(true), with(false));
-        let (w, h) = (96, 64);
-        let rays: Vec<Ray> = (0..w * h)
-            .map(|i| {
-                let x = (i % w) as f32 / w as f32 - 0.5;
-                let y = (i / w) as f32 / h as f32 - 0.5;
-                ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
-            })
-            .collect();
-        let mut a = vec![TraceResult::default(); rays.len()];
-        let mut b = vec![TraceResult::default(); rays.len()];
-        let (mut steps_a, mut steps_b, mut hits) = (0u64, 0u64, 0);
-        for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
-            culled.closest_hits(row, out_a);
-            whole.closest_hits(row, out_b);
-        }
-        for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-            steps_a += u64::from(x.work.steps);
-            steps_b += u64::from(y.work.steps);
-            assert_eq!(x.termination(), y.termination(), "ray {i}");
-            if let (Some(p), Some(q)) = (x.hit(), y.hit()) {
-                hits += 1;
-                assert!(
-                    (p.t - q.t).abs() <= 1e-4 * q.t,
-                    "ray {i}: t {} vs {}",
-                    p.t,
-                    q.t
-                );
-                assert!(
-                    p.normal.dot(q.normal) > 0.9999,
-                    "ray {i}: normals {:?} {:?}",
-                    p.normal,
-                    q.normal
-                );
-                assert_eq!(p.material, q.material, "ray {i}");
-            }
-        }
+        let (steps_a, steps_b, hits) =
+            agree_to_refinement(&camera_rows(&culled), &camera_rows(&whole));
         assert!(hits > 3000, "{hits} hits");
         // The point of culling: fewer objects per step, and never more steps.
         assert!(
@@ -665,37 +678,7 @@ fn beamed_camera_rays_find_the_same_hits_as_unbeamed_ones() {
         .unwrap()
     };
     let (beamed, plain) = (with(true), with(false));
-    let (w, h) = (96, 64);
-    let rays: Vec<Ray> = (0..w * h)
-        .map(|i| {
-            let x = (i % w) as f32 / w as f32 - 0.5;
-            let y = (i / w) as f32 / h as f32 - 0.5;
-            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
-        })
-        .collect();
-    let mut a = vec![TraceResult::default(); rays.len()];
-    let mut b = vec![TraceResult::default(); rays.len()];
-    for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
-        beamed.closest_hits(row, out_a);
-        plain.closest_hits(row, out_b);
-    }
-    let (mut steps_a, mut steps_b, mut hits) = (0u64, 0u64, 0);
-    for (i, (x, y)) in a.iter().zip(&b).enumerate() {
-        steps_a += u64::from(x.work.steps);
-        steps_b += u64::from(y.work.steps);
-        assert_eq!(x.termination(), y.termination(), "ray {i}");
-        if let (Some(p), Some(q)) = (x.hit(), y.hit()) {
-            hits += 1;
-            assert!(
-                (p.t - q.t).abs() <= 1e-4 * q.t,
-                "ray {i}: t {} vs {}",
-                p.t,
-                q.t
-            );
-            assert!(p.normal.dot(q.normal) > 0.9999, "ray {i}: normals");
-            assert_eq!(p.material, q.material, "ray {i}");
-        }
-    }
+    let (steps_a, steps_b, hits) = agree_to_refinement(&camera_rows(&beamed), &camera_rows(&plain));
     assert!(hits > 3000, "{hits} hits");
     // The point of beams: fewer evaluations in all, the beams' own included.
     assert!(
@@ -728,20 +711,7 @@ fn receding_checks_change_no_result() {
         .unwrap()
     };
     let (on, off) = (with(true), with(false));
-    let (w, h) = (96, 64);
-    let rays: Vec<Ray> = (0..w * h)
-        .map(|i| {
-            let x = (i % w) as f32 / w as f32 - 0.5;
-            let y = (i / w) as f32 / h as f32 - 0.5;
-            ray(Vec3::ZERO, Vec3::new(x * 1.2, y * 0.8, 1.0))
-        })
-        .collect();
-    let mut a = vec![TraceResult::default(); rays.len()];
-    let mut b = vec![TraceResult::default(); rays.len()];
-    for ((row, out_a), out_b) in rays.chunks(w).zip(a.chunks_mut(w)).zip(b.chunks_mut(w)) {
-        on.closest_hits(row, out_a);
-        off.closest_hits(row, out_b);
-    }
+    let (a, b) = (camera_rows(&on), camera_rows(&off));
     let (mut steps_a, mut steps_b) = (0u64, 0u64);
     for (i, (x, y)) in a.iter().zip(&b).enumerate() {
         assert_eq!(x.termination(), y.termination(), "camera ray {i}");
