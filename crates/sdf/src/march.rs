@@ -179,7 +179,7 @@ enum Phase {
         s_land: f32,
         left: u32,
         evals: u32,
-        /// Steps are safe segment steps over the rest of the gap (`Params::segment`),
+        /// Steps are safe segment steps over the rest of the gap (`Params::segment_sweeps`),
         /// not plain distances.
         segmented: bool,
     },
