@@ -832,3 +832,94 @@ fn cameras_outside_the_scene_box_get_no_beams() {
     assert!(a.iter().filter(|r| r.hit().is_some()).count() > 200);
     assert_eq!(a, b);
 }
+
+/// The primitives scene's camera, floor, torus and triangle, for shadow rays replayed from
+/// its renders (render space: the camera at the origin).
+fn primitives_floor_scene() -> Scene {
+    let json = r#"{"camera": {"position": [0, 3.2, -7.5], "look_at": [0, 0.4, 0], "vfov_deg": 45, "width": 500, "height": 400},
+        "objects": [{"shape": {"plane": {}}},
+          {"shape": {"torus": {"major_radius": 0.6, "minor_radius": 0.2}}, "transform": {"translate": [-1.2, 0.75, -1.2], "rotate_deg": [60, 0, 0]}},
+          {"shape": {"triangle": {"vertices": [[2.2, 0.05, -1.6], [3.4, 0.05, -1.0], [2.6, 1.5, -0.9]]}}}]}"#;
+    parse_scene(json, "primitives floor", std::path::Path::new(".")).expect("valid test scene")
+}
+
+#[test]
+fn shadow_rays_at_a_sheets_edge_decide_as_the_reference() {
+    // Shadow rays from primitives' floor towards its point light. The first crosses the
+    // triangle (a sheet: no inside to bracket, no sign change to show a crossing) at 7
+    // degrees (the exact reference: blocked at t = 0.49891). Its first prediction overshoots
+    // the crossing, and the sweep of the gap before it closes in on the crossing at
+    // `1 - sin(7 deg)` per step; it used to run out of budget, take up the prediction and
+    // let the ray through (nine floor pixels of primitives lit in the triangle's shadow).
+    // The second passes the triangle's edge by 5e-6, 2.8x the rounding of positions (the
+    // reference: unblocked; a test that called samples within twice that rounding crossings
+    // blocked it).
+    let g = build(&primitives_floor_scene(), &SdfOptions::DEFAULT).unwrap();
+    let blocked = Ray {
+        origin: Vec3::new(3.292_379_6, -3.199_204_2, 6.500_905),
+        dir: Vec3::new(-0.735_950_2, 0.605_522_63, -0.302_852_66),
+        t_min: 0.0,
+        t_max: 9.907_999,
+    };
+    let o = g.occluded(&blocked);
+    assert!(
+        o.occluded,
+        "{:?} after {} steps",
+        o.termination, o.work.steps
+    );
+    let h = g.closest_hit(&blocked);
+    assert!(
+        h.hit().is_some_and(|h| (h.t - 0.498_91).abs() < 1e-4),
+        "{h:?}"
+    );
+    let clear = Ray {
+        origin: Vec3::new(2.4073, -3.199_278_8, 5.997_847),
+        dir: Vec3::new(-0.702_055_6, 0.657_427_2, -0.273_692_1),
+        t_min: 0.0,
+        t_max: 9.125_765,
+    };
+    let o = g.occluded(&clear);
+    assert!(
+        !o.occluded,
+        "{:?} after {} steps",
+        o.termination, o.work.steps
+    );
+    let mut out = vec![marchmesh_core::OcclusionResult::default(); 2];
+    g.occluded_many(&[blocked, clear], &mut out);
+    assert!(out[0].occluded && !out[1].occluded, "{out:?}");
+}
+
+#[test]
+fn a_long_near_pass_within_the_shell_is_a_miss() {
+    // A shadow ray from primitives' floor skimming its torus at 0.9 of the shell (8.5e-4
+    // against 9.4e-4) along a flat stretch: the passage takes more approaching samples than
+    // one shell visit's budget. The exact reference: unblocked. Calling the visit a hit when
+    // its budget ran out shadowed the floor pixel; the distance along the pass curves up,
+    // so its closest approach clears the surface and the visit goes on.
+    let g = build(&primitives_floor_scene(), &SdfOptions::DEFAULT).unwrap();
+    let r = Ray {
+        origin: Vec3::new(0.071_239_82, -3.199_233_3, 6.964_576_7),
+        dir: Vec3::new(-0.506_621_24, 0.746_634_36, -0.431_128_65),
+        t_min: 0.0,
+        t_max: 8.035,
+    };
+    let o = g.occluded(&r);
+    assert!(
+        !o.occluded,
+        "{:?} after {} steps",
+        o.termination, o.work.steps
+    );
+    assert_eq!(o.termination, Termination::MaxDistance);
+    let h = g.closest_hit(&r);
+    assert!(h.hit().is_none(), "{h:?}");
+    // A ray closing in on a plane at a shallow angle never curves up: still decided by the
+    // budget (a hit), not walked to the step limit.
+    let floor = Ray {
+        origin: Vec3::new(0.0, -3.199, 4.0),
+        dir: Vec3::new(0.0, -(0.5f32.to_radians().sin()), 0.5f32.to_radians().cos()),
+        t_min: 0.0,
+        t_max: 1.0,
+    };
+    let h = g.closest_hit(&floor);
+    assert!(h.hit().is_some(), "{h:?}");
+}
