@@ -479,7 +479,13 @@ mod tests {
                             (want.dir.to_array().map(f32::to_bits), want.t_max.to_bits()),
                             "pixel ({col}, {row}) sample {s}"
                         );
-                        assert_eq!(r.origin, want.origin);
+                        assert_eq!(
+                            (r.origin.to_array().map(f32::to_bits), r.t_min.to_bits()),
+                            (
+                                want.origin.to_array().map(f32::to_bits),
+                                want.t_min.to_bits()
+                            )
+                        );
                         assert_eq!(samples.direction(i).as_vec3().normalize(), r.dir);
                     }
                 }

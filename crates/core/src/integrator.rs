@@ -445,18 +445,21 @@ impl<'a> Band<'a> {
         let mut non_finite = 0;
         for pixels in self.rows_of(tile) {
             let pixels = pixels.start as usize..pixels.end as usize;
-            for (c, s) in self.color[pixels.clone()].iter_mut().zip(&sums[pixels]) {
+            let colors = &mut self.color[pixels.clone()];
+            // `v - v` is 0 in every finite channel and NaN in any other, so the row's probe
+            // stays 0 exactly when every pixel is finite; the rare other rows are fixed up.
+            let mut probe = 0.0f32;
+            for (c, s) in colors.iter_mut().zip(&sums[pixels]) {
                 let v = *s * scale;
-                // Branch-free: `v - v` is 0 in every finite channel and NaN in any other.
+                *c = v;
                 let d = v - v;
-                let finite = d.x + d.y + d.z == 0.0;
-                non_finite += u64::from(!finite);
-                let keep = if finite { u32::MAX } else { 0 };
-                *c = Vec3::new(
-                    f32::from_bits(v.x.to_bits() & keep),
-                    f32::from_bits(v.y.to_bits() & keep),
-                    f32::from_bits(v.z.to_bits() & keep),
-                );
+                probe += d.x + d.y + d.z;
+            }
+            if probe != 0.0 {
+                for c in colors.iter_mut().filter(|c| !c.is_finite()) {
+                    *c = Vec3::ZERO;
+                    non_finite += 1;
+                }
             }
         }
         stats.non_finite_pixels += non_finite;
@@ -691,7 +694,6 @@ fn resolve_no_hits(
     let count = paths.len();
     let (rays, results) = (&rays[..count], &results[..count]);
     let aov_pixels = aov_pixels.min(count);
-    let mut tally = MissTally::default();
     let constant = match (sh.emitters.is_empty(), background.constant()) {
         (true, Some(c)) => Some(c),
         _ => None,
@@ -708,13 +710,13 @@ fn resolve_no_hits(
         }
         let span = (&paths[from..to], &rays[from..to], &results[from..to], from);
         match (constant, record) {
-            (Some(c), true) => miss_span::<true>(span, |_| c, sum, &mut aov, hits, &mut tally),
-            (Some(c), false) => miss_span::<false>(span, |_| c, sum, &mut aov, hits, &mut tally),
-            (None, true) => miss_span::<true>(span, radiance, sum, &mut aov, hits, &mut tally),
-            (None, false) => miss_span::<false>(span, radiance, sum, &mut aov, hits, &mut tally),
+            (Some(c), true) => miss_span::<true>(span, |_| c, sum, &mut aov, hits),
+            (Some(c), false) => miss_span::<false>(span, |_| c, sum, &mut aov, hits),
+            (None, true) => miss_span::<true>(span, radiance, sum, &mut aov, hits),
+            (None, false) => miss_span::<false>(span, radiance, sum, &mut aov, hits),
         }
+        .merge_into(stats);
     }
-    tally.merge_into(stats);
 }
 
 /// A band's AOV planes cut to one length (that of the colour sums), so one bounds check
@@ -778,16 +780,17 @@ impl MissTally {
 }
 
 /// [`resolve_no_hits`] over one span of a wavefront (`first` = the span's index in it):
-/// `RECORD` says whether the span's paths record AOVs.
-#[inline(always)]
+/// `RECORD` says whether the span's paths record AOVs. Returns the span's counters (a
+/// local tally, so they can stay in registers).
+#[inline(never)]
 fn miss_span<const RECORD: bool>(
     (paths, rays, results, first): (&[Path], &[Ray], &[TraceResult], usize),
     radiance: impl Fn(&Ray) -> Vec3,
     sum: &mut [Vec3],
     aov: &mut AovPlanes<'_>,
     hits: &mut Vec<u32>,
-    tally: &mut MissTally,
-) {
+) -> MissTally {
+    let mut tally = MissTally::default();
     let n = if RECORD { aov.depth.len() } else { sum.len() };
     let sum = &mut sum[..n];
     for (k, ((path, ray), res)) in paths.iter().zip(rays).zip(results).enumerate() {
@@ -808,6 +811,7 @@ fn miss_span<const RECORD: bool>(
         }
         sum[px] += path.throughput * radiance(ray);
     }
+    tally
 }
 
 /// One path (one sample of one pixel) in the tile's wavefront; its ray is at the same index

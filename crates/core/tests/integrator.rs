@@ -275,6 +275,35 @@ fn renders_without_aovs_have_the_same_colour_and_counters_and_empty_aov_planes()
 }
 
 #[test]
+fn non_finite_colours_are_written_black_and_counted() {
+    // Lights so bright that the centre of the sphere overflows f32: those pixels are
+    // blackened and counted, the rest keep their colour, with one sample and with several.
+    for spp in [1, 4] {
+        let mut s = scene(&ONE_SPHERE.replace(
+            r#""height": 33}"#,
+            &format!(r#""height": 33}}, "render": {{"samples_per_pixel": {spp}}}"#),
+        ));
+        // Past the scene format's validation limits, set on the parsed scene.
+        for l in &mut s.lights {
+            // The sum of the samples, 0.8 x (2e38 + 3e38 n.l), overflows where n.l > 0.75.
+            let share = 1.0 / spp as f64;
+            match l {
+                marchmesh_scene::Light::Ambient { intensity } => *intensity = 2e38 * share,
+                marchmesh_scene::Light::Directional { intensity, .. } => *intensity = 3e38 * share,
+                _ => unreachable!("ONE_SPHERE has an ambient and a directional light"),
+            }
+        }
+        let out = run(&s, 1);
+        let fb = &out.framebuffer;
+        let black = fb.color.iter().filter(|c| **c == Vec3::ZERO).count();
+        assert!(fb.color.iter().all(|c| c.is_finite()));
+        assert!(black > 10 && black < fb.len() / 2, "{black} black pixels");
+        assert_eq!(out.stats.non_finite_pixels, black as u64, "spp {spp}");
+        assert!((0..fb.len()).any(|i| fb.is_hit(i) && fb.color[i] != Vec3::ZERO));
+    }
+}
+
+#[test]
 fn render_refuses_buffers_over_the_memory_limit() {
     let s = scene(ONE_SPHERE);
     let g = Spheres::from_scene(&s);
