@@ -383,6 +383,7 @@ fn render(args: RenderArgs) -> Result<()> {
     let opts = RenderOptions {
         threads: args.threads,
         memory_limit_bytes,
+        ..Default::default()
     };
     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
     bar.finish_and_clear();

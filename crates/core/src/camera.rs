@@ -269,12 +269,20 @@ impl TileRays {
                     _mm_storeu_ps(dy.as_mut_ptr(), _mm_mul_ps(b, s));
                     _mm_storeu_ps(dz.as_mut_ptr(), _mm_mul_ps(c, s));
                 }
-                out.extend((0..(tw - k).min(4)).map(|i| Ray {
-                    origin: glam::Vec3::ZERO,
-                    dir: glam::Vec3::new(dx[i], dy[i], dz[i]),
-                    t_min: 0.0,
-                    t_max: self.t_max,
-                }));
+                // Written into the reserved capacity: no capacity check per ray.
+                let lanes = (tw - k).min(4);
+                let len = out.len();
+                for (i, slot) in out.spare_capacity_mut()[..lanes].iter_mut().enumerate() {
+                    slot.write(Ray {
+                        origin: glam::Vec3::ZERO,
+                        dir: glam::Vec3::new(dx[i], dy[i], dz[i]),
+                        t_min: 0.0,
+                        t_max: self.t_max,
+                    });
+                }
+                // SAFETY: the `lanes` slots after `len` were just initialised (the slice
+                // index above checked they are within the capacity).
+                unsafe { out.set_len(len + lanes) };
             }
         }
     }
@@ -471,7 +479,13 @@ mod tests {
                             (want.dir.to_array().map(f32::to_bits), want.t_max.to_bits()),
                             "pixel ({col}, {row}) sample {s}"
                         );
-                        assert_eq!(r.origin, want.origin);
+                        assert_eq!(
+                            (r.origin.to_array().map(f32::to_bits), r.t_min.to_bits()),
+                            (
+                                want.origin.to_array().map(f32::to_bits),
+                                want.t_min.to_bits()
+                            )
+                        );
                         assert_eq!(samples.direction(i).as_vec3().normalize(), r.dir);
                     }
                 }

@@ -79,6 +79,9 @@ pub fn quantile(v: &mut [f64], q: f64) -> f64 {
 }
 
 /// Compares `test` against `reference` pixel by pixel.
+///
+/// # Panics
+/// If either framebuffer has no AOVs ([`Framebuffer::has_aovs`]): the comparison reads them.
 pub fn compare(test: &Framebuffer, reference: &Framebuffer) -> Result<Accuracy, SizeMismatch> {
     if (test.width, test.height) != (reference.width, reference.height) {
         return Err(SizeMismatch {
@@ -88,6 +91,10 @@ pub fn compare(test: &Framebuffer, reference: &Framebuffer) -> Result<Accuracy, 
             ref_h: reference.height,
         });
     }
+    assert!(
+        test.has_aovs() && reference.has_aovs(),
+        "compare: a framebuffer rendered without AOVs"
+    );
     let n = test.len();
     let mut a = Accuracy {
         pixels: n,

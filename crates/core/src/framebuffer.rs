@@ -10,7 +10,8 @@ pub const NO_HIT_DEPTH: f32 = f32::INFINITY;
 /// A rendered image with AOVs recorded from each pixel's primary ray through the pixel centre
 /// (sample 0), so AOVs of different backends are comparable pixel by pixel.
 ///
-/// Pixels are stored row-major, row 0 at the top.
+/// Pixels are stored row-major, row 0 at the top. A render with `RenderOptions::aovs` off
+/// leaves every plane but `color` empty ([`Framebuffer::has_aovs`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Framebuffer {
     /// Width in pixels.
@@ -50,10 +51,17 @@ impl Framebuffer {
     /// Makes this a `width` x `height` framebuffer, keeping its memory where it suffices;
     /// pixel values are unspecified until written (the renderer overwrites every pixel).
     pub fn resize(&mut self, width: u32, height: u32) {
+        self.resize_planes(width, height, true);
+    }
+
+    /// [`Framebuffer::resize`], with the AOV planes emptied (length 0, memory kept) when
+    /// `aovs` is false: the layout of a render that records no AOVs.
+    pub fn resize_planes(&mut self, width: u32, height: u32, aovs: bool) {
         let n = width as usize * height as usize;
         self.width = width;
         self.height = height;
         self.color.resize(n, Vec3::ZERO);
+        let n = if aovs { n } else { 0 };
         self.depth.resize(n, NO_HIT_DEPTH);
         self.normal.resize(n, Vec3::ZERO);
         self.material.resize(n, u32::MAX);
@@ -81,7 +89,24 @@ impl Framebuffer {
         self.color.is_empty()
     }
 
+    /// Whether the AOV planes hold one value per pixel; false for a render with
+    /// `RenderOptions::aovs` off, whose AOV planes are empty.
+    pub fn has_aovs(&self) -> bool {
+        [
+            self.depth.len(),
+            self.normal.len(),
+            self.material.len(),
+            self.termination.len(),
+            self.work.len(),
+        ]
+        .iter()
+        .all(|&l| l == self.color.len())
+    }
+
     /// Whether the primary ray of pixel `i` hit a surface.
+    ///
+    /// # Panics
+    /// If `i` is outside the depth plane (also: a framebuffer without AOVs).
     pub fn is_hit(&self, i: usize) -> bool {
         self.depth[i].is_finite()
     }

@@ -50,6 +50,11 @@ pub struct RenderOptions {
     pub threads: usize,
     /// The render fails with [`RenderError::TooLarge`] before allocating more than this.
     pub memory_limit_bytes: u64,
+    /// Record the AOV planes of the framebuffer (depth, normal, material, termination,
+    /// work). `false` leaves them empty (length 0; [`Framebuffer::has_aovs`] is false) and
+    /// skips their writes, for renders whose colour and statistics are all that is read
+    /// (the harness's timed repeats). Colour and statistics are the same either way.
+    pub aovs: bool,
 }
 
 impl Default for RenderOptions {
@@ -57,6 +62,7 @@ impl Default for RenderOptions {
         Self {
             threads: 0,
             memory_limit_bytes: DEFAULT_MEMORY_LIMIT_BYTES,
+            aovs: true,
         }
     }
 }
@@ -133,7 +139,8 @@ pub fn render(
 }
 
 /// [`render`] into an existing output, reusing its framebuffer's memory (resized to the
-/// scene's image; every pixel is overwritten). Repeated renders of one size (benchmarks,
+/// scene's image; every pixel is overwritten, and the AOV planes are emptied when
+/// `options.aovs` is false). Repeated renders of one size (benchmarks,
 /// interactive views) then allocate nothing per render.
 ///
 /// The image is cut into bands of [`TILE_HEIGHT`] rows, one per worker task, and each band
@@ -182,13 +189,13 @@ pub fn render_into(
         camera: TileRays::new(&scene.camera, scene.render.max_distance),
     };
     let fb = &mut out.framebuffer;
-    fb.resize(w, h);
+    fb.resize_planes(w, h, options.aovs);
     if shading.spp == 0 {
         // No camera ray writes the pixels: leave them cleared.
         fb.clear();
     }
     let start = Instant::now();
-    let bands = Band::split(fb, TILE_HEIGHT);
+    let bands = Band::split(fb, TILE_HEIGHT, options.aovs);
     let stats = match scene.render.integrator {
         Integrator::Whitted => run_bands(pool.as_ref(), bands, on_row, |s, b| {
             trace_band(&frame, s, b)
@@ -271,6 +278,8 @@ pub(crate) struct Band<'a> {
     pub(crate) width: usize,
     pub(crate) y: u32,
     pub(crate) rows: u32,
+    /// The band records AOVs (its AOV slices are as long as `color`; empty otherwise).
+    pub(crate) aovs: bool,
     color: &'a mut [Vec3],
     depth: &'a mut [f32],
     normal: &'a mut [Vec3],
@@ -280,15 +289,35 @@ pub(crate) struct Band<'a> {
 }
 
 impl<'a> Band<'a> {
-    /// `fb` cut into bands of `rows` rows (the last may be shorter).
-    fn split(fb: &'a mut Framebuffer, rows: u32) -> Vec<Band<'a>> {
+    /// `fb` cut into bands of `rows` rows (the last may be shorter); with `aovs` false the
+    /// bands' AOV slices are empty (and so must `fb`'s AOV planes be).
+    fn split(fb: &'a mut Framebuffer, rows: u32, aovs: bool) -> Vec<Band<'a>> {
         let width = fb.width as usize;
         let n = (width * rows as usize).max(1);
-        let mut depth = fb.depth.chunks_mut(n);
-        let mut normal = fb.normal.chunks_mut(n);
-        let mut material = fb.material.chunks_mut(n);
-        let mut termination = fb.termination.chunks_mut(n);
-        let mut work = fb.work.chunks_mut(n);
+        let aov_len = if aovs { fb.color.len() } else { 0 };
+        assert!(
+            [
+                fb.depth.len(),
+                fb.normal.len(),
+                fb.material.len(),
+                fb.termination.len(),
+                fb.work.len()
+            ]
+            .iter()
+            .all(|&l| l == aov_len),
+            "framebuffer AOV planes differ in length from what the render records"
+        );
+        // Empty planes give every band an empty slice.
+        fn cut<T>(plane: &mut [T], n: usize) -> impl Iterator<Item = &mut [T]> {
+            plane
+                .chunks_mut(n)
+                .chain(std::iter::repeat_with(Default::default))
+        }
+        let mut depth = cut(&mut fb.depth, n);
+        let mut normal = cut(&mut fb.normal, n);
+        let mut material = cut(&mut fb.material, n);
+        let mut termination = cut(&mut fb.termination, n);
+        let mut work = cut(&mut fb.work, n);
         let mut bands = Vec::new();
         for (k, color) in fb.color.chunks_mut(n).enumerate() {
             let (Some(depth), Some(normal), Some(material), Some(termination), Some(work)) = (
@@ -304,6 +333,7 @@ impl<'a> Band<'a> {
                 width,
                 y: k as u32 * rows,
                 rows: (color.len() / width.max(1)) as u32,
+                aovs,
                 color,
                 depth,
                 normal,
@@ -318,35 +348,37 @@ impl<'a> Band<'a> {
     /// A band of the same rows over `planes` (resized to the band's pixels).
     fn staged<'p>(&self, planes: &'p mut Planes) -> Band<'p> {
         let n = self.color.len();
+        let m = self.depth.len();
         planes.color.resize(n, Vec3::ZERO);
-        planes.depth.resize(n, NO_HIT_DEPTH);
-        planes.normal.resize(n, Vec3::ZERO);
-        planes.material.resize(n, u32::MAX);
-        planes.termination.resize(n, Termination::Miss);
-        planes.work.resize(n, RayWork::default());
+        planes.depth.resize(m, NO_HIT_DEPTH);
+        planes.normal.resize(m, Vec3::ZERO);
+        planes.material.resize(m, u32::MAX);
+        planes.termination.resize(m, Termination::Miss);
+        planes.work.resize(m, RayWork::default());
         Band {
             width: self.width,
             y: self.y,
             rows: self.rows,
+            aovs: self.aovs,
             color: &mut planes.color[..n],
-            depth: &mut planes.depth[..n],
-            normal: &mut planes.normal[..n],
-            material: &mut planes.material[..n],
-            termination: &mut planes.termination[..n],
-            work: &mut planes.work[..n],
+            depth: &mut planes.depth[..m],
+            normal: &mut planes.normal[..m],
+            material: &mut planes.material[..m],
+            termination: &mut planes.termination[..m],
+            work: &mut planes.work[..m],
         }
     }
 
     /// Copies the pixels [`Band::staged`] traced into `planes` into this band, with
     /// non-temporal stores (the framebuffer is not read again during the render).
     fn copy_from(&mut self, planes: &Planes) {
-        let n = self.color.len();
+        let (n, m) = (self.color.len(), self.depth.len());
         crate::stream::copy_streaming(self.color, &planes.color[..n]);
-        crate::stream::copy_streaming(self.depth, &planes.depth[..n]);
-        crate::stream::copy_streaming(self.normal, &planes.normal[..n]);
-        crate::stream::copy_streaming(self.material, &planes.material[..n]);
-        crate::stream::copy_streaming(self.termination, &planes.termination[..n]);
-        crate::stream::copy_streaming(self.work, &planes.work[..n]);
+        crate::stream::copy_streaming(self.depth, &planes.depth[..m]);
+        crate::stream::copy_streaming(self.normal, &planes.normal[..m]);
+        crate::stream::copy_streaming(self.material, &planes.material[..m]);
+        crate::stream::copy_streaming(self.termination, &planes.termination[..m]);
+        crate::stream::copy_streaming(self.work, &planes.work[..m]);
     }
 
     /// The tiles of the band, left to right.
@@ -397,16 +429,40 @@ impl<'a> Band<'a> {
         }
     }
 
-    /// Writes the average of `sum` over `samples` into band pixel `i`'s colour, counting
-    /// (and blackening) a non-finite result in `stats`.
-    pub(crate) fn set_color(&mut self, i: usize, sum: Vec3, samples: u32, stats: &mut RenderStats) {
-        let v = sum * (1.0 / samples as f32);
-        self.color[i] = if v.is_finite() {
-            v
-        } else {
-            stats.non_finite_pixels += 1;
-            Vec3::ZERO
-        };
+    /// Writes the average of `sums` over `samples` into the colour of each of `tile`'s
+    /// pixels (`sums` indexed like the band's pixels), counting (and blackening) a
+    /// non-finite result in `stats`.
+    // `v - v` is the finiteness probe (0 in a finite channel, NaN otherwise), not a slip.
+    #[allow(clippy::eq_op)]
+    pub(crate) fn set_colors(
+        &mut self,
+        tile: Tile,
+        sums: &[Vec3],
+        samples: u32,
+        stats: &mut RenderStats,
+    ) {
+        let scale = 1.0 / samples as f32;
+        let mut non_finite = 0;
+        for pixels in self.rows_of(tile) {
+            let pixels = pixels.start as usize..pixels.end as usize;
+            let colors = &mut self.color[pixels.clone()];
+            // `v - v` is 0 in every finite channel and NaN in any other, so the row's probe
+            // stays 0 exactly when every pixel is finite; the rare other rows are fixed up.
+            let mut probe = 0.0f32;
+            for (c, s) in colors.iter_mut().zip(&sums[pixels]) {
+                let v = *s * scale;
+                *c = v;
+                let d = v - v;
+                probe += d.x + d.y + d.z;
+            }
+            if probe != 0.0 {
+                for c in colors.iter_mut().filter(|c| !c.is_finite()) {
+                    *c = Vec3::ZERO;
+                    non_finite += 1;
+                }
+            }
+        }
+        stats.non_finite_pixels += non_finite;
     }
 }
 
@@ -621,7 +677,9 @@ pub(crate) fn resolve_vertex(
 /// The first pass over a wavefront's results: resolves every result without a hit as
 /// [`resolve_vertex`] would (counts, area light or background radiance added to its pixel's
 /// `sum`, AOVs of the first `aov_pixels` paths) and lists the indices of the hits in `hits`.
-/// Slices as arguments, so the loop keeps their addresses in registers.
+/// Slices as arguments, so the loop keeps their addresses in registers; the loop is built
+/// once per combination of "radiance is one constant" and "records AOVs", so the common
+/// case (constant background, no area light) reads neither rays nor background per ray.
 #[inline(never)]
 fn resolve_no_hits(
     (paths, rays, results): (&[Path], &[Ray], &[TraceResult]),
@@ -633,58 +691,127 @@ fn resolve_no_hits(
     stats: &mut RenderStats,
 ) {
     hits.clear();
-    let Band {
-        depth,
-        normal,
-        material,
-        termination,
-        work,
-        ..
-    } = band;
-    // One length for every plane and `sum`, so one bounds check covers a pixel's stores.
-    let n = sum.len().min(depth.len());
-    let sum = &mut sum[..n];
-    let (depth, normal, material, termination, work) = (
-        &mut depth[..n],
-        &mut normal[..n],
-        &mut material[..n],
-        &mut termination[..n],
-        &mut work[..n],
-    );
-    let mut tally = RenderStats::default();
-    let constant_background = background.constant();
     let count = paths.len();
     let (rays, results) = (&rays[..count], &results[..count]);
-    for pi in 0..count {
-        let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
-        let ended = res.termination();
-        if ended == Termination::Hit {
-            hits.push(pi as u32);
+    let aov_pixels = aov_pixels.min(count);
+    let constant = match (sh.emitters.is_empty(), background.constant()) {
+        (true, Some(c)) => Some(c),
+        _ => None,
+    };
+    let radiance = |ray: &Ray| match sh.emitter_before(ray, ray.t_max) {
+        Some(e) => e,
+        None => background.sample(ray.dir),
+    };
+    let mut aov = AovPlanes::of(band, sum.len());
+    let spans = [(0, aov_pixels, true), (aov_pixels, count, false)];
+    for (from, to, record) in spans {
+        if from == to {
             continue;
         }
-        tally.add_work(&res.work);
-        tally.add_termination(ended, false);
-        let emission = match sh.emitters.is_empty() {
-            true => None,
-            false => sh.emitter_before(ray, ray.t_max),
-        };
-        let radiance = match (emission, constant_background) {
-            (Some(e), _) => e,
-            (None, Some(c)) => c,
-            (None, None) => background.sample(ray.dir),
-        };
+        let span = (&paths[from..to], &rays[from..to], &results[from..to], from);
+        match (constant, record) {
+            (Some(c), true) => miss_span::<true>(span, |_| c, sum, &mut aov, hits),
+            (Some(c), false) => miss_span::<false>(span, |_| c, sum, &mut aov, hits),
+            (None, true) => miss_span::<true>(span, radiance, sum, &mut aov, hits),
+            (None, false) => miss_span::<false>(span, radiance, sum, &mut aov, hits),
+        }
+        .merge_into(stats);
+    }
+}
+
+/// A band's AOV planes cut to one length (that of the colour sums), so one bounds check
+/// covers a pixel's stores.
+struct AovPlanes<'b> {
+    depth: &'b mut [f32],
+    normal: &'b mut [Vec3],
+    material: &'b mut [u32],
+    termination: &'b mut [Termination],
+    work: &'b mut [RayWork],
+}
+
+impl<'b> AovPlanes<'b> {
+    /// The planes of `band`, each cut to `n` pixels (empty when the band records no AOVs).
+    fn of(band: &'b mut Band<'_>, n: usize) -> Self {
+        let n = n.min(band.depth.len());
+        Self {
+            depth: &mut band.depth[..n],
+            normal: &mut band.normal[..n],
+            material: &mut band.material[..n],
+            termination: &mut band.termination[..n],
+            work: &mut band.work[..n],
+        }
+    }
+}
+
+/// The counters of rays without a hit, kept in locals and added to the render's
+/// [`RenderStats`] once per wavefront (the same sums [`RenderStats::add_work`] and
+/// [`RenderStats::add_termination`] would make ray by ray).
+#[derive(Default)]
+struct MissTally {
+    /// Count per [`Termination`] discriminant.
+    ended: [u64; 4],
+    steps: u64,
+    max_steps: u32,
+    node_visits: u64,
+    max_node_visits: u32,
+    primitive_tests: u64,
+}
+
+impl MissTally {
+    #[inline(always)]
+    fn add(&mut self, ended: Termination, w: &RayWork) {
+        self.ended[ended as usize] += 1;
+        self.steps += w.steps as u64;
+        self.max_steps = self.max_steps.max(w.steps);
+        self.node_visits += w.node_visits as u64;
+        self.max_node_visits = self.max_node_visits.max(w.node_visits);
+        self.primitive_tests += w.primitive_tests as u64;
+    }
+
+    fn merge_into(&self, stats: &mut RenderStats) {
+        stats.closest_max_steps += self.ended[Termination::MaxSteps as usize];
+        stats.max_distance += self.ended[Termination::MaxDistance as usize];
+        stats.steps += self.steps;
+        stats.max_steps_seen = stats.max_steps_seen.max(self.max_steps);
+        stats.node_visits += self.node_visits;
+        stats.max_node_visits_seen = stats.max_node_visits_seen.max(self.max_node_visits);
+        stats.primitive_tests += self.primitive_tests;
+    }
+}
+
+/// [`resolve_no_hits`] over one span of a wavefront (`first` = the span's index in it):
+/// `RECORD` says whether the span's paths record AOVs. Returns the span's counters (a
+/// local tally, so they can stay in registers).
+#[inline(never)]
+fn miss_span<const RECORD: bool>(
+    (paths, rays, results, first): (&[Path], &[Ray], &[TraceResult], usize),
+    radiance: impl Fn(&Ray) -> Vec3,
+    sum: &mut [Vec3],
+    aov: &mut AovPlanes<'_>,
+    hits: &mut Vec<u32>,
+) -> MissTally {
+    let mut tally = MissTally::default();
+    let n = if RECORD { aov.depth.len() } else { sum.len() };
+    let sum = &mut sum[..n];
+    for (k, ((path, ray), res)) in paths.iter().zip(rays).zip(results).enumerate() {
+        let ended = res.termination();
+        if ended == Termination::Hit {
+            hits.push((first + k) as u32);
+            continue;
+        }
+        tally.add(ended, &res.work);
         let px = path.pixel as usize;
         assert!(px < n, "path pixel outside its band");
-        if pi < aov_pixels {
-            termination[px] = ended;
-            work[px] = res.work;
-            depth[px] = NO_HIT_DEPTH;
-            normal[px] = Vec3::ZERO;
-            material[px] = u32::MAX;
+        if RECORD {
+            aov.termination[px] = ended;
+            aov.work[px] = res.work;
+            aov.depth[px] = NO_HIT_DEPTH;
+            aov.normal[px] = Vec3::ZERO;
+            aov.material[px] = u32::MAX;
         }
-        sum[px] += path.throughput * radiance;
+        sum[px] += path.throughput * radiance(ray);
     }
-    stats.merge(&tally);
+    tally
 }
 
 /// One path (one sample of one pixel) in the tile's wavefront; its ray is at the same index
@@ -802,7 +929,7 @@ fn trace_tile(
         next_rays.clear();
         // Rays without a hit first (most camera rays of a small object), in a lean loop;
         // the hits after, in order.
-        let aov_pixels = if depth == 0 { pixels } else { 0 };
+        let aov_pixels = if depth == 0 && band.aovs { pixels } else { 0 };
         resolve_no_hits(
             (paths, rays, results),
             band,
@@ -816,7 +943,7 @@ fn trace_tile(
             let pi = pi as usize;
             let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
             let px = path.pixel as usize;
-            let aov = (depth == 0 && pi < pixels).then_some((&mut *band, px));
+            let aov = (depth == 0 && pi < pixels && band.aovs).then_some((&mut *band, px));
             let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
                 Vertex::Emitter(radiance) | Vertex::Background(radiance) => {
                     sum[px] += path.throughput * radiance;
@@ -1041,11 +1168,7 @@ fn trace_tile(
         std::mem::swap(rays, next_rays);
         depth += 1;
     }
-    for pixels in band.rows_of(tile) {
-        for i in pixels {
-            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
-        }
-    }
+    band.set_colors(tile, sum, sh.spp, stats);
 }
 
 /// Phong's diffuse plus specular factor of a light of `intensity` in direction `to_light`

@@ -149,7 +149,7 @@ fn trace_tile(
             pending.clear();
             for ((path, ray), res) in paths.iter().zip(rays.iter()).zip(results.iter()) {
                 let px = path.pixel as usize;
-                let aov = (camera && path.sample == 0).then_some((&mut *band, px));
+                let aov = (camera && path.sample == 0 && band.aovs).then_some((&mut *band, px));
                 let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
                     Vertex::Emitter(emission) => {
                         if path.count_emission {
@@ -297,9 +297,5 @@ fn trace_tile(
         }
         first = last;
     }
-    for pixels in band.rows_of(tile) {
-        for i in pixels {
-            band.set_color(i as usize, sum[i as usize], sh.spp, stats);
-        }
-    }
+    band.set_colors(tile, sum, sh.spp, stats);
 }

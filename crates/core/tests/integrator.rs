@@ -4,7 +4,7 @@
 use glam::Vec3;
 use marchmesh_core::{
     BackgroundSampler, Geometry, GeometryReport, Hit, OcclusionResult, Ray, RayWork, RenderOptions,
-    Termination, TraceResult, render,
+    Termination, TraceResult, render, render_into,
 };
 use marchmesh_scene::{Scene, parse_scene};
 
@@ -223,6 +223,87 @@ fn thread_count_does_not_change_the_image() {
 }
 
 #[test]
+fn renders_without_aovs_have_the_same_colour_and_counters_and_empty_aov_planes() {
+    // A mirror sphere over a matte one (reflection wavefronts, hits and misses), 3 samples;
+    // the same scene through the path tracer.
+    let whitted = r#"{
+  "camera": {"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 21, "height": 19},
+  "background": {"color": [0.1, 0.2, 0.3]},
+  "lights": [{"ambient": {"intensity": 0.2}},
+             {"point": {"position": [3, 4, -4], "intensity": 0.7}}],
+  "render": {"samples_per_pixel": 3, "integrator": "INTEGRATOR"},
+  "objects": [
+    {"shape": {"sphere": {"radius": 1}}, "material": {"color": [0.8, 0.8, 0.8], "reflectivity": 0.6}},
+    {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [1.2, 0.8, -1]},
+     "material": {"color": [0.9, 0.3, 0.1]}}]
+}"#;
+    for integrator in ["whitted", "path"] {
+        let s = scene(&whitted.replace("INTEGRATOR", integrator));
+        let g = Spheres::from_scene(&s);
+        let bg = BackgroundSampler::load(&s.background).unwrap();
+        let with = |aovs| RenderOptions {
+            threads: 1,
+            aovs,
+            ..Default::default()
+        };
+        let full = render(&s, &g, &bg, &with(true), &|| {}).unwrap();
+        assert!(full.framebuffer.has_aovs());
+        assert!(full.framebuffer.is_hit(10 * 21 + 10) && !full.framebuffer.is_hit(0));
+        // One reused output, switching between the two layouts.
+        let mut out = marchmesh_core::RenderOutput::default();
+        for aovs in [false, true, false] {
+            render_into(&s, &g, &bg, &with(aovs), &|| {}, &mut out).unwrap();
+            let fb = &out.framebuffer;
+            assert_eq!(
+                fb.color, full.framebuffer.color,
+                "{integrator}, aovs {aovs}"
+            );
+            assert_eq!(fb.has_aovs(), aovs);
+            if aovs {
+                assert_eq!(*fb, full.framebuffer);
+            } else {
+                assert!(fb.depth.is_empty() && fb.normal.is_empty() && fb.material.is_empty());
+                assert!(fb.termination.is_empty() && fb.work.is_empty());
+            }
+            let untimed = |mut s: marchmesh_core::RenderStats| {
+                s.trace_time = Default::default();
+                s
+            };
+            assert_eq!(untimed(out.stats), untimed(full.stats), "{integrator}");
+        }
+    }
+}
+
+#[test]
+fn non_finite_colours_are_written_black_and_counted() {
+    // Lights so bright that the centre of the sphere overflows f32: those pixels are
+    // blackened and counted, the rest keep their colour, with one sample and with several.
+    for spp in [1, 4] {
+        let mut s = scene(&ONE_SPHERE.replace(
+            r#""height": 33}"#,
+            &format!(r#""height": 33}}, "render": {{"samples_per_pixel": {spp}}}"#),
+        ));
+        // Past the scene format's validation limits, set on the parsed scene.
+        for l in &mut s.lights {
+            // The sum of the samples, 0.8 x (2e38 + 3e38 n.l), overflows where n.l > 0.75.
+            let share = 1.0 / spp as f64;
+            match l {
+                marchmesh_scene::Light::Ambient { intensity } => *intensity = 2e38 * share,
+                marchmesh_scene::Light::Directional { intensity, .. } => *intensity = 3e38 * share,
+                _ => unreachable!("ONE_SPHERE has an ambient and a directional light"),
+            }
+        }
+        let out = run(&s, 1);
+        let fb = &out.framebuffer;
+        let black = fb.color.iter().filter(|c| **c == Vec3::ZERO).count();
+        assert!(fb.color.iter().all(|c| c.is_finite()));
+        assert!(black > 10 && black < fb.len() / 2, "{black} black pixels");
+        assert_eq!(out.stats.non_finite_pixels, black as u64, "spp {spp}");
+        assert!((0..fb.len()).any(|i| fb.is_hit(i) && fb.color[i] != Vec3::ZERO));
+    }
+}
+
+#[test]
 fn render_refuses_buffers_over_the_memory_limit() {
     let s = scene(ONE_SPHERE);
     let g = Spheres::from_scene(&s);
@@ -234,6 +315,7 @@ fn render_refuses_buffers_over_the_memory_limit() {
         &RenderOptions {
             threads: 1,
             memory_limit_bytes: 1000,
+            ..Default::default()
         },
         &|| {},
     )

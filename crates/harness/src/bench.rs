@@ -543,10 +543,13 @@ pub fn with_process_cpu_ms<T>(f: impl FnOnce() -> T) -> (T, Option<f64>) {
     (out, cpu_ms)
 }
 
-/// One timed render: (wall ms, process CPU ms if the system can tell).
+/// One timed render: (wall ms, process CPU ms if the system can tell). Only its time is
+/// read (image, accuracy and counters come from the untimed render of [`prepare`]), so it
+/// records no AOVs.
 fn timed_render(p: &Prepared, threads: usize) -> Result<(f64, Option<f64>), String> {
     let ropts = RenderOptions {
         threads,
+        aovs: false,
         ..Default::default()
     };
     let (o, cpu_ms) = with_process_cpu_ms(|| {

@@ -3,8 +3,11 @@
 //! interleaved with the real one, medians of ROUNDS. Both render into one reused output
 //! (`render_into`, as benchmarks repeating a render do); `fresh` renders with `render`,
 //! allocating the framebuffer each time; `stub` or `real` times only that one (for profiling).
+//! The renders record no AOVs, as the harness's timed repeats (`RenderOptions::aovs`); a
+//! fourth argument `aovs` records them (the default of `render`).
 //!
-//! `cargo run --release -p marchmesh-mesh --example harness_overhead [-- ROUNDS [BVH [fresh|stub|real]]]`
+//! `cargo run --release -p marchmesh-mesh --example harness_overhead [-- ROUNDS [BVH [MODE [aovs]]]]`
+//! (MODE: `both`, `fresh`, `stub` or `real`)
 
 #[path = "../benches/support/mod.rs"]
 mod support;
@@ -73,8 +76,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     )?;
     let bg = BackgroundSampler::load(&case.scene.background)?;
+    let aovs = args.get(4).is_some_and(|a| a == "aovs");
     let opts = RenderOptions {
         threads: 1,
+        aovs,
         ..Default::default()
     };
     let mode = args.get(3).map_or("", String::as_str);
@@ -107,13 +112,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     if mode == "stub" || mode == "real" {
         let t = median(if mode == "stub" { stub } else { real });
-        println!("bunny {bvh:?}: {mode} only: {:.2} ms", t * 1e3);
+        println!(
+            "bunny {bvh:?} (AOVs {aovs}): {mode} only: {:.2} ms",
+            t * 1e3
+        );
         return Ok(());
     }
     let (r, s) = (median(real), median(stub));
     println!(
-        "bunny {bvh:?}{}: render {:.1} ms, geometry stubbed to a miss {:.1} ms: overhead {:.1}% of render time",
+        "bunny {bvh:?}{}{}: render {:.1} ms, geometry stubbed to a miss {:.1} ms: overhead {:.1}% of render time",
         if fresh { " (fresh framebuffers)" } else { "" },
+        if aovs { " with AOVs" } else { "" },
         r * 1e3,
         s * 1e3,
         100.0 * s / r

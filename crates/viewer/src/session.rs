@@ -353,6 +353,7 @@ impl Session {
         let options = RenderOptions {
             threads: self.threads,
             memory_limit_bytes: self.memory_limit_bytes,
+            ..Default::default()
         };
         let out = if shift == Vec3::ZERO {
             marchmesh_core::render(
