@@ -19,6 +19,8 @@ venv="${EMBREE_VENV:-/tmp/embree-venv}"
 out="$root/bench-results/anchors"
 stamp="$(date -u +%Y%m%dT%H%M%SZ)"
 
+# The command line as given (the shift below drops --large from "$@").
+given="$*"
 meshes=("$root/scenes/meshes/bunny.obj" "$root/scenes/meshes/dragon_res3.obj")
 if [ "${1:-}" = "--large" ]; then
     shift
@@ -47,7 +49,7 @@ echo "load at start: $(uptime)"
 {
     echo "# Embree anchor, $stamp"
     echo
-    echo "Command: scripts/anchor_embree.sh $*"
+    echo "Command: scripts/anchor_embree.sh $given"
     echo
     echo '```'
     cat "$out/embree-$stamp.md.tmp"
