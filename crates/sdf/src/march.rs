@@ -26,7 +26,8 @@
 //!   change sign there), which `Sweep` looks for before the prediction is used.
 //! * `Sweep`: tracing through such a gap, from the earlier sample's sphere to the
 //!   prediction's; a distance below the fine threshold there is a hit, reaching the
-//!   prediction's sphere clears the gap. With segment tracing on (and an 8-lane tape to
+//!   prediction's sphere clears the gap, running out of [`SWEEP_BUDGET`] while the distance
+//!   still shrinks decides the surface closed in on as a shell visit. With segment tracing on (and an 8-lane tape to
 //!   answer the queries, [`Params::segment_sweeps`]), each sample is a segment
 //!   query over the rest of the gap and the step its safe step (the field keeps its sign
 //!   over it, so no sheet is stepped over): where the field has local bounds one query
@@ -111,7 +112,10 @@ pub(crate) fn recede_checkpoint(evals: u32) -> bool {
 /// degree ran out of steps on 0.5% of its rays (degraded in the stability study), so 48.
 const FINE_BUDGET: u32 = 48;
 
-/// Field evaluations one sweep of a gap before a prediction may spend.
+/// Field evaluations one sweep of a gap before a prediction may spend. A sweep out of
+/// budget takes up the prediction, unless its distances still shrink: then a surface in the
+/// gap is being closed in on (a sheet crossed at a shallow angle), and the shell logic
+/// decides it from the sweep's last two samples.
 const SWEEP_BUDGET: u32 = 32;
 
 /// Evaluations a ray spends sphere tracing before slow progress switches it to segment
