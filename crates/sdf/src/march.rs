@@ -27,8 +27,9 @@
 //! * `Sweep`: tracing through such a gap, from the earlier sample's sphere to the
 //!   prediction's; a distance below the fine threshold there is a hit, reaching the
 //!   prediction's sphere clears the gap, running out of [`SWEEP_BUDGET`] while the distance
-//!   still shrinks decides the surface closed in on as a shell visit. With segment tracing on (and an 8-lane tape to
-//!   answer the queries, [`Params::segment_sweeps`]), each sample is a segment
+//!   still shrinks decides the surface closed in on as a shell visit. With segment tracing
+//!   on (and an 8-lane tape to answer the queries, [`Params::segment_sweeps`]), each
+//!   sample is a segment
 //!   query over the rest of the gap and the step its safe step (the field keeps its sign
 //!   over it, so no sheet is stepped over): where the field has local bounds one query
 //!   usually clears a gap that plain steps crossed in up to [`SWEEP_BUDGET`] (a ray
@@ -104,8 +105,9 @@ pub(crate) fn recede_checkpoint(evals: u32) -> bool {
 }
 
 /// Field evaluations one visit to the shell may spend deciding hit or near miss (a visit
-/// that runs out ends as a hit unless its closest approach is clear, [`March::passes_clear`]). Measured on the default suite's sdf default level (1
-/// thread, load 1.1-1.3), 24 / 48 / 96: primitives PSNR 54.35 / 55.21 / 55.71 dB (shadow
+/// that runs out ends as a hit unless its closest approach is clear,
+/// [`March::passes_clear`]). Measured on the default suite's sdf default level (1 thread,
+/// load 1.1-1.3), 24 / 48 / 96: primitives PSNR 54.35 / 55.21 / 55.71 dB (shadow
 /// rays skimming the torus within the shell were called blocked), csg 58.17 and
 /// seed-spheres 57.05 dB throughout, render times and mean evaluations per ray unchanged
 /// (few rays spend it). At 96 plain sphere tracing (`segment=false`) over a box top at 1
