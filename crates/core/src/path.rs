@@ -86,6 +86,7 @@ pub(crate) fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) ->
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }
+    band.set_colors(&s.sum, f.sh.spp, &mut stats);
     stats
 }
 
@@ -297,5 +298,4 @@ fn trace_tile(
         }
         first = last;
     }
-    band.set_colors(tile, sum, sh.spp, stats);
 }
