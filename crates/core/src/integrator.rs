@@ -685,25 +685,59 @@ pub(crate) fn resolve_vertex(
     vertex
 }
 
-/// The first pass over a wavefront's results: resolves every result without a hit as
-/// [`resolve_vertex`] would (counts, area light or background radiance added to its pixel's
-/// `sum`, AOVs of the first `aov_pixels` paths) and lists the indices of the hits in `hits`.
-/// `unit` says every path's throughput is 1 (camera rays), so the radiance is added as it is
-/// (`1.0 * x == x` bit for bit, but for a NaN's payload, and a NaN sum is blackened anyway).
+/// What the miss pass reads of a path: its band pixel and its share of a radiance.
+trait MissPath {
+    /// Band index of the path's pixel.
+    fn pixel(&self) -> u32;
+    /// The radiance the path carries to its pixel from `radiance` at its vertex.
+    fn weigh(&self, radiance: Vec3) -> Vec3;
+}
+
+impl MissPath for Path {
+    #[inline(always)]
+    fn pixel(&self) -> u32 {
+        self.pixel
+    }
+
+    #[inline(always)]
+    fn weigh(&self, radiance: Vec3) -> Vec3 {
+        self.throughput * radiance
+    }
+}
+
+/// A camera path, named by its band pixel: its throughput is 1, so the radiance is added as
+/// it is (`1.0 * x` is `x` bit for bit, but for a NaN's payload, and a NaN is blackened).
+impl MissPath for u32 {
+    #[inline(always)]
+    fn pixel(&self) -> u32 {
+        *self
+    }
+
+    #[inline(always)]
+    fn weigh(&self, radiance: Vec3) -> Vec3 {
+        radiance
+    }
+}
+
+/// The first pass over (part of) a wavefront's results: resolves every result without a
+/// hit as [`resolve_vertex`] would (counts, area light or background radiance added to its
+/// pixel's `sum`, AOVs of the first `aov_pixels` paths) and appends the wavefront indices
+/// of the hits (`first` + index in the slices) to `hits`. A path's pixel is `base` plus
+/// [`MissPath::pixel`].
 /// Slices as arguments, so the loop keeps their addresses in registers; the loop is built
 /// once per combination of "radiance is one constant" and "records AOVs", so the common
 /// case (constant background, no area light) reads neither rays nor background per ray.
 #[inline(never)]
-fn resolve_no_hits(
-    (paths, rays, results): (&[Path], &[Ray], &[TraceResult]),
+fn resolve_no_hits<P: MissPath>(
+    (paths, rays, results, first): (&[P], &[Ray], &[TraceResult], usize),
+    base: u32,
     band: &mut Band<'_>,
-    (aov_pixels, unit): (usize, bool),
+    aov_pixels: usize,
     sum: &mut [Vec3],
     (sh, background): (&Shading, &BackgroundSampler),
     hits: &mut Vec<u32>,
     stats: &mut RenderStats,
 ) {
-    hits.clear();
     let count = paths.len();
     let (rays, results) = (&rays[..count], &results[..count]);
     let aov_pixels = aov_pixels.min(count);
@@ -721,15 +755,18 @@ fn resolve_no_hits(
         if from == to {
             continue;
         }
-        let span = (&paths[from..to], &rays[from..to], &results[from..to], from);
-        // AOVs are recorded only for camera rays, whose throughput is 1.
-        match (constant, record, unit) {
-            (Some(c), true, _) => miss_span::<true, true>(span, |_| c, sum, &mut aov, hits),
-            (Some(c), false, true) => miss_span::<false, true>(span, |_| c, sum, &mut aov, hits),
-            (Some(c), false, false) => miss_span::<false, false>(span, |_| c, sum, &mut aov, hits),
-            (None, true, _) => miss_span::<true, true>(span, radiance, sum, &mut aov, hits),
-            (None, false, true) => miss_span::<false, true>(span, radiance, sum, &mut aov, hits),
-            (None, false, false) => miss_span::<false, false>(span, radiance, sum, &mut aov, hits),
+        let span = (
+            &paths[from..to],
+            &rays[from..to],
+            &results[from..to],
+            first + from,
+            base,
+        );
+        match (constant, record) {
+            (Some(c), true) => miss_span::<true, P>(span, |_| c, sum, &mut aov, hits),
+            (Some(c), false) => miss_span::<false, P>(span, |_| c, sum, &mut aov, hits),
+            (None, true) => miss_span::<true, P>(span, radiance, sum, &mut aov, hits),
+            (None, false) => miss_span::<false, P>(span, radiance, sum, &mut aov, hits),
         }
         .merge_into(stats);
     }
@@ -795,13 +832,12 @@ impl MissTally {
     }
 }
 
-/// [`resolve_no_hits`] over one span of a wavefront (`first` = the span's index in it):
-/// `RECORD` says whether the span's paths record AOVs, `UNIT` that their throughputs are 1
-/// (see [`resolve_no_hits`]). Returns the span's counters (a local tally, so they can stay
-/// in registers).
+/// [`resolve_no_hits`] over one span of a wavefront (`first` = the span's index in it, `base` = what
+/// its paths' pixels are relative to): `RECORD` says whether the span's paths record AOVs. Returns the span's counters (a
+/// local tally, so they can stay in registers).
 #[inline(never)]
-fn miss_span<const RECORD: bool, const UNIT: bool>(
-    (paths, rays, results, first): (&[Path], &[Ray], &[TraceResult], usize),
+fn miss_span<const RECORD: bool, P: MissPath>(
+    (paths, rays, results, first, base): (&[P], &[Ray], &[TraceResult], usize, u32),
     radiance: impl Fn(&Ray) -> Vec3,
     sum: &mut [Vec3],
     aov: &mut AovPlanes<'_>,
@@ -819,7 +855,7 @@ fn miss_span<const RECORD: bool, const UNIT: bool>(
             continue;
         }
         tally.add(ended, &res.work);
-        let px = path.pixel as usize;
+        let px = (base + path.pixel()) as usize;
         assert!(px < n, "path pixel outside its band");
         if RECORD {
             aov.termination[px] = ended;
@@ -828,11 +864,7 @@ fn miss_span<const RECORD: bool, const UNIT: bool>(
             aov.normal[px] = Vec3::ZERO;
             aov.material[px] = u32::MAX;
         }
-        sum[px] += if UNIT {
-            radiance(ray)
-        } else {
-            path.throughput * radiance(ray)
-        };
+        sum[px] += path.weigh(radiance(ray));
     }
     tally
 }
@@ -873,6 +905,12 @@ pub(crate) struct Scratch {
     visibility: Vec<Visibility>,
     /// Indices into `paths` of the wavefront's rays that hit a surface.
     hits: Vec<u32>,
+    /// Band pixels of a tile at column 0, row-major: camera ray `k` of a tile at column `x`
+    /// is pixel `x + camera_offsets[k % len]` (paths for camera rays are built only for a
+    /// tile with a hit).
+    camera_offsets: Vec<u32>,
+    /// (tile width, tile height, band width) `camera_offsets` was built for.
+    camera_shape: (u32, u32, usize),
     /// Colour sums, indexed like the band's pixels.
     sum: Vec<Vec3>,
 }
@@ -914,30 +952,35 @@ fn trace_tile(
         ao_point_pending,
         visibility,
         hits,
+        camera_offsets,
+        camera_shape,
         sum,
     } = s;
     let (sh, geometry, background) = (f.sh, f.geometry, f.background);
     let pixels = tile.pixels();
     paths.clear();
     rays.clear();
-    for sample in 0..sh.spp {
-        f.camera.push(tile, sample_offset(sample), rays);
-        for pixels in band.rows_of(tile) {
-            paths.extend(pixels.map(|pixel| Path {
-                pixel,
-                sample,
-                throughput: 1.0,
-            }));
+    // The same for every full tile of a band: rebuilt for the band's last, narrower tile.
+    if *camera_shape != (tile.width, tile.height, band.width) {
+        *camera_shape = (tile.width, tile.height, band.width);
+        camera_offsets.clear();
+        for row in band.rows_of(Tile { x: 0, ..tile }) {
+            camera_offsets.extend(row);
         }
     }
+    for sample in 0..sh.spp {
+        f.camera.push(tile, sample_offset(sample), rays);
+    }
     // `sum` was zeroed for the whole band (`trace_band`); each pixel is in one tile.
-    stats.primary_rays += paths.len() as u64;
+    stats.primary_rays += rays.len() as u64;
 
     // Geometry shortcuts: one cone per shading point and area light, one AO estimate per
     // shading point; their pending amounts are scaled by the visible fraction.
     let shortcuts = geometry.shortcuts();
     let mut depth = 0;
-    while !paths.is_empty() {
+    // `paths` holds the wavefront's paths from the first hit on (camera paths are named by
+    // `camera_pixels` until then).
+    while !rays.is_empty() {
         // Camera rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
         let camera = (depth == 0).then(|| PrimarySamples::tile(&f.scene.camera, tile));
         trace_wavefront(geometry, rays, camera, results, stats);
@@ -953,16 +996,46 @@ fn trace_tile(
         next_rays.clear();
         // Rays without a hit first (most camera rays of a small object), in a lean loop;
         // the hits after, in order.
-        let aov_pixels = if depth == 0 && band.aovs { pixels } else { 0 };
-        resolve_no_hits(
-            (paths, rays, results),
-            band,
-            (aov_pixels, depth == 0),
-            sum,
-            (sh, background),
-            hits,
-            stats,
-        );
+        hits.clear();
+        if depth == 0 {
+            // Sample-major: camera ray `k` is pixel `tile.x + camera_offsets[k % n]`, sample `k / n`,
+            // throughput 1; sample 0 records the AOVs.
+            let n = camera_offsets.len();
+            for sample in 0..sh.spp as usize {
+                let from = sample * n;
+                let to = from + n;
+                resolve_no_hits(
+                    (camera_offsets, &rays[from..to], &results[from..to], from),
+                    tile.x,
+                    band,
+                    if sample == 0 && band.aovs { n } else { 0 },
+                    sum,
+                    (sh, background),
+                    hits,
+                    stats,
+                );
+            }
+            if !hits.is_empty() {
+                for sample in 0..sh.spp {
+                    paths.extend(camera_offsets.iter().map(|&offset| Path {
+                        pixel: tile.x + offset,
+                        sample,
+                        throughput: 1.0,
+                    }));
+                }
+            }
+        } else {
+            resolve_no_hits(
+                (paths, rays, results, 0),
+                0,
+                band,
+                0,
+                sum,
+                (sh, background),
+                hits,
+                stats,
+            );
+        }
         for &pi in hits.iter() {
             let pi = pi as usize;
             let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
