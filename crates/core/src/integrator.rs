@@ -981,8 +981,8 @@ fn trace_tile(
     // `paths` holds the wavefront's paths from the first hit on (camera paths are named by
     // `camera_pixels` until then).
     while !rays.is_empty() {
-        // Camera rays: `paths` is ordered sample-major, as `PrimarySamples` documents.
-        let camera = (depth == 0).then(|| PrimarySamples::tile(&f.scene.camera, tile));
+        // Camera rays: `rays` are ordered sample-major, as `PrimarySamples` documents.
+        let camera = (depth == 0).then(|| f.camera.samples(&f.scene.camera, tile));
         trace_wavefront(geometry, rays, camera, results, stats);
         shadow_rays.clear();
         pending.clear();

@@ -27,7 +27,7 @@
 
 use glam::Vec3;
 
-use crate::camera::{PrimarySamples, Tile, sample_offset};
+use crate::camera::{Tile, sample_offset};
 use crate::geometry::{OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
     Band, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
@@ -142,7 +142,7 @@ fn trace_tile(
             let camera = paths[0].bounce == 0;
             // The chunk's camera rays are ordered sample-major from sample `first`.
             let samples =
-                camera.then(|| PrimarySamples::tile(&f.scene.camera, tile).starting_at(first));
+                camera.then(|| f.camera.samples(&f.scene.camera, tile).starting_at(first));
             trace_wavefront(geometry, rays, samples, results, stats);
             next.clear();
             next_rays.clear();
