@@ -729,8 +729,7 @@ impl MissPath for u32 {
 /// case (constant background, no area light) reads neither rays nor background per ray.
 #[inline(never)]
 fn resolve_no_hits<P: MissPath>(
-    (paths, rays, results, first): (&[P], &[Ray], &[TraceResult], usize),
-    base: u32,
+    (paths, rays, results, first, base): (&[P], &[Ray], &[TraceResult], usize, u32),
     band: &mut Band<'_>,
     aov_pixels: usize,
     sum: &mut [Vec3],
@@ -1005,8 +1004,13 @@ fn trace_tile(
                 let from = sample * n;
                 let to = from + n;
                 resolve_no_hits(
-                    (camera_offsets, &rays[from..to], &results[from..to], from),
-                    tile.x,
+                    (
+                        camera_offsets,
+                        &rays[from..to],
+                        &results[from..to],
+                        from,
+                        tile.x,
+                    ),
                     band,
                     if sample == 0 && band.aovs { n } else { 0 },
                     sum,
@@ -1026,8 +1030,7 @@ fn trace_tile(
             }
         } else {
             resolve_no_hits(
-                (paths, rays, results, 0),
-                0,
+                (paths, rays, results, 0, 0),
                 band,
                 0,
                 sum,
