@@ -188,6 +188,17 @@ impl TileRays {
         }
     }
 
+    /// [`PrimarySamples::tile`] of `camera` (the camera these rays were made for), reusing
+    /// the image plane computed once in [`TileRays::new`] instead of once per tile.
+    pub(crate) fn samples<'a>(&self, camera: &'a Camera, tile: Tile) -> PrimarySamples<'a> {
+        PrimarySamples {
+            camera,
+            plane: self.plane,
+            tile,
+            first_sample: 0,
+        }
+    }
+
     /// Appends the rays of `tile`'s pixels at sub-pixel `offset`, row-major.
     /// `tile.width` must not exceed [`MAX_TILE_WIDTH`].
     // The one unsafe call: the AVX build behind runtime detection.

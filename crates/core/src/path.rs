@@ -27,7 +27,7 @@
 
 use glam::Vec3;
 
-use crate::camera::{PrimarySamples, Tile, sample_offset};
+use crate::camera::{Tile, sample_offset};
 use crate::geometry::{OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
     Band, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
@@ -86,6 +86,7 @@ pub(crate) fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) ->
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }
+    band.set_colors(&s.sum, f.sh.spp, &mut stats);
     stats
 }
 
@@ -141,7 +142,7 @@ fn trace_tile(
             let camera = paths[0].bounce == 0;
             // The chunk's camera rays are ordered sample-major from sample `first`.
             let samples =
-                camera.then(|| PrimarySamples::tile(&f.scene.camera, tile).starting_at(first));
+                camera.then(|| f.camera.samples(&f.scene.camera, tile).starting_at(first));
             trace_wavefront(geometry, rays, samples, results, stats);
             next.clear();
             next_rays.clear();
@@ -297,5 +298,4 @@ fn trace_tile(
         }
         first = last;
     }
-    band.set_colors(tile, sum, sh.spp, stats);
 }
