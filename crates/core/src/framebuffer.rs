@@ -92,6 +92,11 @@ impl Framebuffer {
     /// Whether the AOV planes hold one value per pixel; false for a render with
     /// `RenderOptions::aovs` off, whose AOV planes are empty.
     pub fn has_aovs(&self) -> bool {
+        self.aov_planes_hold(self.color.len())
+    }
+
+    /// Whether every AOV plane holds `n` values.
+    pub(crate) fn aov_planes_hold(&self, n: usize) -> bool {
         [
             self.depth.len(),
             self.normal.len(),
@@ -100,7 +105,7 @@ impl Framebuffer {
             self.work.len(),
         ]
         .iter()
-        .all(|&l| l == self.color.len())
+        .all(|&l| l == n)
     }
 
     /// Whether the primary ray of pixel `i` hit a surface.

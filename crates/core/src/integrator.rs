@@ -296,15 +296,7 @@ impl<'a> Band<'a> {
         let n = (width * rows as usize).max(1);
         let aov_len = if aovs { fb.color.len() } else { 0 };
         assert!(
-            [
-                fb.depth.len(),
-                fb.normal.len(),
-                fb.material.len(),
-                fb.termination.len(),
-                fb.work.len()
-            ]
-            .iter()
-            .all(|&l| l == aov_len),
+            fb.aov_planes_hold(aov_len),
             "framebuffer AOV planes differ in length from what the render records"
         );
         // Empty planes give every band an empty slice.
@@ -444,7 +436,11 @@ impl<'a> Band<'a> {
         // Whether any channel's exponent field is all ones (infinite or NaN): a compare and
         // an or per channel, which vectorise with baseline SSE2.
         let mut non_finite = false;
-        for (c, s) in channels_mut(self.color).iter_mut().zip(channels(sums)) {
+        let channels: &mut [f32] = bytemuck::cast_slice_mut(self.color);
+        for (c, s) in channels
+            .iter_mut()
+            .zip(bytemuck::cast_slice::<Vec3, f32>(sums))
+        {
             let v = *s * scale;
             *c = v;
             non_finite |= v.to_bits() & EXPONENT == EXPONENT;
@@ -456,25 +452,6 @@ impl<'a> Band<'a> {
             }
         }
     }
-}
-
-// glam's `Vec3` (scalar math) is `#[repr(C)]` of three `f32`: no padding.
-const _: () = assert!(std::mem::size_of::<Vec3>() == 12 && std::mem::align_of::<Vec3>() == 4);
-
-/// The channels of `v` as one slice (x, y, z per pixel), for loops that vectorise.
-#[allow(unsafe_code)]
-fn channels(v: &[Vec3]) -> &[f32] {
-    // SAFETY: `Vec3` is three `f32` without padding (asserted above), so `v` is `3 * len`
-    // initialised, contiguous, aligned `f32`s, borrowed for the same lifetime.
-    unsafe { std::slice::from_raw_parts(v.as_ptr().cast::<f32>(), v.len() * 3) }
-}
-
-/// [`channels`] of a mutable slice.
-#[allow(unsafe_code)]
-fn channels_mut(v: &mut [Vec3]) -> &mut [f32] {
-    // SAFETY: as in `channels`; the one mutable borrow of `v` is moved into the result, and
-    // every bit pattern is a valid `f32` and a valid `Vec3`.
-    unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<f32>(), v.len() * 3) }
 }
 
 /// Scene data the shading loops read, converted once to f32 render space.
