@@ -7,12 +7,13 @@
 //!
 //! Branches go through [`Lane::select`] and `min`/`max` pick a whole dual, so the gradient
 //! is the one of the branch taken (one-sided at a crease; at a tie, the first argument's). `floor`/`ceil` have derivative 0.
-//! Mesh grids ([`Lane::map3`]) are sampled without a derivative: their gradient lanes are
+//! Mesh grids ([`Lane::sample_grid`]) are sampled without a derivative: their gradient lanes are
 //! NaN, so a caller sees a non-finite gradient and falls back to differences.
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 use crate::lane::{F32x8, Lane, M8, V3};
+use crate::program::GridSampler;
 
 macro_rules! dual {
     ($(#[$doc:meta])* $name:ident, $t:ty, $mask:ty, $mat:ty) => {
@@ -221,10 +222,10 @@ impl Lane for $name {
         Lane::hsum(self.v)
     }
     #[inline]
-    fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {
+    fn sample_grid(grid: &dyn GridSampler, x: Self, y: Self, z: Self) -> Self {
         let nan = <$t as Lane>::splat(f32::NAN);
         $name {
-            v: <$t as Lane>::map3(x.v, y.v, z.v, f),
+            v: <$t as Lane>::sample_grid(grid, x.v, y.v, z.v),
             d: V3::new(nan, nan, nan),
         }
     }
@@ -302,7 +303,21 @@ mod tests {
         ));
         let r = (s.x * s.x + s.y * s.y).sqrt();
         assert_eq!(r.d.x.0, [0.0; 8]);
-        let g = Dual8::map3(s.x, s.y, s.z, &|x, _, _| x);
+        /// A "grid" whose distance is the point's x.
+        struct PlaneX;
+        impl GridSampler for PlaneX {
+            fn sample(&self, x: f64, _: f64, _: f64) -> f64 {
+                x
+            }
+            fn sample_f32(&self, x: f32, _: f32, _: f32) -> f32 {
+                x
+            }
+            fn memory_bytes(&self) -> u64 {
+                0
+            }
+        }
+        let g = Dual8::sample_grid(&PlaneX, s.x, s.y, s.z);
+        assert_eq!(g.v.0, [0.0; 8]);
         assert!(g.d.x.0.iter().all(|v| v.is_nan()));
     }
 }

@@ -4,6 +4,8 @@
 
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
+use crate::program::GridSampler;
+
 /// A number type the field can be evaluated in: one value (`f32`, `f64`) or several lanes.
 ///
 /// Comparisons return a [`Lane::Mask`]; data-dependent choices go through [`Lane::select`], so
@@ -68,8 +70,11 @@ pub trait Lane:
     fn hmax(self) -> f64;
     /// Sum of the lanes (traversal-order heuristics only).
     fn hsum(self) -> f64;
-    /// Applies `f` per lane (f64 in, f64 out); used for mesh grids.
-    fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self;
+    /// The mesh grid `grid`'s signed distance at the point `(x, y, z)` of each lane (the
+    /// grid's local frame), at this lane type's precision: [`GridSampler::sample`] for f64,
+    /// [`GridSampler::sample_f32`] for f32 lanes (eight at a time through
+    /// [`GridSampler::sample_f32x8`]), so the f32 tracer never widens to f64 per lookup.
+    fn sample_grid(grid: &dyn GridSampler, x: Self, y: Self, z: Self) -> Self;
     /// Clamp to `[lo, hi]`.
     #[inline]
     fn clamp(self, lo: Self, hi: Self) -> Self {
@@ -86,7 +91,7 @@ pub trait Scalar: Lane<S = Self> + PartialOrd + std::fmt::Debug {
 }
 
 macro_rules! scalar_lane {
-    ($t:ty) => {
+    ($t:ty, $sample:ident) => {
         impl Lane for $t {
             type S = $t;
             type Mask = bool;
@@ -168,8 +173,8 @@ macro_rules! scalar_lane {
                 self as f64
             }
             #[inline]
-            fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {
-                f(x as f64, y as f64, z as f64) as $t
+            fn sample_grid(grid: &dyn GridSampler, x: Self, y: Self, z: Self) -> Self {
+                grid.$sample(x, y, z)
             }
         }
         impl Scalar for $t {
@@ -184,8 +189,8 @@ macro_rules! scalar_lane {
         }
     };
 }
-scalar_lane!(f32);
-scalar_lane!(f64);
+scalar_lane!(f32, sample_f32);
+scalar_lane!(f64, sample);
 
 /// Eight f32 lanes, operated on element-wise (the loops auto-vectorise to SIMD).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -345,12 +350,8 @@ impl Lane for F32x8 {
         self.0.iter().map(|&v| f64::from(v)).sum()
     }
     #[inline]
-    fn map3(x: Self, y: Self, z: Self, f: &dyn Fn(f64, f64, f64) -> f64) -> Self {
-        let mut r = [0.0f32; 8];
-        for i in 0..8 {
-            r[i] = f(x.0[i] as f64, y.0[i] as f64, z.0[i] as f64) as f32;
-        }
-        F32x8(r)
+    fn sample_grid(grid: &dyn GridSampler, x: Self, y: Self, z: Self) -> Self {
+        F32x8(grid.sample_f32x8(x.0, y.0, z.0))
     }
 }
 

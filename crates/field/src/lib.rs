@@ -199,6 +199,13 @@ impl GridSampler for Grid {
             Grid::Sparse(g) => g.sample(Vec3::new(x, y, z)),
         }
     }
+    fn sample_f32x8(&self, x: [f32; 8], y: [f32; 8], z: [f32; 8]) -> [f32; 8] {
+        // One dispatch for the eight lookups, each inlined.
+        match self {
+            Grid::Dense(g) => std::array::from_fn(|i| g.sample(Vec3::new(x[i], y[i], z[i]))),
+            Grid::Sparse(g) => std::array::from_fn(|i| g.sample(Vec3::new(x[i], y[i], z[i]))),
+        }
+    }
     fn memory_bytes(&self) -> u64 {
         match self {
             Grid::Dense(g) => g.memory_bytes(),
@@ -399,17 +406,9 @@ impl Field {
         })
     }
 
-    fn grid_refs(&self) -> Vec<&dyn GridSampler> {
-        self.grids.iter().map(|g| g.as_ref()).collect()
-    }
-
     #[inline]
     fn eval<T: Lane, const M: bool>(&self, prog: &Program<T::S>, p: V3<T>) -> (T, T::Mat) {
-        if self.grids.is_empty() {
-            prog.eval::<T, M>(p, &[])
-        } else {
-            prog.eval::<T, M>(p, &self.grid_refs())
-        }
+        prog.eval::<T, M>(p, &self.grids)
     }
 
     /// Whether a baked mesh stores surface normals (sparse grids with `recon=normals`), so
@@ -427,7 +426,7 @@ impl Field {
             return None;
         }
         self.p32
-            .stored_normal(p.to_array(), &self.grid_refs())
+            .stored_normal(p.to_array(), &self.grids)
             .map(Vec3::from_array)
     }
 
@@ -471,7 +470,7 @@ impl Field {
         if self.grids.is_empty() {
             self.p64.segment(v(p), v(dir), len, &[])
         } else {
-            self.p64.segment(v(p), v(dir), len, &self.grid_refs())
+            self.p64.segment(v(p), v(dir), len, &self.grids)
         }
     }
 
@@ -481,7 +480,7 @@ impl Field {
         if self.grids.is_empty() {
             prog.segment(v(p), v(dir), len, &[])
         } else {
-            prog.segment(v(p), v(dir), len, &self.grid_refs())
+            prog.segment(v(p), v(dir), len, &self.grids)
         }
     }
 

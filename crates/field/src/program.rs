@@ -195,7 +195,7 @@ impl Program<f32> {
     /// linear part). `None` when the path meets any other operation (CSG, smooth blends,
     /// repetition, an analytic leaf) or the grid has no normal there: the caller then
     /// differentiates the field. Unit length.
-    pub fn stored_normal(&self, p: [f32; 3], grids: &[&dyn GridSampler]) -> Option<[f32; 3]> {
+    pub fn stored_normal(&self, p: [f32; 3], grids: &[Box<dyn GridSampler>]) -> Option<[f32; 3]> {
         if self.instrs.is_empty() {
             return None;
         }
@@ -209,7 +209,7 @@ impl Program<f32> {
         &self,
         i: usize,
         p: V3<f32>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> Option<[f32; 3]> {
         let ins = self.instrs.get(i)?;
         let q = ins.to_local.apply(p);
@@ -256,8 +256,14 @@ impl Instr<f64> {
 pub trait GridSampler: Send + Sync {
     /// Signed distance at a local point (f64).
     fn sample(&self, x: f64, y: f64, z: f64) -> f64;
-    /// Signed distance at a local point (f32).
+    /// Signed distance at a local point (f32): the f32 tracer's lookup, within the grid's
+    /// own error of [`GridSampler::sample`] (it may round differently).
     fn sample_f32(&self, x: f32, y: f32, z: f32) -> f32;
+    /// [`GridSampler::sample_f32`] at eight points (the lanes of an 8-wide evaluation),
+    /// lane by lane the same values. Grids override it to dispatch once per eight lookups.
+    fn sample_f32x8(&self, x: [f32; 8], y: [f32; 8], z: [f32; 8]) -> [f32; 8] {
+        std::array::from_fn(|i| self.sample_f32(x[i], y[i], z[i]))
+    }
     /// Exact bytes held.
     fn memory_bytes(&self) -> u64;
     /// Whether the grid stores surface normals ([`GridSampler::stored_normal`] can answer);
@@ -333,7 +339,7 @@ impl<S: Scalar> Program<S> {
     pub fn eval<T: Lane<S = S>, const M: bool>(
         &self,
         p: V3<T>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         if self.instrs.is_empty() {
             return (T::c(BIG), T::mat_splat(0));
@@ -348,7 +354,7 @@ impl<S: Scalar> Program<S> {
         i: usize,
         p: V3<T>,
         ctx: Ctx<T>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
         let above = ctx.inherited_by(ins);
@@ -379,7 +385,7 @@ impl<S: Scalar> Program<S> {
         i: usize,
         p: V3<T>,
         above: Option<T>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[i];
         let q = ins.to_local.apply(p);
@@ -401,8 +407,8 @@ impl<S: Scalar> Program<S> {
             Op::Torus { big, small } => (shapes::torus(q, T::splat(*big), T::splat(*small)), mat),
             Op::Triangle(t) => (shapes::triangle(q, t), mat),
             Op::Mesh { grid } => {
-                let g = grids[*grid as usize];
-                (T::map3(q.x, q.y, q.z, &|x, y, z| g.sample(x, y, z)), mat)
+                let g = &grids[*grid as usize];
+                (T::sample_grid(g.as_ref(), q.x, q.y, q.z), mat)
             }
             Op::Union => {
                 let mut j = i + 1;
@@ -525,7 +531,7 @@ impl<S: Scalar> Program<S> {
         j: usize,
         q: V3<T>,
         first: T,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[j];
         if !ins.has_bound {
@@ -554,7 +560,7 @@ impl<S: Scalar> Program<S> {
         count: &[S; 3],
         first: &[S; 3],
         r: S,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         let ch = &self.instrs[c];
         let rr = T::splat(r);

@@ -3,7 +3,7 @@
 //! f32/f64/8-lane agreement, materials.
 
 use glam::{DAffine3, DVec3, Vec3};
-use marchmesh_field::{Field, FieldOptions};
+use marchmesh_field::{Field, FieldOptions, MeshGrid};
 use marchmesh_scene::{Node, NodeKind, compose_transform};
 use proptest::prelude::*;
 
@@ -621,6 +621,63 @@ fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
     }
     assert!(f.memory_bytes() > 64 * 64 * 4, "the grid is counted");
     assert!(f.report().notes.iter().any(|n| n.contains("distance grid")));
+}
+
+/// The f32 tracer samples mesh grids in f32, eight lanes at a time: each lane must equal the
+/// single-point f32 lookup bit for bit and stay within f32 rounding of the f64 lookup, for
+/// dense and sparse (f32 and u8) grids, at points inside the grid's box and beyond it.
+#[test]
+fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj");
+    let xf = compose_transform(
+        DVec3::new(0.3, -0.2, 1.0),
+        DVec3::new(0.0, 30.0, 0.0),
+        DVec3::splat(0.25),
+    );
+    let n = node(NodeKind::Mesh { path }, xf, 3);
+    let sparse_u8 = MeshGrid::Sparse {
+        band_voxels: 2,
+        quantization: marchmesh_bake::Quantization::U8,
+        reconstruction: marchmesh_bake::Reconstruction::Trilinear,
+    };
+    for grid in [MeshGrid::Dense, MeshGrid::SPARSE_DEFAULT, sparse_u8] {
+        let opts = FieldOptions {
+            mesh_grid_resolution: 32,
+            mesh_grid: grid,
+            ..FieldOptions::default()
+        };
+        let f = Field::compile_node(&n, DAffine3::IDENTITY, &opts).expect("compiles");
+        let (lo, hi) = f.bounds().expect("a mesh is bounded");
+        let mut rng = 11u64;
+        let mut next = || {
+            rng = rng
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..40 {
+            // Points from half a box beyond each side to half a box beyond the other.
+            let pts: [Vec3; 8] = std::array::from_fn(|_| {
+                let u = DVec3::new(next(), next(), next()) * 2.0 - 0.5;
+                (lo + (hi - lo) * u).as_vec3()
+            });
+            let lanes = f.distance_x8(pts);
+            for (i, p) in pts.iter().enumerate() {
+                let d32 = f.distance(*p);
+                assert_eq!(
+                    lanes[i].to_bits(),
+                    d32.to_bits(),
+                    "{grid:?} lane {i} at {p}"
+                );
+                let d64 = f.distance_f64(p.as_dvec3());
+                assert!(
+                    (d64 - d32 as f64).abs() <= 1e-5 * d64.abs().max(1.0),
+                    "{grid:?} at {p}: f32 {d32} vs f64 {d64}"
+                );
+            }
+        }
+    }
 }
 
 #[test]

@@ -45,7 +45,7 @@ impl<S: Scalar> Program<S> {
     /// boxes not yet entered). The step is never below `|v| / |d|` (plain sphere tracing),
     /// and 0 for `v = 0` or a NaN value. Same value as [`Program::eval`] (up to the order of
     /// a union's minimum, which does not change it).
-    pub fn segment(&self, p: V3<S>, d: V3<S>, len: S, grids: &[&dyn GridSampler]) -> (S, S) {
+    pub fn segment(&self, p: V3<S>, d: V3<S>, len: S, grids: &[Box<dyn GridSampler>]) -> (S, S) {
         if self.instrs.is_empty() {
             return (S::c(super::BIG), S::c(f64::INFINITY));
         }
@@ -61,7 +61,7 @@ impl<S: Scalar> Program<S> {
         d: V3<S>,
         len: S,
         ctx: Ctx<S>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (S, S) {
         let ins = &self.instrs[i];
         let above = ctx.inherited_by(ins);
@@ -85,7 +85,7 @@ impl<S: Scalar> Program<S> {
         d: V3<S>,
         len: S,
         above: Option<S>,
-        grids: &[&dyn GridSampler],
+        grids: &[Box<dyn GridSampler>],
     ) -> (S, S) {
         let ins = &self.instrs[i];
         let zero = S::c(0.0);
