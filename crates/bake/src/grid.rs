@@ -115,8 +115,7 @@ impl DistanceGrid {
         } else {
             // Outside the box (or NaN): f64 so far points neither overflow nor lose `b`.
             let a = off.as_dvec3().length() * self.cell_size as f64;
-            let b = b as f64;
-            (if b > 0.0 { a.hypot(b) } else { b + a }) as f32
+            extend_outside(b as f64, a) as f32
         }
     }
 
