@@ -616,18 +616,30 @@ impl SparseGrid {
 
     /// Signed distance at `p` (mesh local frame), f32: the value of
     /// [`SparseGrid::sample_f64`] (same contract), with lattice coordinates and the
-    /// trilinear interpolation in f32 inside the lattice box (the tracer's hot path, as the
-    /// dense grid's f32 sampler); points outside the box and tricubic evaluations go through
-    /// the f64 path. A NaN coordinate gives NaN; never panics.
+    /// trilinear interpolation in f32 (the tracer's hot path, as the dense grid's f32
+    /// sampler). Beyond the lattice box the value at the nearest point of the box is
+    /// extended as the f64 sampler does; tricubic evaluations go through f64. A NaN
+    /// coordinate gives NaN; never panics.
     #[inline]
     pub fn sample(&self, p: Vec3) -> f32 {
         let c = self.lattice_cells();
         let maxc = Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32);
         let g = (p - self.min) * (1.0 / self.cell_size);
-        // Outside the box, or NaN (which fails every comparison): the f64 path.
-        if !(g.cmpge(Vec3::ZERO).all() && g.cmple(maxc).all()) {
-            return self.sample_f64(p.as_dvec3()) as f32;
+        if g.cmpge(Vec3::ZERO).all() && g.cmple(maxc).all() {
+            return self.value_in_box_f32(g);
         }
+        if g.is_nan() {
+            return f32::NAN;
+        }
+        let gc = g.clamp(Vec3::ZERO, maxc);
+        let outside = (g - gc).as_dvec3().length() * self.cell_size as f64;
+        extend_outside(self.value_in_box_f32(gc) as f64, outside) as f32
+    }
+
+    /// [`SparseGrid::value_in_box`] in f32 at lattice coordinates `g` (cells, inside the
+    /// box), trilinear in f32; the tricubic zone through the f64 path.
+    #[inline]
+    fn value_in_box_f32(&self, g: Vec3) -> f32 {
         let bs = BRICK as f32;
         let gb = g * (1.0 / bs);
         let bi = [
@@ -662,7 +674,7 @@ impl SparseGrid {
         {
             return tri;
         }
-        self.sample_f64(p.as_dvec3()) as f32
+        self.value_in_box(g.as_dvec3()) as f32
     }
 
     /// Signed distance at `p` (mesh local frame) in f64; see the type's docs for the value
