@@ -247,7 +247,7 @@ impl Field {
     #[inline]
     pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
         if r.taped {
-            r.tape.eval::<F32x8, false>(p).0
+            r.tape.eval::<F32x8, false>(p, &self.grids).0
         } else {
             self.eval::<F32x8, false>(&r.prog, p).0
         }
@@ -264,7 +264,7 @@ impl Field {
     ) -> ([f32; 8], [MaterialId; 8]) {
         let p = V3::from_points(p);
         let (d, m) = if r.taped {
-            r.tape.eval::<F32x8, true>(p)
+            r.tape.eval::<F32x8, true>(p, &self.grids)
         } else {
             self.eval::<F32x8, true>(&r.prog, p)
         };
@@ -274,7 +274,7 @@ impl Field {
     /// Normals' gradients at eight points on surfaces under a restriction: per lane the
     /// analytic gradient of the kept leaf nearest to the point ([`Tape::nearest_gradients`]),
     /// which at a hit of the bundle is the gradient of the surface hit (its object is kept).
-    /// `None` when the restriction has no tape (it has CSG, repetition, mesh grids or too
+    /// `None` when the restriction has no tape (it has CSG, repetition or too
     /// many leaves).
     #[inline]
     pub fn restricted_nearest_gradients_x8(
@@ -283,7 +283,7 @@ impl Field {
         p: [Vec3; 8],
     ) -> Option<[Vec3; 8]> {
         r.taped
-            .then(|| r.tape.nearest_gradients(V3::from_points(p)))
+            .then(|| r.tape.nearest_gradients(V3::from_points(p), &self.grids))
     }
 
     /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this
@@ -309,7 +309,7 @@ impl Field {
         d: V3<F32x8>,
         len: F32x8,
     ) -> Option<(F32x8, F32x8)> {
-        r.taped.then(|| r.tape.segment(p, d, len))
+        r.taped.then(|| r.tape.segment(p, d, len, &self.grids))
     }
 
     /// [`Field::recedes`] under a restriction made by [`Field::restrict_to`] on this field

@@ -467,21 +467,13 @@ impl Field {
     /// [`Field::segment_step`] in f64 (same formulas).
     pub fn segment_step_f64(&self, p: DVec3, dir: DVec3, len: f64) -> (f64, f64) {
         let v = |a: DVec3| V3::new(a.x, a.y, a.z);
-        if self.grids.is_empty() {
-            self.p64.segment(v(p), v(dir), len, &[])
-        } else {
-            self.p64.segment(v(p), v(dir), len, &self.grids)
-        }
+        self.p64.segment(v(p), v(dir), len, &self.grids)
     }
 
     #[inline]
     fn segment_in(&self, prog: &Program<f32>, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
         let v = |a: Vec3| V3::new(a.x, a.y, a.z);
-        if self.grids.is_empty() {
-            prog.segment(v(p), v(dir), len, &[])
-        } else {
-            prog.segment(v(p), v(dir), len, &self.grids)
-        }
+        prog.segment(v(p), v(dir), len, &self.grids)
     }
 
     /// Distances at eight points evaluated in lockstep (same values as [`Field::distance`]
@@ -497,7 +489,7 @@ impl Field {
     pub fn distance_material_x8(&self, p: [Vec3; 8]) -> ([f32; 8], [MaterialId; 8]) {
         let p = V3::from_points(p);
         let (d, m) = match &self.tape {
-            Some(t) => t.eval::<F32x8, true>(p),
+            Some(t) => t.eval::<F32x8, true>(p, &self.grids),
             None => self.eval::<F32x8, true>(&self.p32, p),
         };
         (d.0, m)
@@ -508,7 +500,7 @@ impl Field {
     #[inline]
     pub fn distance_lanes(&self, p: V3<F32x8>) -> F32x8 {
         match &self.tape {
-            Some(t) => t.eval::<F32x8, false>(p).0,
+            Some(t) => t.eval::<F32x8, false>(p, &self.grids).0,
             None => self.eval::<F32x8, false>(&self.p32, p).0,
         }
     }
@@ -525,7 +517,9 @@ impl Field {
     /// [`tape`] (the scalar query serves it).
     #[inline]
     pub fn segment_lanes(&self, p: V3<F32x8>, d: V3<F32x8>, len: F32x8) -> Option<(F32x8, F32x8)> {
-        self.tape.as_ref().map(|t| t.segment(p, d, len))
+        self.tape
+            .as_ref()
+            .map(|t| t.segment(p, d, len, &self.grids))
     }
 
     /// Distances and their gradients at eight points, by forward-mode differentiation of
@@ -537,8 +531,13 @@ impl Field {
     /// are the same as [`Field::distance_x8`]'s.
     #[inline]
     pub fn distance_gradient_x8(&self, p: [Vec3; 8]) -> Option<([f32; 8], [Vec3; 8])> {
+        if !self.grids.is_empty() {
+            return None;
+        }
         let t = self.tape.as_ref()?;
-        let d = t.eval::<Dual8, false>(Dual8::seed(V3::from_points(p))).0;
+        let d = t
+            .eval::<Dual8, false>(Dual8::seed(V3::from_points(p)), &self.grids)
+            .0;
         let g = std::array::from_fn(|k| Vec3::new(d.d.x.0[k], d.d.y.0[k], d.d.z.0[k]));
         Some((d.v.0, g))
     }
@@ -550,13 +549,13 @@ impl Field {
     #[inline]
     pub fn nearest_gradients_x8(&self, p: [Vec3; 8]) -> Option<[Vec3; 8]> {
         let t = self.tape.as_ref()?;
-        Some(t.nearest_gradients(V3::from_points(p)))
+        Some(t.nearest_gradients(V3::from_points(p), &self.grids))
     }
 
     /// [`Field::nearest_gradients_x8`] at one point (bit for bit a lane's result).
     #[inline]
     pub fn nearest_gradient(&self, p: Vec3) -> Option<Vec3> {
-        Some(self.tape.as_ref()?.nearest_gradient(p))
+        Some(self.tape.as_ref()?.nearest_gradient(p, &self.grids))
     }
 
     /// Whether the 8-lane evaluations run a flattened [`tape`] (a union of at most

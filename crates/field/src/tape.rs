@@ -17,7 +17,7 @@ use glam::Vec3;
 use crate::dual::Dual1;
 use crate::lane::{F32x8, Lane, V3};
 use crate::program::segment::{bounded_step, fallback, leaf_lambda, leaf_step};
-use crate::program::{Affine, Instr, Op, Program};
+use crate::program::{Affine, GridSampler, Instr, Op, Program};
 use crate::recede;
 use crate::shapes;
 
@@ -73,8 +73,8 @@ pub struct Tape {
     leaves: Vec<Leaf>,
 }
 
-/// Whether `op` is a leaf the tape evaluates (every analytic primitive; not mesh grids,
-/// which need the grid list).
+/// Whether `op` is a leaf the tape evaluates: every analytic primitive and mesh grids
+/// (sampled through the grid list the tape's evaluations are given).
 pub(crate) fn analytic(op: &Op<f32>) -> bool {
     match op {
         Op::Sphere { .. }
@@ -84,9 +84,9 @@ pub(crate) fn analytic(op: &Op<f32>) -> bool {
         | Op::Ellipsoid { .. }
         | Op::Cylinder { .. }
         | Op::Torus { .. }
-        | Op::Triangle(_) => true,
-        Op::Mesh { .. }
-        | Op::Union
+        | Op::Triangle(_)
+        | Op::Mesh { .. } => true,
+        Op::Union
         | Op::Intersection
         | Op::Subtraction
         | Op::SmoothUnion { .. }
@@ -173,13 +173,18 @@ impl Tape {
     }
 
     /// The value of the program at `p` (and the material when `M`), bit for bit
-    /// [`Program::eval`]'s.
+    /// [`Program::eval`]'s with the same `grids` (the field's mesh grids, indexed by the
+    /// program's [`Op::Mesh`] leaves; panics on an index past them, as the interpreter).
     #[inline]
-    pub fn eval<T: Lane<S = f32>, const M: bool>(&self, p: V3<T>) -> (T, T::Mat) {
+    pub fn eval<T: Lane<S = f32>, const M: bool>(
+        &self,
+        p: V3<T>,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
         match &self.root {
-            None => bounded::<T, M>(&self.leaves[0], p, None),
+            None => bounded::<T, M>(&self.leaves[0], p, None, grids),
             Some(root) => match &root.bound {
-                None => self.union::<T, M>(root, p),
+                None => self.union::<T, M>(root, p, grids),
                 Some(b) => {
                     let zero = T::c(0.0);
                     let l = shapes::box_distance(p, V3::splat3(b.lo), V3::splat3(b.hi));
@@ -190,7 +195,7 @@ impl Tape {
                     if T::all(skip) {
                         return (l, mat);
                     }
-                    let (c, m) = self.union::<T, M>(root, p);
+                    let (c, m) = self.union::<T, M>(root, p, grids);
                     let cc = c.min(tau);
                     let g = T::select(outside, l.max(cc), cc);
                     (T::select(skip, l, g), msel::<T, M>(skip, mat, m))
@@ -205,11 +210,17 @@ impl Tape {
     /// visits a pair nearer first: a member's skip decides its step). What lockstep bundles
     /// use for their segment-tracing lanes instead of one interpreter call per lane.
     #[inline]
-    pub fn segment<T: Lane<S = f32>>(&self, p: V3<T>, d: V3<T>, len: T) -> (T, T) {
+    pub fn segment<T: Lane<S = f32>>(
+        &self,
+        p: V3<T>,
+        d: V3<T>,
+        len: T,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T) {
         let (v, s) = match &self.root {
-            None => seg_bounded(&self.leaves[0], p, d, len, None),
+            None => seg_bounded(&self.leaves[0], p, d, len, None, grids),
             Some(root) => {
-                let union = || self.seg_union(root, p, d, len);
+                let union = || self.seg_union(root, p, d, len, grids);
                 match &root.bound {
                     None => union(),
                     Some(b) => bounded_step((b.lo, b.hi, b.tau), None, p, d, union),
@@ -222,12 +233,19 @@ impl Tape {
     /// The root union's value and safe step (without its own bound), `p` and `d` in the
     /// root's parent frame: every member must stay positive, so the smallest member step.
     #[inline(always)]
-    fn seg_union<T: Lane<S = f32>>(&self, root: &Root, p: V3<T>, d: V3<T>, len: T) -> (T, T) {
+    fn seg_union<T: Lane<S = f32>>(
+        &self,
+        root: &Root,
+        p: V3<T>,
+        d: V3<T>,
+        len: T,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T) {
         let q = root.to_local.apply(p);
         let dl = root.to_local.apply_linear(d);
-        let (mut best, mut step) = seg_bounded(&self.leaves[0], q, dl, len, None);
+        let (mut best, mut step) = seg_bounded(&self.leaves[0], q, dl, len, None, grids);
         for l in &self.leaves[1..] {
-            let (v, s) = seg_bounded(l, q, dl, len, Some(best));
+            let (v, s) = seg_bounded(l, q, dl, len, Some(best), grids);
             best = best.min(v);
             step = step.min(s);
         }
@@ -264,32 +282,33 @@ impl Tape {
     /// evaluation and one leaf per lane, where a [`crate::dual::Dual8`] evaluation of a
     /// long tape differentiates every leaf. It ignores the bounds (a point outside the
     /// root's box, or past a bounded leaf's skip distance, gets the leaf's own gradient
-    /// rather than the box distance's), so it is for points on or near a surface.
-    pub fn nearest_gradients(&self, p: V3<F32x8>) -> [Vec3; 8] {
-        let nearest = self.nearest::<F32x8>(p);
+    /// rather than the box distance's), so it is for points on or near a surface. A mesh
+    /// grid is sampled without a derivative: its lanes' gradients are NaN.
+    pub fn nearest_gradients(&self, p: V3<F32x8>, grids: &[Box<dyn GridSampler>]) -> [Vec3; 8] {
+        let nearest = self.nearest::<F32x8>(p, grids);
         std::array::from_fn(|k| {
-            self.leaf_gradient(nearest[k], Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k]))
+            self.leaf_gradient(nearest[k], Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k]), grids)
         })
     }
 
     /// [`Tape::nearest_gradients`] at one point (bit for bit a lane's result: the same
     /// operations per lane).
-    pub fn nearest_gradient(&self, p: Vec3) -> Vec3 {
-        let nearest = self.nearest::<f32>(V3::new(p.x, p.y, p.z));
-        self.leaf_gradient(nearest, p)
+    pub fn nearest_gradient(&self, p: Vec3, grids: &[Box<dyn GridSampler>]) -> Vec3 {
+        let nearest = self.nearest::<f32>(V3::new(p.x, p.y, p.z), grids);
+        self.leaf_gradient(nearest, p, grids)
     }
 
     /// Per lane the index of the leaf the union's running minimum takes last.
     #[inline(always)]
-    fn nearest<T: Lane<S = f32>>(&self, p: V3<T>) -> T::Mat {
+    fn nearest<T: Lane<S = f32>>(&self, p: V3<T>, grids: &[Box<dyn GridSampler>]) -> T::Mat {
         match &self.root {
             None => T::mat_splat(0),
             Some(root) => {
                 let q = root.to_local.apply(p);
-                let (mut best, _) = bounded::<T, false>(&self.leaves[0], q, None);
+                let (mut best, _) = bounded::<T, false>(&self.leaves[0], q, None, grids);
                 let mut at = T::mat_splat(0);
                 for (k, l) in self.leaves.iter().enumerate().skip(1) {
-                    let (d, _) = bounded::<T, false>(l, q, Some(best));
+                    let (d, _) = bounded::<T, false>(l, q, Some(best), grids);
                     let take = T::lt(d, best);
                     best = best.min(d);
                     at = T::mat_select(take, T::mat_splat(k as u32), at);
@@ -300,19 +319,24 @@ impl Tape {
     }
 
     /// The analytic gradient of leaf `k`'s distance alone at `p` (through the root's frame).
-    fn leaf_gradient(&self, k: u32, p: Vec3) -> Vec3 {
+    fn leaf_gradient(&self, k: u32, p: Vec3, grids: &[Box<dyn GridSampler>]) -> Vec3 {
         let x = Dual1::seed(V3::new(p.x, p.y, p.z));
         let leaf = &self.leaves[k as usize];
         let d = match &self.root {
-            None => value(leaf, x),
-            Some(root) => value(leaf, root.to_local.apply(x)) * Dual1::splat(root.dscale),
+            None => value(leaf, x, grids),
+            Some(root) => value(leaf, root.to_local.apply(x), grids) * Dual1::splat(root.dscale),
         };
         Vec3::new(d.d.x, d.d.y, d.d.z)
     }
 
     /// The root union's value (without its own bound), `p` in the root's parent frame.
     #[inline(always)]
-    fn union<T: Lane<S = f32>, const M: bool>(&self, root: &Root, p: V3<T>) -> (T, T::Mat) {
+    fn union<T: Lane<S = f32>, const M: bool>(
+        &self,
+        root: &Root,
+        p: V3<T>,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
         let q = root.to_local.apply(p);
         let ds = T::splat(root.dscale);
         if root.pair {
@@ -325,14 +349,14 @@ impl Tape {
             } else {
                 (a, b)
             };
-            let (best, bm) = bounded::<T, M>(first, q, None);
-            let (d, m) = bounded::<T, M>(second, q, Some(best));
+            let (best, bm) = bounded::<T, M>(first, q, None, grids);
+            let (d, m) = bounded::<T, M>(second, q, Some(best), grids);
             let take = T::lt(d, best);
             return (best.min(d) * ds, msel::<T, M>(take, m, bm));
         }
-        let (mut best, mut bm) = bounded::<T, M>(&self.leaves[0], q, None);
+        let (mut best, mut bm) = bounded::<T, M>(&self.leaves[0], q, None, grids);
         for l in &self.leaves[1..] {
-            let (d, m) = bounded::<T, M>(l, q, Some(best));
+            let (d, m) = bounded::<T, M>(l, q, Some(best), grids);
             let take = T::lt(d, best);
             best = best.min(d);
             bm = msel::<T, M>(take, m, bm);
@@ -360,10 +384,11 @@ fn bounded<T: Lane<S = f32>, const M: bool>(
     leaf: &Leaf,
     p: V3<T>,
     below: Option<T>,
+    grids: &[Box<dyn GridSampler>],
 ) -> (T, T::Mat) {
     let mat = T::mat_splat(leaf.material);
     let Some(b) = &leaf.bound else {
-        return (value(leaf, p), mat);
+        return (value(leaf, p, grids), mat);
     };
     let zero = T::c(0.0);
     let l = shapes::box_distance(p, V3::splat3(b.lo), V3::splat3(b.hi));
@@ -376,7 +401,7 @@ fn bounded<T: Lane<S = f32>, const M: bool>(
     if T::all(skip) {
         return (l, mat);
     }
-    let c = value(leaf, p);
+    let c = value(leaf, p, grids);
     let cc = c.min(tau);
     let g = T::select(outside, l.max(cc), cc);
     (T::select(skip, l, g), mat)
@@ -390,9 +415,10 @@ fn seg_bounded<T: Lane<S = f32>>(
     d: V3<T>,
     len: T,
     below: Option<T>,
+    grids: &[Box<dyn GridSampler>],
 ) -> (T, T) {
     let node = || {
-        let v = value(leaf, p);
+        let v = value(leaf, p, grids);
         let dl = leaf.to_local.apply_linear(d);
         match leaf_lambda(&leaf.op, || leaf.to_local.apply(p), dl, len) {
             Some(lambda) => (v, leaf_step(v, lambda, dl.len(), len, d)),
@@ -407,7 +433,7 @@ fn seg_bounded<T: Lane<S = f32>>(
 
 /// A leaf's value (`Program::node` for a leaf), `p` in its parent's frame.
 #[inline(always)]
-fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
+fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>, grids: &[Box<dyn GridSampler>]) -> T {
     let q = leaf.to_local.apply(p);
     let d = match &leaf.op {
         Op::Sphere { r } => shapes::sphere(q, T::splat(*r)),
@@ -420,9 +446,9 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>) -> T {
         Op::Cylinder { r, h } => shapes::cylinder(q, T::splat(*r), T::splat(*h)),
         Op::Torus { big, small } => shapes::torus(q, T::splat(*big), T::splat(*small)),
         Op::Triangle(t) => shapes::triangle(q, t),
+        Op::Mesh { grid } => T::sample_grid(grids[*grid as usize].as_ref(), q.x, q.y, q.z),
         // Never on a tape (`analytic`); NaN rather than a panic in the hot loop.
-        Op::Mesh { .. }
-        | Op::Union
+        Op::Union
         | Op::Intersection
         | Op::Subtraction
         | Op::SmoothUnion { .. }

@@ -258,3 +258,127 @@ fn rays_leaving_every_leaf_recede_and_others_do_not() {
     );
     assert!(!field(&csg).recedes(above, Vec3::Y));
 }
+
+/// Mesh grids are tape leaves too: a union of a baked mesh (dense and sparse), a sphere and
+/// a plane gets a tape whose lanes are bit for bit the interpreter's (distances, materials,
+/// segment steps); rays it calls receding meet no surface; the nearest leaf's gradient is
+/// analytic for the sphere and the plane and NaN for the grid (sampled without a
+/// derivative: the tracer then differentiates the field); the whole-field dual gradient
+/// is not offered.
+#[test]
+fn unions_with_mesh_grids_get_a_tape_bit_for_bit_the_interpreter() {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj");
+    let bunny = node(
+        NodeKind::Mesh { path },
+        compose_transform(
+            DVec3::new(0.3, -0.2, 3.0),
+            DVec3::new(0.0, 30.0, 0.0),
+            DVec3::splat(0.15),
+        ),
+        4,
+    );
+    let scene = union(vec![
+        bunny,
+        leaves()[0].clone(),
+        node(
+            NodeKind::Plane {
+                normal: DVec3::Y,
+                offset: -1.0,
+            },
+            DAffine3::IDENTITY,
+            5,
+        ),
+    ]);
+    let mut rng = 5u64;
+    let mut next = move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for grid in [
+        marchmesh_field::MeshGrid::Dense,
+        marchmesh_field::MeshGrid::SPARSE_DEFAULT,
+    ] {
+        let opts = FieldOptions {
+            mesh_grid_resolution: 32,
+            mesh_grid: grid,
+            ..FieldOptions::default()
+        };
+        let f = Field::compile_node(&scene, DAffine3::IDENTITY, &opts).expect("compiles");
+        assert!(f.has_tape(), "{grid:?}");
+        assert!(f.distance_gradient_x8([Vec3::ZERO; 8]).is_none());
+        let (mut receding, mut mesh_nearest, mut analytic_nearest) = (0, 0, 0);
+        for _ in 0..300 {
+            let p = DVec3::new(next() * 6.0 - 3.0, next() * 4.0 - 1.5, next() * 6.0);
+            let spread = next() * 2.0;
+            let pts: [Vec3; 8] = std::array::from_fn(|i| {
+                (p + DVec3::new(i as f64 * 0.37, -(i as f64) * 0.21, 0.1) * spread).as_vec3()
+            });
+            let dir = DVec3::new(next() - 0.5, next() - 0.5, next() - 0.5);
+            let dirs: [Vec3; 8] = std::array::from_fn(|i| {
+                (dir + DVec3::new(0.0, i as f64 * 0.1, 0.0) * spread).as_vec3()
+            });
+            let lens: [f32; 8] = std::array::from_fn(|i| (0.05 + next() * 3.0 * i as f64) as f32);
+            let lanes = f.distance_x8(pts);
+            let (dm, mm) = f.distance_material_x8(pts);
+            let (v, s) = f
+                .segment_lanes(V3::from_points(pts), V3::from_points(dirs), F32x8(lens))
+                .expect("a tape");
+            for i in 0..8 {
+                let at = format!("{grid:?} lane {i} at {}", pts[i]);
+                assert_eq!(lanes[i].to_bits(), f.distance(pts[i]).to_bits(), "{at}");
+                let (d, m) = f.distance_material(pts[i]);
+                assert_eq!((dm[i].to_bits(), mm[i]), (d.to_bits(), m), "{at}");
+                let (sv, ss) = f.segment_step(pts[i], dirs[i], lens[i]);
+                assert_eq!(
+                    (v.0[i].to_bits(), s.0[i].to_bits()),
+                    (sv.to_bits(), ss.to_bits()),
+                    "{at}"
+                );
+            }
+            // Points on the surfaces: the nearest leaf's gradient.
+            let on: [Vec3; 8] = std::array::from_fn(|i| {
+                let q = pts[i];
+                q - Vec3::Y * f.distance(q).max(0.0) * if i % 2 == 0 { 1.0 } else { 0.0 }
+            });
+            let g = f.nearest_gradients_x8(on).expect("a tape");
+            for i in 0..8 {
+                let one = f.nearest_gradient(on[i]).expect("a tape");
+                assert_eq!(
+                    g[i].to_array().map(f32::to_bits),
+                    one.to_array().map(f32::to_bits)
+                );
+                let (_, m) = f.distance_material(on[i]);
+                if m == 4 {
+                    mesh_nearest += 1;
+                    assert!(
+                        g[i].is_nan(),
+                        "{grid:?}: the grid's lanes have no derivative"
+                    );
+                } else {
+                    analytic_nearest += 1;
+                    assert!((g[i].length() - 1.0).abs() < 1e-3, "{grid:?}: {}", g[i]);
+                }
+            }
+            // Receding rays stay outside every surface out to 200 units (rays climbing
+            // away from the plane, which no ray going down leaves behind).
+            let (q, u) = (p, (dir.with_y(dir.y.abs() + 0.2)).normalize());
+            if f.distance_f64(q) > 1e-3 && f.recedes(q.as_vec3(), u.as_vec3()) {
+                receding += 1;
+                for k in 1..=2000 {
+                    let t = 0.1 * f64::from(k) * (1.0 + f64::from(k) / 1000.0);
+                    assert!(
+                        f.distance_f64(q + u * t) > 0.0,
+                        "{grid:?}: {q} along {u}, t {t}"
+                    );
+                }
+            }
+        }
+        assert!(
+            receding > 10 && mesh_nearest > 10 && analytic_nearest > 10,
+            "{grid:?}: the cases are exercised ({receding}, {mesh_nearest}, {analytic_nearest})"
+        );
+    }
+}

@@ -16,8 +16,8 @@
 //! * Normals: the analytic gradient of the flattened program's ([`marchmesh_field::tape`])
 //!   leaf nearest to the hit, differentiated alone ([`marchmesh_field::Dual1`]); the 8 hits
 //!   of a lockstep batch find their leaves in one 8-lane evaluation, and a single ray gets
-//!   the same bits ([`marchmesh_field::Field::nearest_gradient`]). Where there is no tape (CSG, repetition, mesh
-//!   grids, large unions) or the gradient is shorter than 0.9 (an unsigned surface at its
+//!   the same bits ([`marchmesh_field::Field::nearest_gradient`]). Where there is no tape (CSG, repetition, large
+//!   nested unions), the nearest leaf is a mesh grid (no derivative), or the gradient is shorter than 0.9 (an unsigned surface at its
 //!   zero set, a smooth blend, an ellipsoid's bound), central differences of the field with a
 //!   step that is a fraction of the pixel footprint ([`SdfOptions::normal_step`]), evaluated
 //!   as one 8-lane field call (the two spare lanes detect a stencil straddling an unsigned
@@ -402,8 +402,9 @@ impl SdfGeometry {
     /// of the whole tape cost twice as much on 4-5 leaves), the material the field's at
     /// `p - 2 h dir` as in [`SdfGeometry::normal_material`] (one 8-lane evaluation). A hit
     /// whose gradient is shorter than 0.9 or not finite (an unsigned surface at its zero
-    /// set, an ellipsoid's bound), or whose field has no tape (CSG, smooth blends, mesh
-    /// grids), takes [`SdfGeometry::normal_material`] instead, with its straddle fallback.
+    /// set, an ellipsoid's bound, a mesh grid, which has no derivative), or whose field has
+    /// no tape (CSG, smooth blends), takes [`SdfGeometry::normal_material`] instead, with its
+    /// straddle fallback.
     ///
     /// Hits of a bundle traced through a restricted field (`scope`) take the gradient of the
     /// nearest kept leaf ([`Field::restricted_nearest_gradients_x8`]: the surface hit, whose

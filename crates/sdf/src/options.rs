@@ -108,8 +108,9 @@ pub struct SdfOptions {
     /// along a line: once it grows it never shrinks) or has its box behind the ray
     /// ([`marchmesh_field::Field::recedes`]), and ends as it would at the end of its range
     /// when all are. Shadow rays climbing away from a ground and rays that passed every
-    /// object stop marching to the end of their range. Fields without a tape (CSG, mesh
-    /// grids) never answer yes. Needs `bounds` (the naive level has none).
+    /// object stop marching to the end of their range. Fields without a tape (CSG,
+    /// repetition) never answer yes; a mesh grid is left behind only with its box. Needs
+    /// `bounds` (the naive level has none).
     pub recede: bool,
     /// Switch rays whose sphere tracing progresses slowly (grazing a surface) to segment
     /// tracing with local directional Lipschitz bounds (Galin et al. 2020; default true):
