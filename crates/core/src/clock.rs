@@ -63,7 +63,8 @@ impl Clock {
         let end = self.now();
         let d = end.0.saturating_sub(start.0);
         match self.ns_per_tick {
-            Some(scale) => (d as f64 * scale).round() as u64,
+            // Rounded to nearest (`round` is a libm call without SSE4.1).
+            Some(scale) => (d as f64 * scale + 0.5) as u64,
             None => d,
         }
     }

@@ -899,8 +899,9 @@ pub(crate) struct Scratch {
 /// Traces one band with the Whitted integrator, tile by tile.
 fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
-    s.sum.clear();
+    // Zeroed as bytes (one `memset`; `clear` and `resize` stored a Vec3 at a time).
     s.sum.resize(band.color_len(), Vec3::ZERO);
+    bytemuck::cast_slice_mut::<Vec3, u8>(&mut s.sum).fill(0);
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }
