@@ -38,8 +38,10 @@ pub fn primary_direction(camera: &Camera, column: u32, row: u32, offset: DVec2) 
 }
 
 /// Primary ray through pixel `(column, row)` (row 0 at the top) at sub-pixel `offset`, in render
-/// space (camera at the origin): [`primary_direction`] rounded to f32. `t_max` is the scene's
-/// maximum distance.
+/// space (camera at the origin): [`primary_direction`] rounded to f32 per component. There is
+/// no f32 renormalisation: the rounding is within a relative 2^-24 of unit length, and
+/// renormalising (rounding a second time) would not bring it closer to the exact direction.
+/// `t_max` is the scene's maximum distance.
 pub fn primary_ray(camera: &Camera, column: u32, row: u32, offset: DVec2, t_max: f64) -> Ray {
     primary_ray_on(&camera.image_plane(), column, row, offset, t_max)
 }
@@ -50,7 +52,7 @@ pub fn primary_ray_on(plane: &ImagePlane, column: u32, row: u32, offset: DVec2, 
     let d = plane.direction(column as f64 + offset.x, row as f64 + offset.y);
     Ray {
         origin: glam::Vec3::ZERO,
-        dir: d.as_vec3().normalize(),
+        dir: d.as_vec3(),
         t_min: 0.0,
         t_max: t_max as f32,
     }
@@ -218,7 +220,7 @@ impl TileRays {
     }
 
     /// [`TileRays::push`] with AVX intrinsics: 4 rays a time through the f64 normalisation
-    /// (`vsqrtpd`, `vdivpd`) and the f32 one. Each lane performs [`directions`]' IEEE
+    /// (`vsqrtpd`, `vdivpd`), then rounded to f32. Each lane performs [`directions`]' IEEE
     /// operations in the same order (square roots and divisions are correctly rounded in
     /// every lane width), so the rays are the same bits; a test compares every pixel.
     #[cfg(target_arch = "x86_64")]
@@ -240,7 +242,6 @@ impl TileRays {
         }
         out.reserve(tw * tile.height as usize);
         let one_d = _mm256_set1_pd(1.0);
-        let one_s = _mm_set1_ps(1.0);
         for row in tile.y..tile.y + tile.height {
             let up = self.plane.row_offset(row as f64 + offset.y);
             let (ux, uy, uz) = (
@@ -263,22 +264,12 @@ impl TileRays {
                     _mm256_mul_pd(z, z),
                 );
                 let r = _mm256_div_pd(one_d, _mm256_sqrt_pd(dot));
-                let (a, b, c) = (
-                    _mm256_cvtpd_ps(_mm256_mul_pd(x, r)),
-                    _mm256_cvtpd_ps(_mm256_mul_pd(y, r)),
-                    _mm256_cvtpd_ps(_mm256_mul_pd(z, r)),
-                );
-                let dot = _mm_add_ps(
-                    _mm_add_ps(_mm_mul_ps(a, a), _mm_mul_ps(b, b)),
-                    _mm_mul_ps(c, c),
-                );
-                let s = _mm_div_ps(one_s, _mm_sqrt_ps(dot));
                 let (mut dx, mut dy, mut dz) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
                 // SAFETY: each store writes 4 f32 into a `[f32; 4]`.
                 unsafe {
-                    _mm_storeu_ps(dx.as_mut_ptr(), _mm_mul_ps(a, s));
-                    _mm_storeu_ps(dy.as_mut_ptr(), _mm_mul_ps(b, s));
-                    _mm_storeu_ps(dz.as_mut_ptr(), _mm_mul_ps(c, s));
+                    _mm_storeu_ps(dx.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(x, r)));
+                    _mm_storeu_ps(dy.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(y, r)));
+                    _mm_storeu_ps(dz.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(z, r)));
                 }
                 // Written into the reserved capacity: no capacity check per ray.
                 let lanes = (tw - k).min(4);
@@ -324,7 +315,7 @@ impl TileRays {
 /// Columns whose directions [`directions`] computes together.
 const LANES: usize = 8;
 
-/// `(column + up).normalize().as_vec3().normalize()` for up to [`LANES`] columns, written
+/// `(column + up).normalize().as_vec3()` for up to [`LANES`] columns, written
 /// lane by lane (structure of arrays) so the compiler can use SIMD; the same IEEE operations
 /// in the same order as glam's `normalize` (`v * (1 / sqrt(x*x + y*y + z*z))`), so the same
 /// bits. Lanes past `columns.len()` are unspecified.
@@ -340,11 +331,9 @@ fn directions(columns: &[DVec3], up: DVec3) -> [[f32; LANES]; 3] {
     let mut out = [[0.0f32; LANES]; 3];
     for i in 0..LANES {
         let r = 1.0 / (x[i] * x[i] + y[i] * y[i] + z[i] * z[i]).sqrt();
-        let (a, b, c) = ((x[i] * r) as f32, (y[i] * r) as f32, (z[i] * r) as f32);
-        let s = 1.0 / (a * a + b * b + c * c).sqrt();
-        out[0][i] = a * s;
-        out[1][i] = b * s;
-        out[2][i] = c * s;
+        out[0][i] = (x[i] * r) as f32;
+        out[1][i] = (y[i] * r) as f32;
+        out[2][i] = (z[i] * r) as f32;
     }
     out
 }
@@ -425,7 +414,8 @@ mod tests {
                 assert_eq!(exact, expect);
                 assert!((exact.length() - 1.0).abs() < 1e-15);
                 let ray = primary_ray(&cam, col, 3, sample_offset(s), 10.0);
-                assert!((ray.dir.as_dvec3() - exact).length() < 1e-6);
+                assert_eq!(ray.dir, exact.as_vec3());
+                assert!((ray.dir.as_dvec3().length() - 1.0).abs() <= 2f64.powi(-24));
             }
         }
     }
@@ -497,7 +487,7 @@ mod tests {
                                 want.t_min.to_bits()
                             )
                         );
-                        assert_eq!(samples.direction(i).as_vec3().normalize(), r.dir);
+                        assert_eq!(samples.direction(i).as_vec3(), r.dir);
                     }
                 }
             }

@@ -26,6 +26,7 @@ use rayon::prelude::*;
 
 use crate::background::BackgroundSampler;
 use crate::camera::{PrimarySamples, Tile, TileRays, sample_offset};
+use crate::clock::Clock;
 use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::RenderSpace;
@@ -194,6 +195,8 @@ pub fn render_into(
         // No camera ray writes the pixels: leave them cleared.
         fb.clear();
     }
+    // Calibrated before the render's clock starts (once per process).
+    Clock::get();
     let start = Instant::now();
     let bands = Band::split(fb, TILE_HEIGHT, options.aovs);
     let stats = match scene.render.integrator {
@@ -566,7 +569,8 @@ impl Shading {
 }
 
 /// Resizes `out` to `len` results (their old values stay: `trace` overwrites them all), runs `trace` on it and returns the nanoseconds the
-/// trace took: every batched geometry query of the integrators is timed through this, so the
+/// trace took (by [`Clock`]: the TSC where it is invariant, two `rdtsc` instead of two
+/// `clock_gettime`): every batched geometry query of the integrators is timed through this, so the
 /// per-ray-type times in [`RenderStats::trace_time`] measure the geometry alone.
 pub(crate) fn timed<T: Clone + Default>(
     out: &mut Vec<T>,
@@ -576,9 +580,10 @@ pub(crate) fn timed<T: Clone + Default>(
     // Every query writes every element of its `out` (the [`Geometry`] contract), so the
     // previous wavefront's results need not be cleared.
     out.resize(len, T::default());
-    let start = Instant::now();
+    let clock = Clock::get();
+    let start = clock.now();
     trace(out);
-    start.elapsed().as_nanos() as u64
+    clock.elapsed_ns(start)
 }
 
 /// Traces one wavefront's `rays` into `results`: camera rays (with their exact `camera`
@@ -894,8 +899,9 @@ pub(crate) struct Scratch {
 /// Traces one band with the Whitted integrator, tile by tile.
 fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
-    s.sum.clear();
+    // Zeroed as bytes (one `memset`; `clear` and `resize` stored a Vec3 at a time).
     s.sum.resize(band.color_len(), Vec3::ZERO);
+    bytemuck::cast_slice_mut::<Vec3, u8>(&mut s.sum).fill(0);
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }

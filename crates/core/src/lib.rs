@@ -9,6 +9,7 @@
 pub mod backend;
 pub mod background;
 pub mod camera;
+mod clock;
 pub mod compare;
 pub mod emitter;
 pub mod framebuffer;

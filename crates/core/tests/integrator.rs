@@ -393,3 +393,68 @@ fn primary_batches_carry_their_exact_camera_samples_in_order() {
     );
     assert_eq!(probe.rays.into_inner(), 13 * 7 * 3);
 }
+
+/// Misses everything after busy-waiting `per_batch` (by `Instant`) in each closest-hit
+/// batch, counting the batches.
+struct Busy {
+    per_batch: std::time::Duration,
+    batches: std::sync::atomic::AtomicUsize,
+}
+
+impl Geometry for Busy {
+    fn closest_hit(&self, _: &Ray) -> TraceResult {
+        TraceResult::found_or_miss(None, RayWork::default())
+    }
+
+    fn occluded(&self, _: &Ray) -> OcclusionResult {
+        OcclusionResult::default()
+    }
+
+    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+        let t = std::time::Instant::now();
+        while t.elapsed() < self.per_batch {}
+        self.batches
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        for (r, o) in rays.iter().zip(out) {
+            *o = self.closest_hit(r);
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        GeometryReport::default()
+    }
+}
+
+#[test]
+fn geometry_times_are_the_nanoseconds_the_queries_took() {
+    // 16x16 pixels: four camera batches of at least 3 ms each.
+    let json = ONE_SPHERE.replace(
+        r#""width": 33, "height": 33"#,
+        r#""width": 16, "height": 16"#,
+    );
+    let scene = scene(&json);
+    let busy = Busy {
+        per_batch: std::time::Duration::from_millis(3),
+        batches: 0.into(),
+    };
+    let bg = BackgroundSampler::load(&scene.background).unwrap();
+    let opts = RenderOptions {
+        threads: 1,
+        ..Default::default()
+    };
+    let out = render(&scene, &busy, &bg, &opts, &|| {}).unwrap();
+    assert_eq!(busy.batches.into_inner(), 4);
+    let t = out.stats.trace_time;
+    let least = 4 * 3_000_000;
+    // At least the busy-waits, at most the whole render (which holds them).
+    assert!(
+        t.camera_ns >= least * 99 / 100 && t.camera_ns <= out.elapsed.as_nanos() as u64,
+        "camera {} ns, render {:?}",
+        t.camera_ns,
+        out.elapsed
+    );
+    assert_eq!(
+        (t.shadow_ns, t.bounce_ns, t.ambient_occlusion_ns),
+        (0, 0, 0)
+    );
+}
