@@ -896,12 +896,18 @@ pub(crate) struct Scratch {
     sum: Vec<Vec3>,
 }
 
+/// Sets `sum` to `len` zero colours, as bytes: one `memset` (`clear` and `resize` stored a
+/// `Vec3` at a time); what each integrator's band starts from.
+pub(crate) fn zero_sums(sum: &mut Vec<Vec3>, len: usize) {
+    sum.truncate(len);
+    bytemuck::cast_slice_mut::<Vec3, u8>(sum).fill(0);
+    sum.resize(len, Vec3::ZERO);
+}
+
 /// Traces one band with the Whitted integrator, tile by tile.
 fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
-    // Zeroed as bytes (one `memset`; `clear` and `resize` stored a Vec3 at a time).
-    s.sum.resize(band.color_len(), Vec3::ZERO);
-    bytemuck::cast_slice_mut::<Vec3, u8>(&mut s.sum).fill(0);
+    zero_sums(&mut s.sum, band.color_len());
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }

@@ -81,9 +81,7 @@ pub(crate) struct Scratch {
 /// shading data holds the materials, lights and limits.
 pub(crate) fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
-    // Zeroed as bytes (one `memset`, as the Whitted integrator's `trace_band`).
-    s.sum.resize(band.color_len(), Vec3::ZERO);
-    bytemuck::cast_slice_mut::<Vec3, u8>(&mut s.sum).fill(0);
+    crate::integrator::zero_sums(&mut s.sum, band.color_len());
     for tile in band.tiles() {
         trace_tile(f, s, band, tile, &mut stats);
     }
