@@ -21,7 +21,7 @@ use marchmesh_scene::MaterialId;
 use crate::Field;
 use crate::lane::{F32x8, V3};
 use crate::program::{Instr, Op, Program};
-use crate::tape::{Tape, analytic};
+use crate::tape::{Tape, tape_leaf};
 
 /// Rays from `origin` whose directions lie in a pyramid around `axis`: in the frame
 /// (`u`, `v`, `axis`), a direction `d` is inside when `u.d / axis.d` lies in `[u_lo, u_hi]`
@@ -193,7 +193,7 @@ impl Wedge {
 pub struct Restricted {
     prog: Program<f32>,
     dropped: usize,
-    /// `prog` as a tape, when it is a small union of analytic leaves (`taped`).
+    /// `prog` as a tape, when it is a small union of tape leaves (`taped`).
     tape: Tape,
     taped: bool,
     /// Buffer of [`flatten`].
@@ -207,7 +207,7 @@ impl Restricted {
     }
 
     /// Whether the 8-lane evaluations (and gradients) under this restriction run a flat
-    /// [`Tape`]: the restricted program is one analytic leaf or a union of at most
+    /// [`Tape`]: the restricted program is one tape leaf or a union of at most
     /// [`Tape::MAX_LEAVES`] of them (nested unions of the compiler's hierarchy are
     /// flattened). Otherwise they run the interpreter.
     pub fn is_taped(&self) -> bool {
@@ -224,7 +224,7 @@ impl Field {
     /// Restricts the f32 program to the objects `cone` may reach, into `out` (its buffer is
     /// reused). Evaluate it with [`Field::restricted_distance_x8`] on this same field. The
     /// kept part of the compiler's union hierarchy is flattened into one union when it has
-    /// at most [`Tape::MAX_LEAVES`] analytic leaves, so the bundle runs a [`Tape`].
+    /// at most [`Tape::MAX_LEAVES`] tape leaves, so the bundle runs a [`Tape`].
     pub fn restrict_to(&self, cone: &RayCone, out: &mut Restricted) {
         out.prog.instrs.clear();
         if !self.p32.instrs.is_empty() {
@@ -274,16 +274,19 @@ impl Field {
     /// Normals' gradients at eight points on surfaces under a restriction: per lane the
     /// analytic gradient of the kept leaf nearest to the point ([`Tape::nearest_gradients`]),
     /// which at a hit of the bundle is the gradient of the surface hit (its object is kept).
-    /// `None` when the restriction has no tape (it has CSG, repetition or too
-    /// many leaves).
+    /// Lanes nearest a mesh grid get NaN. `None` when the restriction has no tape (it has
+    /// CSG, repetition or too many leaves) or no lane has a gradient.
     #[inline]
     pub fn restricted_nearest_gradients_x8(
         &self,
         r: &Restricted,
         p: [Vec3; 8],
     ) -> Option<[Vec3; 8]> {
-        r.taped
-            .then(|| r.tape.nearest_gradients(V3::from_points(p), &self.grids))
+        if !r.taped {
+            return None;
+        }
+        let g = r.tape.nearest_gradients(V3::from_points(p), &self.grids);
+        g.iter().any(|v| v.is_finite()).then_some(g)
     }
 
     /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this
@@ -377,7 +380,7 @@ fn emit(src: &[Instr<f32>], i: usize, cone: &Wedge, out: &mut Vec<Instr<f32>>) -
     true
 }
 
-/// Rewrites a restricted program that is a union of identity-frame unions of analytic
+/// Rewrites a restricted program that is a union of identity-frame unions of tape
 /// leaves (what [`emit`] leaves of the compiler's union hierarchy) as one union of those
 /// leaves, in the same order, when there are at most [`Tape::MAX_LEAVES`] of them, so the
 /// bundle gets a [`Tape`]. A union of unions is the union of their leaves: the value is the
@@ -398,7 +401,7 @@ fn flatten(instrs: &mut Vec<Instr<f32>>, scratch: &mut Vec<Instr<f32>>) {
                 return;
             }
             nested = true;
-        } else if analytic(&ins.op) && ins.end as usize == k + 1 {
+        } else if tape_leaf(&ins.op) && ins.end as usize == k + 1 {
             leaves += 1;
         } else {
             return;

@@ -303,11 +303,12 @@ mod tests {
         ));
         let r = (s.x * s.x + s.y * s.y).sqrt();
         assert_eq!(r.d.x.0, [0.0; 8]);
-        /// A "grid" whose distance is the point's x.
+        /// A "grid" whose f32 distance is the point's x (its f64 one is off by 1000, so the
+        /// test sees which sampler the f32 lanes take).
         struct PlaneX;
         impl GridSampler for PlaneX {
             fn sample(&self, x: f64, _: f64, _: f64) -> f64 {
-                x
+                x + 1000.0
             }
             fn sample_f32(&self, x: f32, _: f32, _: f32) -> f32 {
                 x
@@ -316,8 +317,13 @@ mod tests {
                 0
             }
         }
-        let g = Dual8::sample_grid(&PlaneX, s.x, s.y, s.z);
-        assert_eq!(g.v.0, [0.0; 8]);
+        let x = Dual8::seed(V3::new(
+            F32x8(std::array::from_fn(|i| i as f32 - 2.5)),
+            F32x8::splat(1.0),
+            F32x8::splat(2.0),
+        ));
+        let g = Dual8::sample_grid(&PlaneX, x.x, x.y, x.z);
+        assert_eq!(g.v.0, x.x.v.0, "each lane's own point");
         assert!(g.d.x.0.iter().all(|v| v.is_nan()));
     }
 }

@@ -154,7 +154,7 @@ pub struct FieldReport {
 pub struct Field {
     p32: Program<f32>,
     p64: Program<f64>,
-    /// `p32` flattened when it is a small union of analytic leaves ([`tape`]): what the
+    /// `p32` flattened when it is a small union of analytic or mesh-grid leaves ([`tape`]): what the
     /// 8-lane evaluations run (same values).
     tape: Option<Tape>,
     grids: Vec<Box<dyn GridSampler>>,
@@ -545,11 +545,13 @@ impl Field {
     /// Normals' gradients at eight points on surfaces: per lane the analytic gradient of
     /// the leaf nearest to the point ([`Tape::nearest_gradients`]: at a hit, the surface
     /// hit), far cheaper than [`Field::distance_gradient_x8`] on a tape of several leaves
-    /// and the same away from ties and bounds. `None` when the field has no [`tape`].
+    /// and the same away from ties and bounds. A lane nearest a mesh grid gets NaN (a grid
+    /// has no derivative). `None` when the field has no [`tape`] or no lane has a gradient.
     #[inline]
     pub fn nearest_gradients_x8(&self, p: [Vec3; 8]) -> Option<[Vec3; 8]> {
         let t = self.tape.as_ref()?;
-        Some(t.nearest_gradients(V3::from_points(p), &self.grids))
+        let g = t.nearest_gradients(V3::from_points(p), &self.grids);
+        g.iter().any(|v| v.is_finite()).then_some(g)
     }
 
     /// [`Field::nearest_gradients_x8`] at one point (bit for bit a lane's result).
@@ -559,7 +561,7 @@ impl Field {
     }
 
     /// Whether the 8-lane evaluations run a flattened [`tape`] (a union of at most
-    /// [`Tape::MAX_LEAVES`] analytic leaves) rather than the interpreter.
+    /// [`Tape::MAX_LEAVES`] analytic or mesh-grid leaves) rather than the interpreter.
     pub fn has_tape(&self) -> bool {
         self.tape.is_some()
     }

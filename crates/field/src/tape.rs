@@ -1,4 +1,5 @@
-//! Straight-line evaluation of small programs: a union of analytic leaves (or one leaf),
+//! Straight-line evaluation of small programs: a union of leaves (analytic shapes and mesh
+//! grids; or one leaf),
 //! the shape of every scene of a few objects and of most bundles after [`crate::cull`].
 //!
 //! The interpreter ([`Program::eval`]) walks the pre-order node list recursively, passing
@@ -40,7 +41,8 @@ impl Bound {
     }
 }
 
-/// One analytic leaf with its frame, distance scale and (optional) bound.
+/// One leaf (an analytic shape or a mesh grid) with its frame, distance scale and
+/// (optional) bound.
 #[derive(Debug, Clone, PartialEq)]
 struct Leaf {
     to_local: Affine<f32>,
@@ -75,7 +77,7 @@ pub struct Tape {
 
 /// Whether `op` is a leaf the tape evaluates: every analytic primitive and mesh grids
 /// (sampled through the grid list the tape's evaluations are given).
-pub(crate) fn analytic(op: &Op<f32>) -> bool {
+pub(crate) fn tape_leaf(op: &Op<f32>) -> bool {
     match op {
         Op::Sphere { .. }
         | Op::SphereAt { .. }
@@ -115,8 +117,8 @@ impl Tape {
     /// -> 853M); 16 recovered only 5% at 10000 spheres and 128 changed nothing.
     pub const MAX_LEAVES: usize = 64;
 
-    /// The tape of `prog` when it is one analytic leaf or a union (not a nested one) of at
-    /// most [`Tape::MAX_LEAVES`] analytic leaves; `None` otherwise (the interpreter serves
+    /// The tape of `prog` when it is one leaf ([`tape_leaf`]) or a union (not a nested one)
+    /// of at most [`Tape::MAX_LEAVES`] such leaves; `None` otherwise (the interpreter serves
     /// it).
     pub fn of(prog: &Program<f32>) -> Option<Tape> {
         let mut t = Tape::default();
@@ -131,7 +133,7 @@ impl Tape {
         let Some(first) = prog.instrs.first() else {
             return false;
         };
-        if analytic(&first.op) {
+        if tape_leaf(&first.op) {
             if prog.instrs.len() != 1 {
                 return false;
             }
@@ -147,7 +149,7 @@ impl Tape {
         }
         // Every node after the root must be a leaf of it (its subtree is itself).
         for (k, ins) in prog.instrs[1..].iter().enumerate() {
-            if !analytic(&ins.op) || ins.end as usize != k + 2 {
+            if !tape_leaf(&ins.op) || ins.end as usize != k + 2 {
                 return false;
             }
             self.leaves.push(leaf(ins));
@@ -261,8 +263,9 @@ impl Tape {
     ///   positive there never reaches 0; or
     /// - the ray misses the leaf's bounding box from `p` on.
     ///
-    /// Conservative: a torus or triangle whose box the ray still meets, a point on or in a
-    /// convex leaf, or a ray within about 0.006 degree of tangency answers false. Used to end
+    /// Conservative: a torus, triangle or mesh grid whose box the ray still meets (an
+    /// unbounded mesh grid always), a point on or in a convex leaf, or a ray within about
+    /// 0.006 degree of tangency answers false. Used to end
     /// rays receding from everything (shadow rays climbing away from a ground, rays that
     /// passed every object) instead of marching them to the end of their range.
     pub fn recedes(&self, p: Vec3, d: Vec3) -> bool {
@@ -283,7 +286,7 @@ impl Tape {
     /// long tape differentiates every leaf. It ignores the bounds (a point outside the
     /// root's box, or past a bounded leaf's skip distance, gets the leaf's own gradient
     /// rather than the box distance's), so it is for points on or near a surface. A mesh
-    /// grid is sampled without a derivative: its lanes' gradients are NaN.
+    /// grid has no derivative: the lanes nearest one get NaN.
     pub fn nearest_gradients(&self, p: V3<F32x8>, grids: &[Box<dyn GridSampler>]) -> [Vec3; 8] {
         let nearest = self.nearest::<F32x8>(p, grids);
         std::array::from_fn(|k| {
@@ -320,8 +323,12 @@ impl Tape {
 
     /// The analytic gradient of leaf `k`'s distance alone at `p` (through the root's frame).
     fn leaf_gradient(&self, k: u32, p: Vec3, grids: &[Box<dyn GridSampler>]) -> Vec3 {
-        let x = Dual1::seed(V3::new(p.x, p.y, p.z));
         let leaf = &self.leaves[k as usize];
+        if matches!(leaf.op, Op::Mesh { .. }) {
+            // Sampled without a derivative: no need to sample it.
+            return Vec3::NAN;
+        }
+        let x = Dual1::seed(V3::new(p.x, p.y, p.z));
         let d = match &self.root {
             None => value(leaf, x, grids),
             Some(root) => value(leaf, root.to_local.apply(x), grids) * Dual1::splat(root.dscale),
@@ -447,7 +454,7 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>, grids: &[Box<dyn GridSampler>]
         Op::Torus { big, small } => shapes::torus(q, T::splat(*big), T::splat(*small)),
         Op::Triangle(t) => shapes::triangle(q, t),
         Op::Mesh { grid } => T::sample_grid(grids[*grid as usize].as_ref(), q.x, q.y, q.z),
-        // Never on a tape (`analytic`); NaN rather than a panic in the hot loop.
+        // Never on a tape (`tape_leaf`); NaN rather than a panic in the hot loop.
         Op::Union
         | Op::Intersection
         | Op::Subtraction
@@ -460,6 +467,12 @@ fn value<T: Lane<S = f32>>(leaf: &Leaf, p: V3<T>, grids: &[Box<dyn GridSampler>]
 /// [`Tape::recedes`] for one leaf, `q` and `dq` in the leaf's parent frame (`inv` the
 /// reciprocals of `dq`'s components).
 fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
+    // A mesh grid's zero set keeps to its mesh's box only while the leaf's bound keeps the
+    // value outside the box at least the box distance; unbounded (`Field::without_bounds`),
+    // quantisation or an open mesh's sign can put it a little outside.
+    if matches!(l.op, Op::Mesh { .. }) && l.bound.is_none() {
+        return false;
+    }
     let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
     // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
     // point is inside where the direction is not the outward one).

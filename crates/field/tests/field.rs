@@ -647,34 +647,50 @@ fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
             mesh_grid: grid,
             ..FieldOptions::default()
         };
-        let f = Field::compile_node(&n, DAffine3::IDENTITY, &opts).expect("compiles");
-        let (lo, hi) = f.bounds().expect("a mesh is bounded");
-        let mut rng = 11u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (rng >> 11) as f64 / (1u64 << 53) as f64
-        };
-        for _ in 0..40 {
-            // Points from half a box beyond each side to half a box beyond the other.
-            let pts: [Vec3; 8] = std::array::from_fn(|_| {
-                let u = DVec3::new(next(), next(), next()) * 2.0 - 0.5;
-                (lo + (hi - lo) * u).as_vec3()
-            });
-            let lanes = f.distance_x8(pts);
-            for (i, p) in pts.iter().enumerate() {
-                let d32 = f.distance(*p);
-                assert_eq!(
-                    lanes[i].to_bits(),
-                    d32.to_bits(),
-                    "{grid:?} lane {i} at {p}"
-                );
-                let d64 = f.distance_f64(p.as_dvec3());
-                assert!(
-                    (d64 - d32 as f64).abs() <= 1e-5 * d64.abs().max(1.0),
-                    "{grid:?} at {p}: f32 {d32} vs f64 {d64}"
-                );
+        // The mesh alone runs on a tape; carved by a sphere (CSG) on the interpreter.
+        let carved = node(
+            NodeKind::Subtraction(vec![
+                n.clone(),
+                node(
+                    NodeKind::Sphere { radius: 0.2 },
+                    DAffine3::from_translation(DVec3::new(0.3, 0.0, 1.0)),
+                    1,
+                ),
+            ]),
+            DAffine3::IDENTITY,
+            0,
+        );
+        for (which, tree) in [("mesh", &n), ("carved mesh", &carved)] {
+            let f = Field::compile_node(tree, DAffine3::IDENTITY, &opts).expect("compiles");
+            assert_eq!(f.has_tape(), which == "mesh");
+            let (lo, hi) = f.bounds().expect("a mesh is bounded");
+            let mut rng = 11u64;
+            let mut next = || {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (rng >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for _ in 0..40 {
+                // Points from half a box beyond each side to half a box beyond the other.
+                let pts: [Vec3; 8] = std::array::from_fn(|_| {
+                    let u = DVec3::new(next(), next(), next()) * 2.0 - 0.5;
+                    (lo + (hi - lo) * u).as_vec3()
+                });
+                let lanes = f.distance_x8(pts);
+                for (i, p) in pts.iter().enumerate() {
+                    let d32 = f.distance(*p);
+                    assert_eq!(
+                        lanes[i].to_bits(),
+                        d32.to_bits(),
+                        "{grid:?} lane {i} at {p}"
+                    );
+                    let d64 = f.distance_f64(p.as_dvec3());
+                    assert!(
+                        (d64 - d32 as f64).abs() <= 1e-5 * d64.abs().max(1.0),
+                        "{which} {grid:?} at {p}: f32 {d32} vs f64 {d64}"
+                    );
+                }
             }
         }
     }

@@ -343,7 +343,8 @@ fn unions_with_mesh_grids_get_a_tape_bit_for_bit_the_interpreter() {
                 let q = pts[i];
                 q - Vec3::Y * f.distance(q).max(0.0) * if i % 2 == 0 { 1.0 } else { 0.0 }
             });
-            let g = f.nearest_gradients_x8(on).expect("a tape");
+            // `None` only when every lane is nearest the grid.
+            let g = f.nearest_gradients_x8(on).unwrap_or([Vec3::NAN; 8]);
             for i in 0..8 {
                 let one = f.nearest_gradient(on[i]).expect("a tape");
                 assert_eq!(
