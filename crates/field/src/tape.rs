@@ -119,9 +119,9 @@ impl Tape {
     /// -> 853M); 16 recovered only 5% at 10000 spheres and 128 changed nothing.
     pub const MAX_LEAVES: usize = 64;
 
-    /// The tape of `prog` when it is one leaf (an analytic shape or a mesh grid) or a union (not a nested one)
-    /// of at most [`Tape::MAX_LEAVES`] such leaves; `None` otherwise (the interpreter serves
-    /// it).
+    /// The tape of `prog` when it is one leaf (an analytic shape or a mesh grid) or a union
+    /// (not a nested one) of at most [`Tape::MAX_LEAVES`] such leaves; `None` otherwise (the
+    /// interpreter serves it).
     pub fn of(prog: &Program<f32>) -> Option<Tape> {
         let mut t = Tape::default();
         t.rebuild(prog).then_some(t)
