@@ -36,13 +36,14 @@ fn primary_rays(scene: &Scene) -> Vec<Ray> {
     let mut rays = Vec::with_capacity((c.width * c.height) as usize);
     for y in 0..c.height {
         for x in 0..c.width {
-            let d = c.direction(x as f64 + 0.5, y as f64 + 0.5);
-            rays.push(Ray {
-                origin: Vec3::ZERO,
-                dir: d.as_vec3().normalize(),
-                t_min: 0.0,
-                t_max: scene.render.max_distance as f32,
-            });
+            // The integrator's camera rays (pixel centres), bit for bit.
+            rays.push(marchmesh_core::camera::primary_ray(
+                c,
+                x,
+                y,
+                glam::DVec2::splat(0.5),
+                scene.render.max_distance,
+            ));
         }
     }
     rays
