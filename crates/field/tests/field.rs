@@ -25,6 +25,18 @@ fn at(kind: NodeKind, t: DVec3) -> Node {
     node(kind, DAffine3::from_translation(t), 0)
 }
 
+/// A deterministic uniform sequence in [0, 1) (a 64-bit LCG, Knuth's MMIX constants) for
+/// test points.
+fn uniform(seed: u64) -> impl FnMut() -> f64 {
+    let mut rng = seed;
+    move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
 fn field(n: &Node) -> Field {
     Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default()).expect("compiles")
 }
@@ -423,13 +435,8 @@ fn repetition_is_exact_below_the_window_and_continuous_at_borders() {
                 .filter(|v| *v > 0.0)
                 .fold(f64::INFINITY, f64::min),
         ) * 0.5;
-        let mut rng = 12345u64;
-        let mut next = || {
-            rng = rng
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((rng >> 11) as f64 / (1u64 << 53) as f64) * 12.0 - 6.0
-        };
+        let mut unit = uniform(12345);
+        let mut next = || unit() * 12.0 - 6.0;
         for _ in 0..2000 {
             let p = DVec3::new(next(), next() * 0.5, next());
             let d = f.distance_f64(p);
@@ -586,13 +593,7 @@ fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
         .map(|t| t.map(|i| xf.transform_point3(mesh.positions[i as usize].as_dvec3())))
         .collect();
     let (wlo, whi) = f.bounds().expect("a mesh is bounded");
-    let mut rng = 7u64;
-    let mut next = || {
-        rng = rng
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = uniform(7);
     for _ in 0..150 {
         // Points inside the mesh's own box (inside the grid), mapped to the frame.
         let local = lo.as_dvec3() + (hi - lo).as_dvec3() * DVec3::new(next(), next(), next());
@@ -664,13 +665,7 @@ fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
             let f = Field::compile_node(tree, DAffine3::IDENTITY, &opts).expect("compiles");
             assert_eq!(f.has_tape(), which == "mesh");
             let (lo, hi) = f.bounds().expect("a mesh is bounded");
-            let mut rng = 11u64;
-            let mut next = || {
-                rng = rng
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                (rng >> 11) as f64 / (1u64 << 53) as f64
-            };
+            let mut next = uniform(11);
             for _ in 0..40 {
                 // Points from half a box beyond each side to half a box beyond the other.
                 let pts: [Vec3; 8] = std::array::from_fn(|_| {
@@ -698,13 +693,7 @@ fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
 
 #[test]
 fn large_unions_are_grouped_without_changing_values() {
-    let mut rng = 99u64;
-    let mut next = || {
-        rng = rng
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (rng >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut next = uniform(99);
     let mut spheres = Vec::new();
     let mut children = vec![node(
         NodeKind::Plane {
