@@ -167,13 +167,19 @@ impl<'a> PrimarySamples<'a> {
 /// formulas of [`ImagePlane::direction`] with each column's and each row's term computed
 /// once per tile instead of once per pixel (same operations in the same order, so the same
 /// rounding; a test compares every pixel).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub(crate) struct TileRays {
     plane: ImagePlane,
     t_max: f32,
     /// The CPU has AVX (detected once): [`TileRays::push`] takes its AVX build.
     #[cfg(target_arch = "x86_64")]
     avx: bool,
+    /// Column terms ([`ImagePlane::column`]) of every image column at sample 0's offset
+    /// (the pixel centre, every pixel's first sample), as structure of arrays: each holds a
+    /// division, and every tile of a column needs them again.
+    centre_columns: [Vec<f64>; 3],
+    /// Row terms ([`ImagePlane::row_offset`]) of every image row at sample 0's offset.
+    centre_rows: Vec<DVec3>,
 }
 
 /// Widest tile [`TileRays::push`] accepts.
@@ -182,11 +188,72 @@ pub(crate) const MAX_TILE_WIDTH: usize = 64;
 impl TileRays {
     /// The camera's rays, ending at `t_max` (the scene's maximum distance).
     pub(crate) fn new(camera: &Camera, t_max: f64) -> Self {
+        let plane = camera.image_plane();
+        let centre = sample_offset(0);
+        // Padded to a whole group of 4 columns (see `column_terms`).
+        let columns: Vec<DVec3> = (0..camera.width.next_multiple_of(4))
+            .map(|c| match c < camera.width {
+                true => plane.column(c as f64 + centre.x),
+                false => DVec3::X,
+            })
+            .collect();
         Self {
-            plane: camera.image_plane(),
+            plane,
             t_max: t_max as f32,
             #[cfg(target_arch = "x86_64")]
             avx: std::arch::is_x86_feature_detected!("avx"),
+            centre_columns: [
+                columns.iter().map(|c| c.x).collect(),
+                columns.iter().map(|c| c.y).collect(),
+                columns.iter().map(|c| c.z).collect(),
+            ],
+            centre_rows: (0..camera.height)
+                .map(|r| plane.row_offset(r as f64 + centre.y))
+                .collect(),
+        }
+    }
+
+    /// Calls `with` with the column terms of `tile`'s columns at sub-pixel `offset` as
+    /// structure of arrays `(x, y, z)`, each padded to a whole group of 4 with the
+    /// forward-looking (finite, non-zero) direction so padding lanes stay harmless: slices
+    /// of the table at sample 0's offset, else computed. `tile.width` must not exceed
+    /// [`MAX_TILE_WIDTH`].
+    #[inline(always)]
+    fn with_column_terms<R>(
+        &self,
+        tile: Tile,
+        offset: DVec2,
+        with: impl FnOnce([&[f64]; 3]) -> R,
+    ) -> R {
+        let (x0, tw) = (tile.x as usize, (tile.width as usize).min(MAX_TILE_WIDTH));
+        let padded = tw.next_multiple_of(4);
+        let [tx, ty, tz] = &self.centre_columns;
+        if offset == sample_offset(0) && x0 + padded <= tx.len() {
+            return with([
+                &tx[x0..x0 + padded],
+                &ty[x0..x0 + padded],
+                &tz[x0..x0 + padded],
+            ]);
+        }
+        let [mut cx, mut cy, mut cz] = [[0.0; MAX_TILE_WIDTH]; 3];
+        for k in 0..padded {
+            let c = if k < tw {
+                self.plane.column((tile.x + k as u32) as f64 + offset.x)
+            } else {
+                DVec3::X
+            };
+            (cx[k], cy[k], cz[k]) = (c.x, c.y, c.z);
+        }
+        with([&cx[..padded], &cy[..padded], &cz[..padded]])
+    }
+
+    /// The row term of image row `row` at sub-pixel `offset`: from the table at sample 0's
+    /// offset, else computed.
+    #[inline(always)]
+    fn row_term(&self, row: u32, offset: DVec2) -> DVec3 {
+        match self.centre_rows.get(row as usize) {
+            Some(&up) if offset == sample_offset(0) => up,
+            _ => self.plane.row_offset(row as f64 + offset.y),
         }
     }
 
@@ -229,76 +296,69 @@ impl TileRays {
     fn push_avx(&self, tile: Tile, offset: DVec2, out: &mut Vec<Ray>) {
         use std::arch::x86_64::*;
         let tw = (tile.width as usize).min(MAX_TILE_WIDTH);
-        // Column terms as structure of arrays, padded to whole groups of 4 with the
-        // forward-looking (finite, non-zero) direction so padding lanes stay harmless.
-        let (mut cx, mut cy, mut cz) = (
-            [1.0f64; MAX_TILE_WIDTH],
-            [0.0f64; MAX_TILE_WIDTH],
-            [0.0f64; MAX_TILE_WIDTH],
-        );
-        for k in 0..tw {
-            let c = self.plane.column((tile.x + k as u32) as f64 + offset.x);
-            (cx[k], cy[k], cz[k]) = (c.x, c.y, c.z);
-        }
-        out.reserve(tw * tile.height as usize);
-        let one_d = _mm256_set1_pd(1.0);
-        for row in tile.y..tile.y + tile.height {
-            let up = self.plane.row_offset(row as f64 + offset.y);
-            let (ux, uy, uz) = (
-                _mm256_set1_pd(up.x),
-                _mm256_set1_pd(up.y),
-                _mm256_set1_pd(up.z),
-            );
-            for k in (0..tw).step_by(4) {
-                // SAFETY: each slice `[k..k + 4]` is bounds-checked (4 f64, what the load
-                // reads; `MAX_TILE_WIDTH` is a multiple of 4).
-                let (x, y, z) = unsafe {
-                    (
-                        _mm256_add_pd(_mm256_loadu_pd(cx[k..k + 4].as_ptr()), ux),
-                        _mm256_add_pd(_mm256_loadu_pd(cy[k..k + 4].as_ptr()), uy),
-                        _mm256_add_pd(_mm256_loadu_pd(cz[k..k + 4].as_ptr()), uz),
-                    )
-                };
-                let dot = _mm256_add_pd(
-                    _mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)),
-                    _mm256_mul_pd(z, z),
+        self.with_column_terms(tile, offset, |[cx, cy, cz]| {
+            out.reserve(tw * tile.height as usize);
+            let one_d = _mm256_set1_pd(1.0);
+            for row in tile.y..tile.y + tile.height {
+                let up = self.row_term(row, offset);
+                let (ux, uy, uz) = (
+                    _mm256_set1_pd(up.x),
+                    _mm256_set1_pd(up.y),
+                    _mm256_set1_pd(up.z),
                 );
-                let r = _mm256_div_pd(one_d, _mm256_sqrt_pd(dot));
-                let (mut dx, mut dy, mut dz) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
-                // SAFETY: each store writes 4 f32 into a `[f32; 4]`.
-                unsafe {
-                    _mm_storeu_ps(dx.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(x, r)));
-                    _mm_storeu_ps(dy.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(y, r)));
-                    _mm_storeu_ps(dz.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(z, r)));
+                for k in (0..tw).step_by(4) {
+                    // SAFETY: each slice `[k..k + 4]` is bounds-checked (4 f64, what the load
+                    // reads; the terms are padded to whole groups of 4).
+                    let (x, y, z) = unsafe {
+                        (
+                            _mm256_add_pd(_mm256_loadu_pd(cx[k..k + 4].as_ptr()), ux),
+                            _mm256_add_pd(_mm256_loadu_pd(cy[k..k + 4].as_ptr()), uy),
+                            _mm256_add_pd(_mm256_loadu_pd(cz[k..k + 4].as_ptr()), uz),
+                        )
+                    };
+                    let dot = _mm256_add_pd(
+                        _mm256_add_pd(_mm256_mul_pd(x, x), _mm256_mul_pd(y, y)),
+                        _mm256_mul_pd(z, z),
+                    );
+                    let r = _mm256_div_pd(one_d, _mm256_sqrt_pd(dot));
+                    let (mut dx, mut dy, mut dz) = ([0.0f32; 4], [0.0f32; 4], [0.0f32; 4]);
+                    // SAFETY: each store writes 4 f32 into a `[f32; 4]`.
+                    unsafe {
+                        _mm_storeu_ps(dx.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(x, r)));
+                        _mm_storeu_ps(dy.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(y, r)));
+                        _mm_storeu_ps(dz.as_mut_ptr(), _mm256_cvtpd_ps(_mm256_mul_pd(z, r)));
+                    }
+                    // Written into the reserved capacity: no capacity check per ray.
+                    let lanes = (tw - k).min(4);
+                    let len = out.len();
+                    for (i, slot) in out.spare_capacity_mut()[..lanes].iter_mut().enumerate() {
+                        slot.write(Ray {
+                            origin: glam::Vec3::ZERO,
+                            dir: glam::Vec3::new(dx[i], dy[i], dz[i]),
+                            t_min: 0.0,
+                            t_max: self.t_max,
+                        });
+                    }
+                    // SAFETY: the `lanes` slots after `len` were just initialised (the slice
+                    // index above checked they are within the capacity).
+                    unsafe { out.set_len(len + lanes) };
                 }
-                // Written into the reserved capacity: no capacity check per ray.
-                let lanes = (tw - k).min(4);
-                let len = out.len();
-                for (i, slot) in out.spare_capacity_mut()[..lanes].iter_mut().enumerate() {
-                    slot.write(Ray {
-                        origin: glam::Vec3::ZERO,
-                        dir: glam::Vec3::new(dx[i], dy[i], dz[i]),
-                        t_min: 0.0,
-                        t_max: self.t_max,
-                    });
-                }
-                // SAFETY: the `lanes` slots after `len` were just initialised (the slice
-                // index above checked they are within the capacity).
-                unsafe { out.set_len(len + lanes) };
             }
-        }
+        })
     }
 
     #[inline(always)]
     fn push_portable(&self, tile: Tile, offset: DVec2, out: &mut Vec<Ray>) {
         let tw = (tile.width as usize).min(MAX_TILE_WIDTH);
         let mut columns = [DVec3::ZERO; MAX_TILE_WIDTH];
-        for (k, c) in columns[..tw].iter_mut().enumerate() {
-            *c = self.plane.column((tile.x + k as u32) as f64 + offset.x);
-        }
+        self.with_column_terms(tile, offset, |[cx, cy, cz]| {
+            for (k, c) in columns[..tw].iter_mut().enumerate() {
+                *c = DVec3::new(cx[k], cy[k], cz[k]);
+            }
+        });
         out.reserve(tw * tile.height as usize);
         for row in tile.y..tile.y + tile.height {
-            let up = self.plane.row_offset(row as f64 + offset.y);
+            let up = self.row_term(row, offset);
             for chunk in columns[..tw].chunks(LANES) {
                 let d = directions(chunk, up);
                 out.extend((0..chunk.len()).map(|i| Ray {
@@ -448,18 +508,21 @@ mod tests {
             let detected = TileRays::new(&cam, 123.25);
             // Both builds where the CPU has AVX: the intrinsics and the portable code.
             #[allow(unused_mut)]
-            let mut grids = vec![detected];
+            let mut grids = vec![detected.clone()];
             #[cfg(target_arch = "x86_64")]
             grids.push(TileRays {
                 avx: false,
-                ..detected
+                ..detected.clone()
             });
             for (grid, s) in grids.iter().flat_map(|g| [0, 1, 5].map(|s| (g, s))) {
                 let off = sample_offset(s);
+                // Sample 0 reads the precomputed column and row terms; these tiles
+                // include a right-edge tile whose width is no multiple of 4.
                 for (x, y, w, h) in [
                     (0, 0, 8, 8),
                     (3, 2, 16, 4),
                     (0, 0, cam.width.min(MAX_TILE_WIDTH as u32), 1),
+                    (cam.width - 5, cam.height - 3, 5, 3),
                 ] {
                     let tile = Tile {
                         x,
