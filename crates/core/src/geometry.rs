@@ -289,6 +289,19 @@ pub trait Geometry: Send + Sync {
     /// Memory, build phases and counts of the built representation.
     fn report(&self) -> GeometryReport;
 
+    /// Columns of the screen tiles whose camera rays this geometry would take as one batch
+    /// (`TILE_HEIGHT` rows each); the integrators cap it ([`crate::tile_width`]) so a tile
+    /// holds at most `TILE_RAYS` camera rays. Wider tiles spread the integrator's fixed
+    /// cost per tile (camera terms, the clock reads around each batch query, the miss
+    /// pass's setup) over more rays, but a wavefront spread over more pixels also reads
+    /// more of the scene's data between a camera ray and its shadow rays. The default is
+    /// `TILE_WIDTH` (8); an implementation returns what measures best for it. Rays, results
+    /// and images do not depend on it except where a backend's results depend on its
+    /// batching.
+    fn tile_width(&self) -> u32 {
+        crate::TILE_WIDTH
+    }
+
     /// The one-query approximations this geometry answers (none by default).
     fn shortcuts(&self) -> Shortcuts {
         Shortcuts::default()

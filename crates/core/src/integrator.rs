@@ -1,6 +1,6 @@
 //! The Whitted-style integrator: Phong shading, hard shadows (soft for area lights), ambient
 //! occlusion, iterative mirror reflections and Halton anti-aliasing, traced as wavefronts per
-//! screen tile ([`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels) so backends get coherent rays in
+//! screen tile ([`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels, or wider: [`tile_width`]) so backends get coherent rays in
 //! batches. [`render`] runs the path tracer
 //! ([`crate::path`]) instead when the scene asks for it.
 //!
@@ -117,8 +117,22 @@ impl Default for RenderOutput {
     }
 }
 
-/// Columns of the screen tiles the integrators trace as one batch.
+/// Columns of the screen tiles the integrators trace as one batch, unless the geometry
+/// asks for wider ones ([`Geometry::tile_width`], see [`tile_width`]).
 pub const TILE_WIDTH: u32 = 8;
+
+/// Most camera rays (pixels times samples per pixel) of a tile widened beyond [`TILE_WIDTH`].
+pub const TILE_RAYS: u32 = 512;
+
+/// Columns of the screen tiles a render traces: the geometry's preference
+/// (`preferred`, [`Geometry::tile_width`]) as far as its camera rays stay within
+/// [`TILE_RAYS`] at `samples_per_pixel`, rounded down to a multiple of [`TILE_WIDTH`],
+/// and from [`TILE_WIDTH`] to 64 (the widest tile the camera builds rays for).
+pub fn tile_width(preferred: u32, samples_per_pixel: u32) -> u32 {
+    let fits = TILE_RAYS / (TILE_HEIGHT * samples_per_pixel.max(1));
+    (preferred.min(fits) / TILE_WIDTH * TILE_WIDTH)
+        .clamp(TILE_WIDTH, crate::camera::MAX_TILE_WIDTH as u32)
+}
 
 /// Rows of the screen tiles the integrators trace as one batch (and of the bands of rows
 /// handed to worker threads).
@@ -145,7 +159,7 @@ pub fn render(
 /// interactive views) then allocate nothing per render.
 ///
 /// The image is cut into bands of [`TILE_HEIGHT`] rows, one per worker task, and each band
-/// into tiles of at most [`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels; each tile's rays are
+/// into tiles of at most [`tile_width`] x [`TILE_HEIGHT`] pixels; each tile's rays are
 /// traced as wavefronts (camera rays, then shadow and other secondary rays, then
 /// reflections), so a backend gets coherent batches. Every pixel's result is independent of
 /// the batching and of the thread count.
@@ -376,13 +390,14 @@ impl<'a> Band<'a> {
         crate::stream::copy_streaming(self.work, &planes.work[..m]);
     }
 
-    /// The tiles of the band, left to right.
-    pub(crate) fn tiles(&self) -> impl Iterator<Item = Tile> + use<> {
+    /// The band's tiles of `tile_width` columns (the last may be narrower), left to right.
+    pub(crate) fn tiles(&self, tile_width: u32) -> impl Iterator<Item = Tile> + use<> {
         let (width, y, rows) = (self.width as u32, self.y, self.rows);
-        (0..width).step_by(TILE_WIDTH as usize).map(move |x| Tile {
+        let step = tile_width.max(1);
+        (0..width).step_by(step as usize).map(move |x| Tile {
             x,
             y,
-            width: TILE_WIDTH.min(width - x),
+            width: step.min(width - x),
             height: rows,
         })
     }
@@ -908,7 +923,7 @@ pub(crate) fn zero_sums(sum: &mut Vec<Vec3>, len: usize) {
 fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
     zero_sums(&mut s.sum, band.color_len());
-    for tile in band.tiles() {
+    for tile in band.tiles(tile_width(f.geometry.tile_width(), f.sh.spp)) {
         trace_tile(f, s, band, tile, &mut stats);
     }
     band.set_colors(&s.sum, f.sh.spp, &mut stats);

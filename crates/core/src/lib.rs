@@ -30,7 +30,7 @@ pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{
     DEFAULT_MEMORY_LIMIT_BYTES, MAX_THREADS, RenderError, RenderOptions, RenderOutput, TILE_HEIGHT,
-    TILE_WIDTH, render, render_into,
+    TILE_RAYS, TILE_WIDTH, render, render_into, tile_width,
 };
 pub use stats::{RayTypeRates, RayTypeTimes, RenderStats};
 pub use tolerance::{INVISIBLE_PSNR_DB, Measured, Tolerance};

@@ -328,9 +328,28 @@ fn render_refuses_buffers_over_the_memory_limit() {
 struct PrimaryOrderProbe {
     batches: std::sync::atomic::AtomicUsize,
     rays: std::sync::atomic::AtomicUsize,
+    /// What `Geometry::tile_width` answers.
+    tile_width: u32,
+    /// Width of the widest tile a camera batch came from.
+    widest: std::sync::atomic::AtomicU32,
+}
+
+impl PrimaryOrderProbe {
+    fn new(tile_width: u32) -> Self {
+        Self {
+            batches: 0.into(),
+            rays: 0.into(),
+            tile_width,
+            widest: 0.into(),
+        }
+    }
 }
 
 impl Geometry for PrimaryOrderProbe {
+    fn tile_width(&self) -> u32 {
+        self.tile_width
+    }
+
     fn closest_hit(&self, _ray: &Ray) -> TraceResult {
         TraceResult::default()
     }
@@ -358,6 +377,10 @@ impl Geometry for PrimaryOrderProbe {
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         self.rays
             .fetch_add(rays.len(), std::sync::atomic::Ordering::Relaxed);
+        self.widest.fetch_max(
+            samples.tile_bounds().width,
+            std::sync::atomic::Ordering::Relaxed,
+        );
         self.closest_hits(rays, out);
     }
 
@@ -375,10 +398,7 @@ fn primary_batches_carry_their_exact_camera_samples_in_order() {
         std::path::Path::new("."),
     )
     .unwrap();
-    let probe = PrimaryOrderProbe {
-        batches: 0.into(),
-        rays: 0.into(),
-    };
+    let probe = PrimaryOrderProbe::new(marchmesh_core::TILE_WIDTH);
     let bg = BackgroundSampler::load(&scene.background).unwrap();
     let opts = RenderOptions {
         threads: 1,
@@ -392,6 +412,43 @@ fn primary_batches_carry_their_exact_camera_samples_in_order() {
             * 7usize.div_ceil(marchmesh_core::TILE_HEIGHT as usize)
     );
     assert_eq!(probe.rays.into_inner(), 13 * 7 * 3);
+}
+
+#[test]
+fn tile_width_follows_the_geometry_up_to_the_ray_cap() {
+    use marchmesh_core::tile_width;
+    // Multiples of 8, from 8 to 64, at most TILE_RAYS (512) camera rays a tile of 8 rows.
+    assert_eq!(tile_width(64, 1), 64);
+    assert_eq!(tile_width(1000, 1), 64);
+    assert_eq!(tile_width(20, 1), 16);
+    assert_eq!(tile_width(0, 1), 8);
+    assert_eq!(tile_width(64, 2), 32);
+    assert_eq!(tile_width(64, 3), 16);
+    assert_eq!(tile_width(64, 16), 8);
+    assert_eq!(tile_width(64, 0), 64);
+    // Rendered: 70x9 pixels are two bands (8 rows and 1); a geometry asking for 64 columns
+    // gets a 64-wide and a 6-wide tile per band at one sample, 16-wide tiles at three.
+    for (spp, width, tiles_per_band) in [(1, 64, 2), (3, 16, 5)] {
+        let scene = parse_scene(
+            &format!(
+                r#"{{"camera": {{"position": [3, 1, -2], "look_at": [0, 0.5, 1], "vfov_deg": 50, "width": 70, "height": 9}},
+                "objects": [{{"shape": {{"sphere": {{}}}}}}], "render": {{"samples_per_pixel": {spp}}}}}"#
+            ),
+            "<test>",
+            std::path::Path::new("."),
+        )
+        .unwrap();
+        let probe = PrimaryOrderProbe::new(64);
+        let bg = BackgroundSampler::load(&scene.background).unwrap();
+        let opts = RenderOptions {
+            threads: 1,
+            ..Default::default()
+        };
+        render(&scene, &probe, &bg, &opts, &|| {}).unwrap();
+        assert_eq!(probe.batches.into_inner(), 2 * tiles_per_band, "{spp} spp");
+        assert_eq!(probe.widest.into_inner(), width, "{spp} spp");
+        assert_eq!(probe.rays.into_inner(), 70 * 9 * spp as usize);
+    }
 }
 
 /// Misses everything after busy-waiting `per_batch` (by `Instant`) in each closest-hit
