@@ -1017,9 +1017,10 @@ pub(crate) struct Plain {
 }
 
 /// Eight rays marched in lockstep, structure of arrays. The common case, a step of plain
-/// (relaxed) marching that enters no shell, undoes no relaxed step, leaves no range and
-/// exhausts no budget (or a ray's first sample that is such a step into `March`), runs on all
-/// lanes at once in [`Lanes8::step`] with exactly the
+/// (relaxed) marching that enters no shell, leaves no range and exhausts no budget (or a
+/// ray's first sample that is such a step into `March`), and the undoing of a relaxed step
+/// whose sphere does not cover the gap, runs on all lanes at once in [`Lanes8::step`] with
+/// exactly the
 /// arithmetic of [`March::feed`]'s `March` phase in 8-lane vector operations (so results
 /// are bit for bit those of single rays); a lane that needs any other decision, or is in
 /// another phase, is handed to its scalar [`March`] for that step.
@@ -1188,16 +1189,29 @@ impl Lanes8 {
         let plain = M8(std::array::from_fn(|k| {
             (ok.0[k] & !undo.0[k]) | started.0[k]
         }));
+        // The overlap fallback (`March::feed_with`'s first test in `March`, before the shell,
+        // segment and receding tests): back to the plain step from the previous sample,
+        // relaxation off, then `budget`: the lane stays fast unless that ends the ray.
+        let back = self.t_prev + self.r_prev;
+        let in_budget = M8(std::array::from_fn(|k| {
+            mask(self.evals[k] + 1 < p.max_steps)
+        }));
+        let undone = F32x8::and(
+            F32x8::and(self.fast, undo),
+            F32x8::and(in_budget, F32x8::le(back, self.t_end)),
+        );
         self.fast = F32x8::or(self.fast, started);
         self.start = M8(std::array::from_fn(|k| self.start.0[k] & !started.0[k]));
         let stepped = (t + s * self.omega).min(self.t_end);
         self.t_prev = F32x8::select(plain, t, self.t_prev);
         self.r_prev = F32x8::select(plain, s, self.r_prev);
-        self.t = F32x8::select(plain, stepped, t);
+        self.t = F32x8::select(plain, stepped, F32x8::select(undone, back, t));
+        self.omega = F32x8::select(undone, c(1.0), self.omega);
         let mut slow = 0u8;
         for k in 0..8 {
-            self.evals[k] += plain.0[k] & 1;
-            slow |= u8::from(plain.0[k] == 0) << k;
+            let moved = plain.0[k] | undone.0[k];
+            self.evals[k] += moved & 1;
+            slow |= u8::from(moved == 0) << k;
         }
         slow
     }
