@@ -1115,8 +1115,9 @@ impl Lanes8 {
                 evals: self.evals[k],
             });
         } else if self.fine.0[k] != 0 {
-            // What `March::enter_shell` leaves when it predicts (see `Lanes8::step`).
-            debug_assert!(m.phase == Phase::March);
+            // What `March::enter_shell` leaves when it predicts (see `Lanes8::step`). A ray
+            // whose first sample the lanes took still says `Start` here (as for `set_plain`).
+            debug_assert!(matches!(m.phase, Phase::March | Phase::Start));
             let (ta, sa) = (self.t_prev.0[k], self.r_prev.0[k]);
             m.t = self.t.0[k];
             m.t_prev = ta;
