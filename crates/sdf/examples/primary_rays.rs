@@ -7,9 +7,10 @@
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
 //! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false]
-//! [beams=true|false] [recede=true|false] [versus=KEY=VALUE]`
+//! [beams=true|false] [recede=true|false] [relaxation=OMEGA] [versus=KEY=VALUE]`
 //!
-//! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`) builds a second geometry with that option
+//! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`,
+//! `relaxation=1.5`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.
@@ -52,6 +53,10 @@ fn run() -> Result<(), String> {
     let segment = flag(kv("segment"));
     let beams = flag(kv("beams"));
     let recede = flag(kv("recede"));
+    let relaxation = match kv("relaxation") {
+        None => SdfOptions::DEFAULT.relaxation,
+        Some(v) => v.parse().map_err(|e| format!("relaxation: {e}"))?,
+    };
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -65,6 +70,7 @@ fn run() -> Result<(), String> {
         segment,
         beams,
         recede,
+        relaxation,
         ..SdfOptions::DEFAULT
     };
     let g = build(&scene, &options).map_err(|e| e.to_string())?;
@@ -83,9 +89,14 @@ fn run() -> Result<(), String> {
                 "beams=true" => other.beams = true,
                 "recede=false" => other.recede = false,
                 "recede=true" => other.recede = true,
+                _ if spec.starts_with("relaxation=") => {
+                    other.relaxation = spec["relaxation=".len()..]
+                        .parse()
+                        .map_err(|e| format!("versus: {spec}: {e}"))?;
+                }
                 _ => {
                     return Err(format!(
-                        "versus: {spec}: expected cull=, lockstep=, segment=, beams= or recede=BOOL"
+                        "versus: {spec}: expected cull=, lockstep=, segment=, beams= or recede=BOOL, or relaxation=OMEGA"
                     ));
                 }
             }

@@ -1017,9 +1017,10 @@ pub(crate) struct Plain {
 }
 
 /// Eight rays marched in lockstep, structure of arrays. The common case, a step of plain
-/// (relaxed) marching that enters no shell, undoes no relaxed step, leaves no range and
-/// exhausts no budget (or a ray's first sample that is such a step into `March`), runs on all
-/// lanes at once in [`Lanes8::step`] with exactly the
+/// (relaxed) marching that enters no shell, leaves no range and exhausts no budget (or a
+/// ray's first sample that is such a step into `March`), and the undoing of a relaxed step
+/// whose sphere does not cover the gap, runs on all lanes at once in [`Lanes8::step`] with
+/// exactly the
 /// arithmetic of [`March::feed`]'s `March` phase in 8-lane vector operations (so results
 /// are bit for bit those of single rays); a lane that needs any other decision, or is in
 /// another phase, is handed to its scalar [`March`] for that step.
@@ -1041,6 +1042,14 @@ pub(crate) struct Lanes8 {
     /// Lane holds a ray in the `Start` phase whose state lives here (all ones): its first
     /// sample, when it is a plain step into `March`, is taken here too.
     start: M8,
+    /// Lane holds a ray that entered the shell approaching the surface in [`Lanes8::step`]
+    /// and waits for its secant prediction's sample at `t` (all ones): its `March` is in
+    /// `Fine { ta: t_prev, sa: r_prev, trial: true, left: FINE_BUDGET - 1 }`, its shell
+    /// visit began at `(t_prev, r_prev)` with approach slope `shell_k`, once
+    /// [`Lanes8::store`] has written that back.
+    fine: M8,
+    /// Per lane the approach slope of a `fine` lane's shell entry.
+    shell_k: F32x8,
     /// Per lane the segment its ray's next sample wants ([`March::segment_len`]; 0 when
     /// the ray is not segment tracing).
     seg_len: F32x8,
@@ -1069,6 +1078,7 @@ impl Lanes8 {
         let (plain, start) = (m.plain(), m.start());
         self.fast.0[k] = if plain.is_some() { !0 } else { 0 };
         self.start.0[k] = if start.is_some() { !0 } else { 0 };
+        self.fine.0[k] = 0;
         if let Some(s) = plain.or(start) {
             self.t_prev.0[k] = s.t_prev;
             self.r_prev.0[k] = s.r_prev;
@@ -1087,6 +1097,7 @@ impl Lanes8 {
             None => {
                 self.fast.0[k] = 0;
                 self.start.0[k] = 0;
+                self.fine.0[k] = 0;
                 self.segmenting &= !(1 << k);
             }
         }
@@ -1103,6 +1114,25 @@ impl Lanes8 {
                 omega: self.omega.0[k],
                 evals: self.evals[k],
             });
+        } else if self.fine.0[k] != 0 {
+            // What `March::enter_shell` leaves when it predicts (see `Lanes8::step`). A ray
+            // whose first sample the lanes took still says `Start` here (as for `set_plain`).
+            debug_assert!(matches!(m.phase, Phase::March | Phase::Start));
+            let (ta, sa) = (self.t_prev.0[k], self.r_prev.0[k]);
+            m.t = self.t.0[k];
+            m.t_prev = ta;
+            m.r_prev = sa;
+            m.omega = self.omega.0[k];
+            m.evals = self.evals[k];
+            m.shell_t = ta;
+            m.shell_s = sa;
+            m.shell_k = self.shell_k.0[k];
+            m.phase = Phase::Fine {
+                ta,
+                sa,
+                trial: true,
+                left: FINE_BUDGET - 1,
+            };
         }
     }
 
@@ -1188,16 +1218,48 @@ impl Lanes8 {
         let plain = M8(std::array::from_fn(|k| {
             (ok.0[k] & !undo.0[k]) | started.0[k]
         }));
-        self.fast = F32x8::or(self.fast, started);
+        // The overlap fallback (`March::feed_with`'s first test in `March`, before the shell,
+        // segment and receding tests): back to the plain step from the previous sample,
+        // relaxation off, then `budget`: the lane stays fast unless that ends the ray.
+        let back = self.t_prev + self.r_prev;
+        let in_budget = M8(std::array::from_fn(|k| {
+            mask(self.evals[k] + 1 < p.max_steps)
+        }));
+        let undone = F32x8::and(
+            F32x8::and(self.fast, undo),
+            F32x8::and(in_budget, F32x8::le(back, self.t_end)),
+        );
+        // Entering the shell (`thr < s < eps`, no undo) while approaching the surface:
+        // `March::enter_shell` then `fine` and `fine_clear` jump to the secant prediction
+        // (the visit's approach slope is that secant's slope), unless it is out of budget.
+        // Crossings, hits and other shell entries stay scalar.
+        let slope = (self.r_prev - s) / (t - self.t_prev);
+        let approach = F32x8::and(
+            F32x8::and(F32x8::lt(thr, s), F32x8::lt(s, eps)),
+            F32x8::and(F32x8::lt(self.t_prev, t), F32x8::lt(c(0.01), slope)),
+        );
+        let entered = M8(std::array::from_fn(|k| {
+            self.fast.0[k] & !undo.0[k] & approach.0[k] & in_budget.0[k]
+        }));
+        let predicted = (t + s / slope).min(self.t_end);
+        self.fast = M8(std::array::from_fn(|k| {
+            (self.fast.0[k] | started.0[k]) & !entered.0[k]
+        }));
         self.start = M8(std::array::from_fn(|k| self.start.0[k] & !started.0[k]));
+        self.fine = F32x8::or(self.fine, entered);
+        self.shell_k = F32x8::select(entered, slope, self.shell_k);
         let stepped = (t + s * self.omega).min(self.t_end);
-        self.t_prev = F32x8::select(plain, t, self.t_prev);
-        self.r_prev = F32x8::select(plain, s, self.r_prev);
-        self.t = F32x8::select(plain, stepped, t);
+        let accepted = F32x8::or(plain, entered);
+        self.t_prev = F32x8::select(accepted, t, self.t_prev);
+        self.r_prev = F32x8::select(accepted, s, self.r_prev);
+        let moved_t = F32x8::select(entered, predicted, F32x8::select(undone, back, t));
+        self.t = F32x8::select(plain, stepped, moved_t);
+        self.omega = F32x8::select(undone, c(1.0), self.omega);
         let mut slow = 0u8;
         for k in 0..8 {
-            self.evals[k] += plain.0[k] & 1;
-            slow |= u8::from(plain.0[k] == 0) << k;
+            let moved = plain.0[k] | undone.0[k] | entered.0[k];
+            self.evals[k] += moved & 1;
+            slow |= u8::from(moved == 0) << k;
         }
         slow
     }
