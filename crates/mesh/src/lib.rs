@@ -1166,9 +1166,9 @@ impl MeshGeometry {
 impl Geometry for MeshGeometry {
     /// 64 columns: the same packets (8 consecutive pixels of a tile row start at multiples
     /// of 8 either way) with an eighth of the integrator's fixed cost per tile. Measured
-    /// (`harness_overhead`, bunny 500x500, 1 thread, alternating processes, load 2-3): the
-    /// stub render 0.77x its time at 8 columns, the bunny render 0.98-0.99x; CLI renders
-    /// at 320x240, 10 alternating rounds: bunny 1.00x, dragon_res3 0.98x.
+    /// against 8 columns (1 thread, alternating processes, load 1.3-2.5):
+    /// `harness_overhead`'s stub render 0.86x (0.90 against 1.05 ms), the bunny render
+    /// 1.00x; the full dragon at 640x480 1.00x; images byte-identical.
     fn tile_width(&self) -> u32 {
         64
     }
