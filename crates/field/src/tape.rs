@@ -15,7 +15,7 @@
 
 use glam::Vec3;
 
-use crate::dual::Dual1;
+use crate::dual::{Dual1, Dual8};
 use crate::lane::{F32x8, Lane, V3};
 use crate::program::segment::{bounded_step, fallback, leaf_lambda, leaf_step};
 use crate::program::{Affine, GridSampler, Instr, Op, Program};
@@ -314,7 +314,9 @@ impl Tape {
 
     /// Per lane, the analytic gradient of the leaf nearest to the point: the leaf whose value
     /// the union's running minimum takes last (as [`Tape::eval`] picks materials), then
-    /// that leaf's distance alone differentiated in [`Dual1`] through the root's frame.
+    /// that leaf's distance alone differentiated through the root's frame ([`Dual8`] once
+    /// for all lanes nearest one leaf when they are two or more, [`Dual1`] otherwise: the
+    /// same bits either way).
     /// This is the gradient of the surface a hit lies on, at the cost of one 8-lane
     /// evaluation and one leaf per lane, where a [`crate::dual::Dual8`] evaluation of a
     /// long tape differentiates every leaf. It ignores the bounds (a point outside the
@@ -327,9 +329,35 @@ impl Tape {
         } else {
             self.nearest::<F32x8, _>(p, NoGrids)
         };
-        std::array::from_fn(|k| {
-            self.leaf_gradient(nearest[k], Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k]))
-        })
+        // Each leaf nearest to two lanes or more is differentiated once in all eight
+        // lanes ([`Dual8`]: per lane [`Dual1`]'s operations, so the same bits as
+        // [`Tape::leaf_gradient`]); the 8 hits of a batch mostly lie on one or two
+        // surfaces. A leaf nearest to one lane alone takes the scalar [`Dual1`].
+        let mut out = [Vec3::ZERO; 8];
+        let mut todo: u32 = 0xff;
+        while todo != 0 {
+            let first = todo.trailing_zeros() as usize;
+            let k = nearest[first];
+            let mut lanes = 0u32;
+            for (i, &n) in nearest.iter().enumerate() {
+                if n == k {
+                    lanes |= 1 << i;
+                }
+            }
+            let lanes = lanes & todo;
+            todo &= !lanes;
+            if lanes.count_ones() < 2 {
+                out[first] = self.leaf_gradient(k, lane_point(p, first));
+                continue;
+            }
+            let g = self.leaf_gradients(k, p);
+            for (i, o) in out.iter_mut().enumerate() {
+                if lanes & (1 << i) != 0 {
+                    *o = g[i];
+                }
+            }
+        }
+        out
     }
 
     /// [`Tape::nearest_gradients`] at one point (bit for bit a lane's result: the same
@@ -379,6 +407,20 @@ impl Tape {
         Vec3::new(d.d.x, d.d.y, d.d.z)
     }
 
+    /// [`Tape::leaf_gradient`] of leaf `k` at eight points at once, bit for bit.
+    fn leaf_gradients(&self, k: u32, p: V3<F32x8>) -> [Vec3; 8] {
+        let leaf = &self.leaves[k as usize];
+        if matches!(leaf.op, Op::Mesh { .. }) {
+            return [Vec3::NAN; 8];
+        }
+        let x = Dual8::seed(p);
+        let d = match &self.root {
+            None => value(leaf, x, NoGrids),
+            Some(root) => value(leaf, root.to_local.apply(x), NoGrids) * Dual8::splat(root.dscale),
+        };
+        std::array::from_fn(|i| Vec3::new(d.d.x.0[i], d.d.y.0[i], d.d.z.0[i]))
+    }
+
     /// The root union's value (without its own bound), `p` in the root's parent frame.
     #[inline(always)]
     fn union<T: Lane<S = f32>, const M: bool, G: GridSource>(
@@ -413,6 +455,11 @@ impl Tape {
         }
         (best * ds, bm)
     }
+}
+
+/// Lane `k` of `p`.
+fn lane_point(p: V3<F32x8>, k: usize) -> Vec3 {
+    Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k])
 }
 
 fn bound_of(l: &Leaf) -> &Bound {

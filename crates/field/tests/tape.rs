@@ -148,6 +148,33 @@ proptest! {
         }
     }
 
+    /// Lanes near different leaves in any pattern (several lanes on one leaf, which
+    /// `nearest_gradients_x8` differentiates once in eight lanes, and lanes alone on theirs,
+    /// which take the scalar path): each lane bit for bit the one-point gradient.
+    #[test]
+    fn mixed_lanes_get_each_points_nearest_gradient(
+        pick in proptest::array::uniform8(0usize..7),
+        off in proptest::array::uniform8((-0.6f64..0.6, -0.6f64..0.6, -0.6f64..0.6)),
+    ) {
+        // Near each leaf of `leaves()` (the plane's point below the others).
+        let near = [
+            [0.5, 0.2, 3.0], [1.1, -0.6, 2.2], [-1.0, 0.4, 2.5], [0.0, -1.0, 4.0],
+            [-1.5, -0.5, 3.5], [0.0, 0.6, 5.2], [2.5, -2.1, 6.0],
+        ];
+        for (name, f) in cases() {
+            let pts: [Vec3; 8] = std::array::from_fn(|i| {
+                let (x, y, z) = off[i];
+                (DVec3::from(near[pick[i]]) + DVec3::new(x, y, z)).as_vec3()
+            });
+            let lanes = f.nearest_gradients_x8(pts).expect("a tape");
+            for i in 0..8 {
+                let one = f.nearest_gradient(pts[i]).expect("a tape");
+                prop_assert_eq!(one.to_array().map(f32::to_bits), lanes[i].to_array().map(f32::to_bits),
+                    "{} lane {} at {}", name, i, pts[i]);
+            }
+        }
+    }
+
     #[test]
     fn gradients_are_the_fields_derivative(p in pt()) {
         for (name, f) in cases() {
