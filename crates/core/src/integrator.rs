@@ -1,8 +1,8 @@
 //! The Whitted-style integrator: Phong shading, hard shadows (soft for area lights), ambient
 //! occlusion, iterative mirror reflections and Halton anti-aliasing, traced as wavefronts per
-//! screen tile ([`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels, or wider: [`tile_width`]) so backends get coherent rays in
-//! batches. [`render`] runs the path tracer
-//! ([`crate::path`]) instead when the scene asks for it.
+//! screen tile ([`TILE_WIDTH`] x [`TILE_HEIGHT`] pixels, or wider: [`tile_width`]) so
+//! backends get coherent rays in batches. [`render`] runs the path tracer ([`crate::path`])
+//! instead when the scene asks for it.
 //!
 //! Shading follows the source study ("Computer Graphics from Scratch", Gambetta): the local
 //! colour is `colour * (ambient + sum diffuse + sum specular)` with
