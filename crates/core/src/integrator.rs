@@ -156,7 +156,9 @@ pub fn render(
 /// [`render`] into an existing output, reusing its framebuffer's memory (resized to the
 /// scene's image; every pixel is overwritten, and the AOV planes are emptied when
 /// `options.aovs` is false). Repeated renders of one size (benchmarks,
-/// interactive views) then allocate nothing per render.
+/// interactive views) then allocate no framebuffer; what a render still allocates is
+/// small: each worker's ray and result buffers (a tile's worth) and the camera's column
+/// and row terms (24 bytes per image column and row).
 ///
 /// The image is cut into bands of [`TILE_HEIGHT`] rows, one per worker task, and each band
 /// into tiles of at most [`tile_width`] x [`TILE_HEIGHT`] pixels; each tile's rays are
