@@ -1,0 +1,145 @@
+/* Embree 4's single-ray rtcIntersect1 in a C loop, for scripts/anchor_embree.py.
+ *
+ * The embreex wheel ships libembree4 but its EmbreeScene sets RTC_SCENE_FLAG_ROBUST by default
+ * (embreex 4.x, `robust=True`), exposes no build quality, and its Python-called loop writes
+ * u, v, Ng, primID, geomID and tfar into fresh NumPy arrays around every call. Measured on
+ * this machine (2026-11-26, load 0.4) that loop ran Embree 0.70-0.74x as fast as this one on
+ * the bunny and 0.86-0.89x on the full dragon, so it is not Embree's single-ray speed.
+ * anchor_embree.py compiles this file with the system C compiler into a shared library that
+ * resolves against the wheel's libembree4 (no Embree headers needed: the few declarations
+ * below follow Embree 4's rtcore_*.h) and traces the rays one rtcIntersect1 call each on the
+ * calling thread, timed with the thread's CPU clock (as anchor_rays times marchmesh).
+ *
+ * Build quality (rtcSetSceneBuildQuality): 0 low, 1 medium (Embree's default, binned SAH),
+ * 2 high (spatial splits). Scene flags (rtcSetSceneFlags): 0 none (Embree's default),
+ * 4 robust.
+ */
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <string.h>
+#include <time.h>
+
+typedef struct RTCDeviceTy *RTCDevice;
+typedef struct RTCSceneTy *RTCScene;
+typedef struct RTCGeometryTy *RTCGeometry;
+
+RTCDevice rtcNewDevice(const char *config);
+void rtcReleaseDevice(RTCDevice device);
+int rtcGetDeviceError(RTCDevice device);
+RTCScene rtcNewScene(RTCDevice device);
+void rtcReleaseScene(RTCScene scene);
+void rtcSetSceneBuildQuality(RTCScene scene, int quality);
+void rtcSetSceneFlags(RTCScene scene, int flags);
+void rtcCommitScene(RTCScene scene);
+RTCGeometry rtcNewGeometry(RTCDevice device, int type);
+void rtcSetGeometryBuildQuality(RTCGeometry geometry, int quality);
+void *rtcSetNewGeometryBuffer(RTCGeometry geometry, int type, unsigned int slot, int format,
+                              size_t byte_stride, size_t item_count);
+void rtcCommitGeometry(RTCGeometry geometry);
+unsigned int rtcAttachGeometry(RTCScene scene, RTCGeometry geometry);
+void rtcReleaseGeometry(RTCGeometry geometry);
+
+enum {
+    GEOMETRY_TYPE_TRIANGLE = 0,
+    BUFFER_TYPE_INDEX = 0,
+    BUFFER_TYPE_VERTEX = 1,
+    FORMAT_UINT3 = 0x5003,
+    FORMAT_FLOAT3 = 0x9003,
+};
+#define INVALID_ID 0xffffffffu
+
+/* struct RTCRayHit of rtcore_ray.h. The hit part is padded: with instance arrays compiled in,
+ * Embree's RTCHit carries one more id than the 7 fields below. */
+struct __attribute__((aligned(16))) RayHit {
+    float org_x, org_y, org_z, tnear;
+    float dir_x, dir_y, dir_z, time;
+    float tfar;
+    unsigned int mask, id, flags;
+    float ng_x, ng_y, ng_z, u, v;
+    unsigned int prim_id, geom_id, inst_id[1];
+    unsigned int pad[8];
+};
+
+void rtcIntersect1(RTCScene scene, struct RayHit *rayhit, void *args);
+
+static double thread_seconds(void) {
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+/* Builds a scene of `ntri` triangles (9 floats each: v0 v1 v2) with build `quality` and scene
+ * `flags` (rtcSetSceneFlags: 0 none, 4 robust). Returns the scene, or NULL with *error set:
+ * -1 no device, -2 no geometry buffers, -3 Embree reported an error. */
+RTCScene anchor_build(const float *tris, size_t ntri, int quality, int flags, int *error) {
+    *error = 0;
+    RTCDevice device = rtcNewDevice(NULL);
+    if (!device) {
+        *error = -1;
+        return NULL;
+    }
+    RTCScene scene = rtcNewScene(device);
+    rtcSetSceneFlags(scene, flags);
+    rtcSetSceneBuildQuality(scene, quality);
+    RTCGeometry geom = rtcNewGeometry(device, GEOMETRY_TYPE_TRIANGLE);
+    rtcSetGeometryBuildQuality(geom, quality);
+    float *vertices = rtcSetNewGeometryBuffer(geom, BUFFER_TYPE_VERTEX, 0, FORMAT_FLOAT3,
+                                              3 * sizeof(float), 3 * ntri);
+    unsigned int *indices = rtcSetNewGeometryBuffer(geom, BUFFER_TYPE_INDEX, 0, FORMAT_UINT3,
+                                                    3 * sizeof(unsigned int), ntri);
+    if (!vertices || !indices) {
+        rtcReleaseGeometry(geom);
+        rtcReleaseScene(scene);
+        rtcReleaseDevice(device);
+        *error = -2;
+        return NULL;
+    }
+    memcpy(vertices, tris, 9 * ntri * sizeof(float));
+    for (size_t i = 0; i < 3 * ntri; i++) indices[i] = (unsigned int)i;
+    rtcCommitGeometry(geom);
+    rtcAttachGeometry(scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(scene);
+    if (rtcGetDeviceError(device) != 0) {
+        rtcReleaseScene(scene);
+        rtcReleaseDevice(device);
+        *error = -3;
+        return NULL;
+    }
+    /* The scene keeps its own reference to the device. */
+    rtcReleaseDevice(device);
+    return scene;
+}
+
+/* Traces `nray` rays (6 floats each: origin, direction; tnear 0, tfar +inf) through `scene`,
+ * one rtcIntersect1 call each: one warm-up pass, then `repeats` timed passes, each rate
+ * (Mrays/s of the thread's CPU time) into rates[k]. The last pass's hit distance of every
+ * ray goes into t_out (+inf on a miss); returns the number of rays that hit. */
+long anchor_trace(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
+                  float *t_out) {
+    long found = 0;
+    for (int pass = -1; pass < repeats; pass++) {
+        found = 0;
+        double t0 = thread_seconds();
+        for (size_t i = 0; i < nray; i++) {
+            const float *r = rays + 6 * i;
+            struct RayHit rh;
+            rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
+            rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
+            rh.tfar = INFINITY;
+            rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+            rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
+            rtcIntersect1(scene, &rh, NULL);
+            int hit = rh.geom_id != INVALID_ID;
+            found += hit;
+            if (pass == repeats - 1) t_out[i] = hit ? rh.tfar : INFINITY;
+        }
+        double dt = thread_seconds() - t0;
+        if (pass >= 0) rates[pass] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
+    }
+    return found;
+}
+
+/* Releases a scene from anchor_build (and with it its device). */
+void anchor_release(RTCScene scene) { rtcReleaseScene(scene); }
