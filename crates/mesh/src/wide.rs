@@ -989,7 +989,15 @@ pub(crate) fn closest_in_blocks(
 ) -> u32 {
     for (i, b) in blocks.iter().enumerate() {
         let t = block_hits(b, ray);
+        // Most blocks hold no hit: one vector compare decides, and the lanes below `tmax`
+        // then update in lane order (a later lane must be strictly nearer), as before.
+        let mut below = 0u32;
         for lane in 0..BLOCK {
+            below |= u32::from(t[lane] < ray.tmax) << lane;
+        }
+        while below != 0 {
+            let lane = below.trailing_zeros() as usize;
+            below &= below - 1;
             if t[lane] < ray.tmax {
                 ray.tmax = t[lane];
                 *best = Some((((first + i) * BLOCK + lane) as u32, t[lane]));
