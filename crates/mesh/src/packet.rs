@@ -17,7 +17,8 @@
 use obvhs::ray::Ray;
 
 use crate::wide::{
-    EMPTY, LEAF, STACK, WIDTH, WideBvh, WideNode, closest_in_blocks, entered_children, leaf_range,
+    EMPTY, Isa, LEAF, STACK, WIDTH, WideBvh, WideNode, by_isa, closest_in_blocks, entered_children,
+    leaf_range,
 };
 
 /// Rays per packet.
@@ -116,13 +117,14 @@ pub(crate) fn closest8(
 ) -> Option<[Option<(u32, f32)>; PACKET]> {
     let bounds = Bounds::of(rays)?;
     #[cfg(target_arch = "x86_64")]
-    if bvh.avx {
-        // SAFETY: `avx` is set only when the CPU reports AVX and POPCNT.
+    if bvh.isa != Isa::Portable {
+        use avx::{closest8_avx as c, closest8_avx512 as c512};
+        // SAFETY: `isa` is above `Portable` only when the CPU reports its features.
         return Some(unsafe {
             // Camera rays start at the origin of render space: no origin to subtract.
             match bounds.origin == [0.0; 3] {
-                true => avx::closest8::<true>(bvh, &bounds, rays, visits, tests),
-                false => avx::closest8::<false>(bvh, &bounds, rays, visits, tests),
+                true => by_isa!(bvh.isa, c, c512, ::<true>(bvh, &bounds, rays, visits, tests)),
+                false => by_isa!(bvh.isa, c, c512, ::<false>(bvh, &bounds, rays, visits, tests)),
             }
         });
     }
@@ -241,12 +243,27 @@ mod avx {
         found: u32,
     }
 
-    /// [`super::closest8`] on an AVX CPU.
+    crate::wide::avx_twins! {
+        /// [`closest8`] compiled for AVX / AVX-512 ([`crate::wide::Isa`]).
+        pub(super) unsafe fn [closest8_avx, closest8_avx512]<const AT_ORIGIN: bool>(
+            bvh: &WideBvh,
+            bounds: &Bounds,
+            rays: &mut [Ray; PACKET],
+            visits: &mut u32,
+            tests: &mut [u32; PACKET],
+        ) -> [Option<(u32, f32)>; PACKET] {
+            // SAFETY: the caller checked the CPU's level (see `super::closest8`).
+            unsafe { closest8::<AT_ORIGIN>(bvh, bounds, rays, visits, tests) }
+        }
+    }
+
+    /// [`super::closest8`] with AVX intrinsics; inlined into [`closest8_avx`] and
+    /// [`closest8_avx512`].
     ///
     /// # Safety
     /// The CPU must support AVX and POPCNT.
-    #[target_feature(enable = "avx,popcnt")]
-    pub(super) unsafe fn closest8<const AT_ORIGIN: bool>(
+    #[inline(always)]
+    unsafe fn closest8<const AT_ORIGIN: bool>(
         bvh: &WideBvh,
         bounds: &Bounds,
         rays: &mut [Ray; PACKET],
