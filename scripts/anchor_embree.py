@@ -10,7 +10,7 @@ Setup:  python3 -m venv /tmp/embree-venv && /tmp/embree-venv/bin/pip install emb
         (and a C compiler, `cc`, on the PATH)
 Run:    /tmp/embree-venv/bin/python scripts/anchor_embree.py MESH.obj [MESH...] [--rounds 3]
             [--repeats 15] [--bvh bvh2,wide1,wide,raw] [--embree-quality medium|high]
-            [--embree-robust] [--json OUT.json]
+            [--embree-robust] [--embree-packets] [--json OUT.json]
 (scripts/anchor_embree.sh runs it on the committed meshes and writes bench-results/anchors/.)
 
 Embree runs in a C loop (scripts/embree_trace.c, compiled here with `cc` against the
@@ -100,6 +100,8 @@ class EmbreeLoop:
             ctypes.c_void_p, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int,
             ctypes.POINTER(ctypes.c_double), ctypes.c_void_p,
         ]
+        lib.anchor_trace8.restype = ctypes.c_long
+        lib.anchor_trace8.argtypes = lib.anchor_trace.argtypes
         lib.anchor_release.argtypes = [ctypes.c_void_p]
         self.lib = lib
 
@@ -118,8 +120,29 @@ class EmbreeLoop:
         hits = self.lib.anchor_trace(scene, rays.ctypes.data, len(rays), repeats, rates, t.ctypes.data)
         return statistics.median(rates), int(hits), t
 
+    def trace8(self, scene, rays, repeats):
+        """`trace` with Embree's 8-ray packets (rtcIntersect8), rays 8k..8k+7 one packet."""
+        rates = (ctypes.c_double * repeats)()
+        t = np.empty(len(rays), dtype=np.float32)
+        hits = self.lib.anchor_trace8(
+            scene, rays.ctypes.data, len(rays), repeats, rates, t.ctypes.data
+        )
+        return statistics.median(rates), int(hits), t
+
     def release(self, scene):
         self.lib.anchor_release(scene)
+
+
+def tile_order(side, height, tw, th):
+    """Ray indices of a row-major `side x height` image, tile by tile (`tw x th` tiles,
+    row-major inside and between tiles; a ragged edge keeps what fits), as anchor_rays'
+    `wide4x2` orders them."""
+    order = []
+    for ty in range(0, height, th):
+        for tx in range(0, side, tw):
+            for y in range(ty, min(ty + th, height)):
+                order.extend(range(y * side + tx, y * side + min(tx + tw, side)))
+    return np.array(order, dtype=np.int64)
 
 
 def embreex_check(tris, rays, robust, t_loop, repeats):
@@ -164,7 +187,14 @@ def load_average():
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust):
+# Embree's packet variants (--embree-packets): name -> ray order of the 500x500 image.
+PACKET_ORDERS = {
+    "embree8-rows": lambda side: np.arange(side * side),
+    "embree8-4x2": lambda side: tile_order(side, side, 4, 2),
+}
+
+
+def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=False):
     """Times Embree (through `loop`, an EmbreeLoop) and each marchmesh tracer on MESH's camera
     rays in `rounds` interleaved rounds; prints the table and returns the mesh's record."""
     with tempfile.TemporaryDirectory() as d:
@@ -187,12 +217,27 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust):
                 "anchor_embree: the C loop and embreex disagree on the same build: "
                 "scripts/embree_trace.c does not match this libembree4"
             )
-        per = {"embree": [], **{k: [] for k in kinds}}
+        variants = {}
+        if packets:
+            side = int(round(len(rays) ** 0.5))
+            for name, order in PACKET_ORDERS.items():
+                idx = order(side)
+                ordered = np.ascontiguousarray(rays[idx])
+                _, _, t8 = loop.trace8(scene, ordered, 1)
+                differ = int((t8.view(np.uint32) != t_loop[idx].view(np.uint32)).sum())
+                print(f"check: {name}: {differ} hit distances differ from rtcIntersect1's",
+                      file=sys.stderr)
+                variants[name] = ordered
+        per = {"embree": [], **{k: [] for k in variants}, **{k: [] for k in kinds}}
         hits = {}
         for r in range(rounds):
             e, hits["embree"], _ = loop.trace(scene, rays, repeats)
             per["embree"].append(e)
             line = f"round {r}: embree {e:.2f} ({hits['embree']} hits)"
+            for name, ordered in variants.items():
+                m, hits[name], _ = loop.trace8(scene, ordered, repeats)
+                per[name].append(m)
+                line += f"  {name} {m:.2f}"
             for k in kinds:
                 name, _, build = k.partition("@")
                 lines = run_example("time", mesh, name, str(repeats), *([build] if build else []))
@@ -223,11 +268,14 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust):
         "embreex_hit_distance_mismatches": mismatches,
         "tracers": {},
     }
-    for k in kinds:
+    if variants:
+        # Embree's own packets (not marchmesh tracers: `marchmesh findings` reads "tracers").
+        record["embree_packets"] = {}
+    for k in [*variants, *kinds]:
         ratios = [m / e for m, e in zip(per[k], per["embree"])]
         ratio = statistics.median(ratios)
         print(f"{k:<14} {statistics.median(per[k]):>8.2f} {ratio:>9.3f}")
-        record["tracers"][k] = {
+        record["embree_packets" if k in variants else "tracers"][k] = {
             "mrays_per_s_rounds": per[k],
             "mrays_per_s_median": statistics.median(per[k]),
             "ratio_over_embree_per_round_median": ratio,
@@ -256,6 +304,12 @@ def main():
         "high adds spatial splits)",
     )
     ap.add_argument(
+        "--embree-packets",
+        action="store_true",
+        help="also time Embree's 8-ray packets (rtcIntersect8) on rows of 8 pixels and on "
+        "4x2-pixel tiles (embree8-rows, embree8-4x2), against its single rays",
+    )
+    ap.add_argument(
         "--embree-robust",
         action="store_true",
         help="set RTC_SCENE_FLAG_ROBUST (embreex's default, not Embree's; slower)",
@@ -278,7 +332,10 @@ def main():
     with tempfile.TemporaryDirectory() as workdir:
         loop = EmbreeLoop(workdir)
         meshes = [
-            anchor_mesh(m, kinds, a.rounds, a.repeats, loop, a.embree_quality, a.embree_robust)
+            anchor_mesh(
+                m, kinds, a.rounds, a.repeats, loop, a.embree_quality, a.embree_robust,
+                a.embree_packets,
+            )
             for m in a.mesh
         ]
     load_end = load_average()

@@ -63,6 +63,19 @@ struct __attribute__((aligned(16))) RayHit {
 
 void rtcIntersect1(RTCScene scene, struct RayHit *rayhit, void *args);
 
+/* struct RTCRayHit8 of rtcore_ray.h: 8 rays as structure of arrays, hit part padded as above. */
+struct __attribute__((aligned(32))) RayHit8 {
+    float org_x[8], org_y[8], org_z[8], tnear[8];
+    float dir_x[8], dir_y[8], dir_z[8], time[8];
+    float tfar[8];
+    unsigned int mask[8], id[8], flags[8];
+    float ng_x[8], ng_y[8], ng_z[8], u[8], v[8];
+    unsigned int prim_id[8], geom_id[8], inst_id[1][8];
+    unsigned int pad[8][8];
+};
+
+void rtcIntersect8(const int *valid, RTCScene scene, struct RayHit8 *rayhit, void *args);
+
 static double thread_seconds(void) {
     struct timespec ts;
     clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
@@ -134,6 +147,40 @@ long anchor_trace(RTCScene scene, const float *rays, size_t nray, int repeats, d
             int hit = rh.geom_id != INVALID_ID;
             found += hit;
             if (pass == repeats - 1) t_out[i] = hit ? rh.tfar : INFINITY;
+        }
+        double dt = thread_seconds() - t0;
+        if (pass >= 0) rates[pass] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
+    }
+    return found;
+}
+
+/* anchor_trace with Embree's 8-ray packets: rays 8k..8k+7 (in the order given) are one
+ * rtcIntersect8 call; a last partial packet has its missing lanes switched off. */
+long anchor_trace8(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
+                   float *t_out) {
+    long found = 0;
+    for (int pass = -1; pass < repeats; pass++) {
+        found = 0;
+        double t0 = thread_seconds();
+        for (size_t first = 0; first < nray; first += 8) {
+            struct RayHit8 rh;
+            int valid[8];
+            for (int k = 0; k < 8; k++) {
+                size_t i = first + (size_t)k;
+                const float *r = rays + 6 * (i < nray ? i : first);
+                valid[k] = i < nray ? -1 : 0;
+                rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
+                rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
+                rh.tfar[k] = INFINITY;
+                rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
+                rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
+            }
+            rtcIntersect8(valid, scene, &rh, NULL);
+            for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
+                int hit = rh.geom_id[k] != INVALID_ID;
+                found += hit;
+                if (pass == repeats - 1) t_out[first + (size_t)k] = hit ? rh.tfar[k] : INFINITY;
+            }
         }
         double dt = thread_seconds() - t0;
         if (pass >= 0) rates[pass] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
