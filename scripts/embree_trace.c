@@ -125,67 +125,79 @@ RTCScene anchor_build(const float *tris, size_t ntri, int quality, int flags, in
     return scene;
 }
 
-/* Traces `nray` rays (6 floats each: origin, direction; tnear 0, tfar +inf) through `scene`,
- * one rtcIntersect1 call each: one warm-up pass, then `repeats` timed passes, each rate
- * (Mrays/s of the thread's CPU time) into rates[k]. The last pass's hit distance of every
- * ray goes into t_out (+inf on a miss); returns the number of rays that hit. */
-long anchor_trace(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
-                  float *t_out) {
+/* One pass of rtcIntersect1 calls over `nray` rays (6 floats each: origin, direction;
+ * tnear 0, tfar +inf); writes each hit distance into t_out (+inf on a miss) unless it is
+ * NULL; returns the number of rays that hit. */
+static long single_pass(RTCScene scene, const float *rays, size_t nray, float *t_out) {
     long found = 0;
-    for (int pass = -1; pass < repeats; pass++) {
-        found = 0;
-        double t0 = thread_seconds();
-        for (size_t i = 0; i < nray; i++) {
-            const float *r = rays + 6 * i;
-            struct RayHit rh;
-            rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
-            rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
-            rh.tfar = INFINITY;
-            rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
-            rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
-            rtcIntersect1(scene, &rh, NULL);
-            int hit = rh.geom_id != INVALID_ID;
-            found += hit;
-            if (pass == repeats - 1) t_out[i] = hit ? rh.tfar : INFINITY;
-        }
-        double dt = thread_seconds() - t0;
-        if (pass >= 0) rates[pass] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
+    for (size_t i = 0; i < nray; i++) {
+        const float *r = rays + 6 * i;
+        struct RayHit rh;
+        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
+        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
+        rh.tfar = INFINITY;
+        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
+        rtcIntersect1(scene, &rh, NULL);
+        int hit = rh.geom_id != INVALID_ID;
+        found += hit;
+        if (t_out) t_out[i] = hit ? rh.tfar : INFINITY;
     }
     return found;
 }
 
-/* anchor_trace with Embree's 8-ray packets: rays 8k..8k+7 (in the order given) are one
+/* single_pass with Embree's 8-ray packets: rays 8k..8k+7 (in the order given) are one
  * rtcIntersect8 call; a last partial packet has its missing lanes switched off. */
-long anchor_trace8(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
-                   float *t_out) {
+static long packet_pass(RTCScene scene, const float *rays, size_t nray, float *t_out) {
     long found = 0;
-    for (int pass = -1; pass < repeats; pass++) {
-        found = 0;
-        double t0 = thread_seconds();
-        for (size_t first = 0; first < nray; first += 8) {
-            struct RayHit8 rh;
-            int valid[8];
-            for (int k = 0; k < 8; k++) {
-                size_t i = first + (size_t)k;
-                const float *r = rays + 6 * (i < nray ? i : first);
-                valid[k] = i < nray ? -1 : 0;
-                rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
-                rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
-                rh.tfar[k] = INFINITY;
-                rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
-                rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
-            }
-            rtcIntersect8(valid, scene, &rh, NULL);
-            for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
-                int hit = rh.geom_id[k] != INVALID_ID;
-                found += hit;
-                if (pass == repeats - 1) t_out[first + (size_t)k] = hit ? rh.tfar[k] : INFINITY;
-            }
+    for (size_t first = 0; first < nray; first += 8) {
+        struct RayHit8 rh;
+        int valid[8];
+        for (int k = 0; k < 8; k++) {
+            size_t i = first + (size_t)k;
+            const float *r = rays + 6 * (i < nray ? i : first);
+            valid[k] = i < nray ? -1 : 0;
+            rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
+            rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
+            rh.tfar[k] = INFINITY;
+            rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
+            rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
         }
-        double dt = thread_seconds() - t0;
-        if (pass >= 0) rates[pass] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
+        rtcIntersect8(valid, scene, &rh, NULL);
+        for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
+            int hit = rh.geom_id[k] != INVALID_ID;
+            found += hit;
+            if (t_out) t_out[first + (size_t)k] = hit ? rh.tfar[k] : INFINITY;
+        }
     }
     return found;
+}
+
+/* One warm-up pass of `pass`, then `repeats` timed passes, each rate (Mrays/s of the
+ * thread's CPU time) into rates[k]; the last pass's hit distances go into t_out. Returns
+ * the number of rays that hit. */
+static long timed(long (*pass)(RTCScene, const float *, size_t, float *), RTCScene scene,
+                  const float *rays, size_t nray, int repeats, double *rates, float *t_out) {
+    long found = 0;
+    for (int k = -1; k < repeats; k++) {
+        double t0 = thread_seconds();
+        found = pass(scene, rays, nray, k == repeats - 1 ? t_out : NULL);
+        double dt = thread_seconds() - t0;
+        if (k >= 0) rates[k] = (double)nray / (dt > 1e-12 ? dt : 1e-12) / 1e6;
+    }
+    return found;
+}
+
+/* Single rays (rtcIntersect1): see `timed`. */
+long anchor_trace(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
+                  float *t_out) {
+    return timed(single_pass, scene, rays, nray, repeats, rates, t_out);
+}
+
+/* 8-ray packets (rtcIntersect8), rays 8k..8k+7 one packet: see `timed`. */
+long anchor_trace8(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
+                   float *t_out) {
+    return timed(packet_pass, scene, rays, nray, repeats, rates, t_out);
 }
 
 /* Releases a scene from anchor_build (and with it its device). */
