@@ -159,6 +159,7 @@ fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
     for (i, s) in scenes.iter().enumerate() {
         let options = MeshOptions {
             bvh: BvhKind::Wide,
+            packets: false,
             ..MeshOptions::fast()
         };
         let single = build(s, &options).expect("build");
