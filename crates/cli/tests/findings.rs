@@ -8,8 +8,9 @@ fn repo() -> PathBuf {
     marchmesh_testkit::repo_root()
 }
 
-/// The run folders of the committed FINDINGS.md: its regenerate command names them.
-fn committed_runs(text: &str) -> Vec<String> {
+/// The arguments of the committed FINDINGS.md's regenerate command before `--out`: its run
+/// folders and any `--anchor FILE`.
+fn committed_args(text: &str) -> Vec<String> {
     let start = text
         .find("`marchmesh findings ")
         .expect("FINDINGS.md names its command");
@@ -17,7 +18,7 @@ fn committed_runs(text: &str) -> Vec<String> {
     let cmd = &cmd[..cmd.find('`').expect("closing backtick")];
     cmd.split_whitespace()
         .skip(2)
-        .take_while(|w| !w.starts_with("--"))
+        .take_while(|w| *w != "--out")
         .map(str::to_string)
         .collect()
 }
@@ -26,15 +27,15 @@ fn committed_runs(text: &str) -> Vec<String> {
 fn committed_findings_regenerate_byte_identically() {
     let results = repo().join("bench-results");
     let committed = std::fs::read_to_string(results.join("FINDINGS.md")).unwrap();
-    let runs = committed_runs(&committed);
-    assert!(!runs.is_empty());
+    let args = committed_args(&committed);
+    assert!(!args.is_empty());
     let dir = std::env::temp_dir().join(format!("marchmesh-findings-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("FINDINGS.md");
     let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
         .arg("findings")
-        .args(&runs)
+        .args(&args)
         .arg("--out")
         .arg(&out)
         .current_dir(&results)
@@ -55,7 +56,7 @@ fn committed_findings_regenerate_byte_identically() {
     // Without --force an existing file is refused and left as it was.
     let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
         .arg("findings")
-        .args(&runs)
+        .args(&args)
         .arg("--out")
         .arg(&out)
         .current_dir(&results)
