@@ -113,20 +113,13 @@ class EmbreeLoop:
             sys.exit(f"anchor_embree: Embree scene build failed (code {err.value})")
         return scene
 
-    def trace(self, scene, rays, repeats):
-        """(median Mrays/s, hit count, hit distances) of `rays` (n x 6 float32)."""
+    def trace(self, scene, rays, repeats, packets=False):
+        """(median Mrays/s, hit count, hit distances) of `rays` (n x 6 float32): one
+        rtcIntersect1 per ray, or with `packets` one rtcIntersect8 per 8 consecutive rays."""
+        run = self.lib.anchor_trace8 if packets else self.lib.anchor_trace
         rates = (ctypes.c_double * repeats)()
         t = np.empty(len(rays), dtype=np.float32)
-        hits = self.lib.anchor_trace(scene, rays.ctypes.data, len(rays), repeats, rates, t.ctypes.data)
-        return statistics.median(rates), int(hits), t
-
-    def trace8(self, scene, rays, repeats):
-        """`trace` with Embree's 8-ray packets (rtcIntersect8), rays 8k..8k+7 one packet."""
-        rates = (ctypes.c_double * repeats)()
-        t = np.empty(len(rays), dtype=np.float32)
-        hits = self.lib.anchor_trace8(
-            scene, rays.ctypes.data, len(rays), repeats, rates, t.ctypes.data
-        )
+        hits = run(scene, rays.ctypes.data, len(rays), repeats, rates, t.ctypes.data)
         return statistics.median(rates), int(hits), t
 
     def release(self, scene):
@@ -223,7 +216,7 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=Fal
             for name, order in PACKET_ORDERS.items():
                 idx = order(side)
                 ordered = np.ascontiguousarray(rays[idx])
-                _, _, t8 = loop.trace8(scene, ordered, 1)
+                _, _, t8 = loop.trace(scene, ordered, 1, packets=True)
                 differ = int((t8.view(np.uint32) != t_loop[idx].view(np.uint32)).sum())
                 print(f"check: {name}: {differ} hit distances differ from rtcIntersect1's",
                       file=sys.stderr)
@@ -235,7 +228,7 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=Fal
             per["embree"].append(e)
             line = f"round {r}: embree {e:.2f} ({hits['embree']} hits)"
             for name, ordered in variants.items():
-                m, hits[name], _ = loop.trace8(scene, ordered, repeats)
+                m, hits[name], _ = loop.trace(scene, ordered, repeats, packets=True)
                 per[name].append(m)
                 line += f"  {name} {m:.2f}"
             for k in kinds:

@@ -903,6 +903,8 @@ avx_twins! {
 
 /// The SIMD level traversal runs at, detected once per BVH build ([`Isa::detect`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+// Off x86_64 only `Portable` is ever detected.
+#[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(crate) enum Isa {
     /// Plain per-lane code: any CPU.
     Portable,
