@@ -287,7 +287,7 @@ def main():
         default="bvh2,wide1,wide,raw",
         help="marchmesh tracers: bvh2, cwbvh, wide1 (single rays), wide (row packets), wide4x2 "
         "(4x2-tile packets), wide8 (row batches, no packets), raw (obvhs Bvh2); a suffix "
-        "@PRESET builds with that obvhs preset (e.g. wide4x2@slow; default medium)",
+        "@PRESET builds with that build preset (e.g. wide4x2@medium; default tuned, as renders)",
     )
     ap.add_argument(
         "--embree-quality",

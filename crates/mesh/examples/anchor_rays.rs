@@ -4,7 +4,8 @@
 //!
 //! `anchor_rays export MESH OUT_DIR`: writes `tris.f32` (9 f32 per triangle: v0 v1 v2),
 //! `rays.f32` (6 f32 per ray: origin, direction) little-endian, in render space.
-//! `anchor_rays time MESH BVH REPEATS`: builds with `bvh`
+//! `anchor_rays time MESH BVH REPEATS [PRESET]`: builds with the build preset `PRESET`
+//! (`fastest|very_fast|fast|medium|tuned|slow|very_slow`, default `tuned` as in renders) and `bvh`
 //! (bvh2|cwbvh|wide|wide1|wide4x2|wide8|wide8x8|raw; `wide1` traces single rays one call each,
 //! `wide` row batches with packets of 8 consecutive pixels of a row, `wide4x2` the same rays
 //! reordered into 4x2-pixel tiles, handed over a tile row at a time; `wide8` row batches
@@ -103,7 +104,8 @@ fn tiled<T: Copy>(rays: &[T], side: usize, tw: usize, th: usize) -> Vec<T> {
 
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().collect();
-    let usage = "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS";
+    let usage =
+        "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS [PRESET]";
     let (Some(mode), Some(mesh)) = (args.get(1), args.get(2)) else {
         return Err(usage.into());
     };
@@ -139,7 +141,8 @@ fn main() -> Res<()> {
             };
             use marchmesh_mesh::BuildQuality as Q;
             let build_quality = match args.get(5).map(String::as_str) {
-                None | Some("medium") => Q::Medium,
+                None | Some("tuned") => Q::Tuned,
+                Some("medium") => Q::Medium,
                 Some("fastest") => Q::Fastest,
                 Some("very_fast") => Q::VeryFast,
                 Some("fast") => Q::Fast,

@@ -88,6 +88,7 @@ fn wide_matches_bvh2_on_the_bunny_at_every_build_preset() {
     for quality in [
         marchmesh_mesh::BuildQuality::Fastest,
         marchmesh_mesh::BuildQuality::Medium,
+        marchmesh_mesh::BuildQuality::Tuned,
         marchmesh_mesh::BuildQuality::Slow,
     ] {
         let (bvh2, wide) = both(
