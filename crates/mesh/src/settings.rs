@@ -33,7 +33,7 @@ pub struct MeshSettings {
     pub preset: Option<MeshPreset>,
     /// BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2.
     pub bvh: Option<BvhKind>,
-    /// obvhs build preset.
+    /// BVH build preset: an obvhs preset, or tuned (medium, more reinsertion; the default).
     pub build: Option<BuildQuality>,
     /// Tessellation chord error on screen, pixels.
     pub tess_px: Option<f64>,
