@@ -406,10 +406,11 @@ impl WideBvh {
 
 /// Cost of testing one node's 8 child boxes, per unit of the node's surface area.
 const COST_NODE: f32 = 1.0;
-/// Cost of testing one triangle block, per unit of the leaf's surface area. Half a node
-/// test: with leaves of up to 8 triangles it traced 1.02x (dragon_res3) to 1.10x (871k
-/// dragon) the single rays per second of the earlier 1.0 with 4 (`anchor_rays`, 5
-/// interleaved rounds, load 1.5-1.9); 0.4 and 0.7 measured within 2% of 0.5, 1.5 slower.
+/// Cost of testing one triangle block, per unit of the leaf's surface area: half a node
+/// test. With leaves of up to 8 triangles, against the earlier 1.0 and 4 (`anchor_rays`
+/// single rays, 5 interleaved rounds, load 1.5-1.9): 1.02x on dragon_res3 alone; on the
+/// tuned build 0.4-0.7 measured within 2% of each other on dragon_res3 and 3-5% faster
+/// than 1.0 on the 871k dragon, and 1.5 was slower.
 const COST_BLOCK: f32 = 0.5;
 /// Most triangles a collapsed leaf may hold: two blocks (see [`COST_BLOCK`]).
 const MAX_LEAF_TRIS: u32 = 8;
