@@ -97,9 +97,11 @@ pub struct MeshOptions {
     /// BVH layout. Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1
     /// thread, 500x500 primary rays, interleaved rounds, thread CPU time, load ~12) it traced
     /// 1.8x (bunny), 1.55x (dragon_res3) and 1.9x (871k-triangle dragon) as many rays per
-    /// second as Bvh2 (1.51x, 1.08x, 0.84x Embree 4's rtcIntersect1), for about 1.1x its
-    /// memory (100-104 vs 93-95 bytes per triangle). Earlier, Bvh2 rendered seed-spheres
-    /// 1.84x and the bunny 1.24x faster than CwBvh (bench-results/20261122T222119Z-default).
+    /// second as Bvh2, for about 1.1x its memory then; its single rays now run 1.28x, 1.09x
+    /// and 1.07-1.09x Embree 4's `rtcIntersect1` called from C
+    /// (`bench-results/anchors/embree-20261127T010637Z`). Earlier, Bvh2 rendered
+    /// seed-spheres 1.84x and the bunny 1.24x faster than CwBvh
+    /// (bench-results/20261122T222119Z-default).
     pub bvh: BvhKind,
     /// Build preset. Default [`BuildQuality::Tuned`].
     pub build_quality: BuildQuality,
