@@ -139,16 +139,15 @@ fn main() -> Res<()> {
                 "wide" | "wide1" | "wide4x2" | "wide8" | "wide8x8" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
-            use marchmesh_mesh::BuildQuality as Q;
-            let build_quality = match args.get(5).map(String::as_str) {
-                None | Some("tuned") => Q::Tuned,
-                Some("medium") => Q::Medium,
-                Some("fastest") => Q::Fastest,
-                Some("very_fast") => Q::VeryFast,
-                Some("fast") => Q::Fast,
-                Some("slow") => Q::Slow,
-                Some("very_slow") => Q::VerySlow,
-                Some(other) => return Err(format!("unknown quality `{other}`").into()),
+            // The preset by its option name (`build=...`), through the same serde names.
+            let build_quality = match args.get(5) {
+                None => MeshOptions::DEFAULT.build_quality,
+                Some(name) => {
+                    use serde::{Deserialize, de::value::StrDeserializer};
+                    let de = StrDeserializer::<serde::de::value::Error>::new(name);
+                    marchmesh_mesh::BuildQuality::deserialize(de)
+                        .map_err(|e| format!("unknown preset `{name}`: {e}"))?
+                }
             };
             let g = build(
                 &scene,
