@@ -7,7 +7,7 @@
 use glam::Vec3;
 use marchmesh_core::{Geometry, Ray, Termination};
 use marchmesh_scene::{Scene, parse_scene};
-use marchmesh_sdf::{SdfOptions, build};
+use marchmesh_sdf::{SdfGeometry, SdfOptions, build};
 use proptest::prelude::*;
 
 fn scene(objects: &str) -> Scene {
@@ -27,6 +27,18 @@ fn ray(dir: Vec3) -> Ray {
     }
 }
 
+/// The scene's sdf geometry without segment tracing: plain (relaxed) sphere tracing.
+fn plain_tracer(s: &Scene) -> SdfGeometry {
+    build(
+        s,
+        &SdfOptions {
+            segment: false,
+            ..SdfOptions::DEFAULT
+        },
+    )
+    .unwrap()
+}
+
 const PLANE: &str = r#"{"shape": {"plane": {}}, "transform": {"translate": [0, -1, 0]}}"#;
 const SLAB: &str = r#"{"shape": {"box": {"half_extents": [1e6, 0.5, 1e6]}}, "transform": {"translate": [0, -1.5, 0]}}"#;
 
@@ -35,14 +47,7 @@ fn grazing_rays_over_a_plane_and_a_box_top_hit_exactly() {
     for objects in [PLANE, SLAB] {
         let s = scene(objects);
         let g = build(&s, &SdfOptions::DEFAULT).unwrap();
-        let plain = build(
-            &s,
-            &SdfOptions {
-                segment: false,
-                ..SdfOptions::DEFAULT
-            },
-        )
-        .unwrap();
+        let plain = plain_tracer(&s);
         for deg in [5.0f64, 1.0, 0.1, 0.01, 0.001] {
             let (sn, cs) = deg.to_radians().sin_cos();
             // Also off to the side: the ray is not in a symmetry plane of the box.
@@ -156,9 +161,7 @@ proptest! {
                     // Plain sphere tracing passes this surface too (a shell-logic case found
                     // by this test, e.g. csg_on_ground at ~1.2 degree, x = -0.0209, that
                     // predates segment tracing): segment tracing must do no worse.
-                    let plain = build(&s, &SdfOptions { segment: false, ..SdfOptions::DEFAULT })
-                        .unwrap()
-                        .closest_hit(&r);
+                    let plain = plain_tracer(&s).closest_hit(&r);
                     let tp = plain.hit().map_or(inf, |h| f64::from(h.t));
                     prop_assert!(tp > tw * (1.0 + 1e-3) && th <= tp * (1.0 + 1e-3),
                         "{name} at {deg}: sdf {th} passed the reference hit {tw} (depth {deepest}), plain tracing {tp}");
@@ -186,14 +189,7 @@ fn plain_tracing_does_not_pass_the_box_on_the_ground() {
         .find(|(name, _)| *name == "csg_on_ground")
         .expect("scene listed");
     let s = scene(&objects);
-    let plain = build(
-        &s,
-        &SdfOptions {
-            segment: false,
-            ..SdfOptions::DEFAULT
-        },
-    )
-    .unwrap();
+    let plain = plain_tracer(&s);
     let truth = marchmesh_reference::build(&s, &Default::default()).unwrap();
     let mut hits = 0;
     for i in 0..=20 {
