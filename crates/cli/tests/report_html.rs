@@ -49,16 +49,6 @@ document.getElementById("f").onload = function () {
 };
 </script></body></html>"##;
 
-/// The first of `chromium`, `chromium-browser` found on `PATH`.
-fn chromium() -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    ["chromium", "chromium-browser"].iter().find_map(|name| {
-        std::env::split_paths(&path)
-            .map(|d| d.join(name))
-            .find(|p| p.is_file())
-    })
-}
-
 /// Runs headless Chromium on `url` with `extra` flags (its own profile in `profile`), killing
 /// it after two minutes. Returns stdout and stderr.
 fn headless(browser: &Path, profile: &Path, extra: &[&str], url: &str) -> (String, String) {
@@ -200,8 +190,10 @@ fn report_html_is_self_contained_and_its_viewer_flips_images_in_a_browser() {
         "difference images are in the viewer"
     );
 
-    let Some(browser) = chromium() else {
-        println!("skipped: no chromium on PATH (scripts/install_chromium.sh)");
+    let Some(browser) = marchmesh_testkit::tools::require(
+        marchmesh_testkit::tools::Tool::Chromium,
+        "report_html_is_self_contained_and_its_viewer_flips_images_in_a_browser",
+    ) else {
         let _ = std::fs::remove_dir_all(&out);
         return;
     };

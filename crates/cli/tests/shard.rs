@@ -51,11 +51,13 @@ fn accuracy(res: &Results) -> Vec<AccuracyRow> {
 
 #[test]
 fn gnu_parallel_shards_merge_into_the_unsharded_run() {
-    let parallel = Command::new("parallel").arg("--version").output();
-    assert!(
-        parallel.is_ok_and(|o| o.status.success()),
-        "GNU parallel is needed for this test (Debian: apt-get install parallel; .ci/run installs it)"
-    );
+    use marchmesh_testkit::tools::{Tool, require};
+    let Some(parallel) = require(
+        Tool::GnuParallel,
+        "gnu_parallel_shards_merge_into_the_unsharded_run",
+    ) else {
+        return;
+    };
     let dir = tmp("parallel");
     let (whole, shards, merged) = (dir.join("whole"), dir.join("shards"), dir.join("merged"));
     let (ok, stdout, stderr) = marchmesh(&[
@@ -67,7 +69,7 @@ fn gnu_parallel_shards_merge_into_the_unsharded_run() {
     ]);
     assert!(ok, "{stdout}\n{stderr}");
     // The documented one-liner (README "Beyond one machine").
-    let status = Command::new("parallel")
+    let status = Command::new(&parallel)
         .args([
             "--will-cite",
             "--halt",

@@ -423,15 +423,6 @@ fn without_a_display_the_window_is_a_clear_error() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
-/// The `Xvfb` program on PATH, if any.
-fn xvfb() -> Option<PathBuf> {
-    std::env::var_os("PATH").and_then(|paths| {
-        std::env::split_paths(&paths)
-            .map(|p| p.join("Xvfb"))
-            .find(|p| p.is_file())
-    })
-}
-
 /// Kills the virtual X server when the test ends, however it ends.
 struct Server(std::process::Child);
 
@@ -444,10 +435,9 @@ impl Drop for Server {
 
 #[test]
 fn the_window_opens_under_a_virtual_x_server() {
-    let Some(xvfb) = xvfb() else {
-        eprintln!(
-            "skipped: Xvfb is not installed (apt-get install xvfb); the window test needs it"
-        );
+    use marchmesh_testkit::tools::{Tool, require, skip};
+    const TEST: &str = "the_window_opens_under_a_virtual_x_server";
+    let Some(xvfb) = require(Tool::Xvfb, TEST) else {
         return;
     };
     // A display number nobody uses: no socket and no lock file.
@@ -455,7 +445,7 @@ fn the_window_opens_under_a_virtual_x_server() {
         !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
             && !Path::new(&format!("/tmp/.X{n}-lock")).exists()
     }) else {
-        eprintln!("skipped: no free X display number in :90..:190");
+        skip(Tool::Xvfb, TEST, "no free X display number in :90..:190");
         return;
     };
     let server = Command::new(xvfb)
@@ -471,7 +461,7 @@ fn the_window_opens_under_a_virtual_x_server() {
         .stderr(Stdio::null())
         .spawn();
     let Ok(server) = server else {
-        eprintln!("skipped: Xvfb did not start");
+        skip(Tool::Xvfb, TEST, "Xvfb did not start");
         return;
     };
     let mut server = Server(server);
@@ -479,13 +469,21 @@ fn the_window_opens_under_a_virtual_x_server() {
     let start = Instant::now();
     while !socket.exists() && start.elapsed() < Duration::from_secs(10) {
         if let Ok(Some(status)) = server.0.try_wait() {
-            eprintln!("skipped: Xvfb exited at start ({status})");
+            skip(
+                Tool::Xvfb,
+                TEST,
+                &format!("Xvfb exited at start ({status})"),
+            );
             return;
         }
         std::thread::sleep(Duration::from_millis(50));
     }
     if !socket.exists() {
-        eprintln!("skipped: Xvfb did not open display :{n} within 10 s");
+        skip(
+            Tool::Xvfb,
+            TEST,
+            &format!("Xvfb did not open display :{n} within 10 s"),
+        );
         return;
     }
     let dir = marchmesh_testkit::temp_dir("view-window");
@@ -502,7 +500,11 @@ fn the_window_opens_under_a_virtual_x_server() {
         String::from_utf8_lossy(&out.stderr),
     );
     if !out.status.success() && stderr.contains("failed to load") {
-        eprintln!("skipped: the X11 client libraries (libX11, libXcursor) are missing: {stderr}");
+        skip(
+            Tool::Xvfb,
+            TEST,
+            &format!("the X11 client libraries (libX11, libXcursor) are missing: {stderr}"),
+        );
         return;
     }
     assert!(out.status.success(), "{stdout}\n{stderr}");

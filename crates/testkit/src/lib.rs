@@ -6,6 +6,8 @@
 //! Everything panics with a message on failure: these helpers serve tests, where a panic is
 //! the failure report.
 
+pub mod tools;
+
 use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec3};
