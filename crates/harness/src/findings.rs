@@ -361,7 +361,12 @@ fn scene_axis(
                 }
             }
         }
-        let d = duel(&at);
+        // Speed is compared only within one machine.
+        let d = if machines_differ(runs, points) {
+            None
+        } else {
+            duel(&at)
+        };
         let best = fastest_per_backend(&at);
         let log_ratio = match best.as_slice() {
             [a, b, ..] => Some(Duel::log_ratio(a, b)),
@@ -525,7 +530,12 @@ fn setting_axis(
                 s.1.push((x, y));
             }
         }
-        let d = duel(&at);
+        // Speed is compared only within one machine.
+        let d = if machines_differ(runs, points) {
+            None
+        } else {
+            duel(&at)
+        };
         let _ = writeln!(
             body,
             "| {x} | {} | {} |",
@@ -609,19 +619,26 @@ fn quality_axes(
     let clock = points[0].clock;
     let run = &runs[points[0].run].results;
     let timing = Timing::of(run);
-    let claims = matched_accuracy(&rows, timing);
+    // Speed is compared only within one machine: rows of several make no claim at all.
+    let claims = if machines_differ(runs, points) {
+        Vec::new()
+    } else {
+        matched_accuracy(&rows, timing)
+    };
     let mut body = String::new();
-    let _ = writeln!(
-        body,
-        "| PSNR target (dB) | fastest backend reaching it vs runner-up ({} time) |\n|---|---|",
-        clock.name()
-    );
+    if !claims.is_empty() {
+        let _ = writeln!(
+            body,
+            "| PSNR target (dB) | fastest backend reaching it vs runner-up ({} time) |\n|---|---|",
+            clock.name()
+        );
+    }
     let mut runs_of_winner: Vec<(String, f64, f64)> = Vec::new();
     for (q, c) in &claims {
         let (w, text) = match c {
             Ok(c) if c.decisive => (c.faster.clone(), format!("{c} (`{}`)", c.faster_label)),
             Ok(c) => ("no clear winner".to_string(), c.to_string()),
-            Err(only) => (format!("only {only}"), format!("only {only} reaches it")),
+            Err(only) => (format!("{only} alone"), format!("only {only} reaches it")),
         };
         let _ = writeln!(body, "| {q:.1} | {text} |");
         match runs_of_winner.last_mut() {
@@ -630,10 +647,17 @@ fn quality_axes(
         }
     }
     let _ = writeln!(body);
+    let last = runs_of_winner.len().saturating_sub(1);
     let ranges: Vec<String> = runs_of_winner
         .iter()
-        .map(|(w, a, b)| {
-            if a == b {
+        .enumerate()
+        .map(|(i, (w, a, b))| {
+            // A backend alone at the top reaches every target from `a` up: no other row
+            // of the setting reaches any of them (targets are per 0.1 dB, see
+            // `verdicts::PSNR_TARGET_STEP_DB`).
+            if i == last && w.ends_with(" alone") {
+                format!("{w} reaches {a:.1} dB and above")
+            } else if a == b {
                 format!("{w} at {a:.1} dB")
             } else {
                 format!("{w} from {a:.1} to {b:.1} dB")
@@ -1026,6 +1050,90 @@ mod tests {
         assert!(!dir.join("old_axis.svg").exists());
         assert!(dir.join("notes.txt").is_file());
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// One quality level of one backend on a scene `q` (quality axis only).
+    fn level(backend: &str, quality: &str, ms: f64, psnr: f64) -> Row {
+        let mut r = row(backend, quality, ms, Some(psnr), 100);
+        r.scene = "box".into();
+        r.group = "quality".into();
+        r.config_id = format!("quality/box/{backend}:{quality}/x1/t2");
+        r
+    }
+
+    fn findings_of(rows: Vec<Row>, name: &str) -> String {
+        let runs = vec![Run {
+            name: "run1".into(),
+            results: results(rows),
+        }];
+        let dir =
+            std::env::temp_dir().join(format!("marchmesh-findings-{name}-{}", std::process::id()));
+        let doc = write_findings(&runs, &[], &dir, "plots").unwrap();
+        std::fs::remove_dir_all(&dir).ok();
+        doc
+    }
+
+    #[test]
+    fn targets_that_print_alike_are_one_row() {
+        // mesh tops out at 48.17 dB, sdf at 48.24 dB: both print as 48.2, so at 48.2 dB both
+        // reach the target and mesh (faster) wins; nobody is "alone" there.
+        let doc = findings_of(
+            vec![
+                level("mesh", "lo", 1.0, 28.4),
+                level("mesh", "hi", 2.0, 48.17),
+                level("sdf", "lo", 9.0, 30.0),
+                level("sdf", "hi", 10.0, 48.24),
+            ],
+            "tie",
+        );
+        let rows_at = |t: &str| doc.lines().filter(|l| l.starts_with(t)).count();
+        assert_eq!(rows_at("| 48.2 |"), 1, "{doc}");
+        assert!(!doc.contains("only sdf reaches it"), "{doc}");
+        assert!(!doc.contains("between 48.2 and 48.2"), "{doc}");
+        assert!(doc.contains("mesh from 28.4 to 48.2 dB."), "{doc}");
+    }
+
+    #[test]
+    fn a_backend_alone_is_checked_against_every_row() {
+        // sdf alone reaches 48.3 dB: no mesh row prints at 48.3 or above.
+        let rows = vec![
+            level("mesh", "lo", 1.0, 28.4),
+            level("mesh", "hi", 2.0, 48.24),
+            level("sdf", "lo", 9.0, 30.0),
+            level("sdf", "hi", 10.0, 48.26),
+        ];
+        let doc = findings_of(rows.clone(), "alone");
+        assert!(
+            doc.contains("mesh from 28.4 to 48.2 dB, sdf alone reaches 48.3 dB and above; the winner changes between 48.2 and 48.3 dB (mesh -> sdf alone)."),
+            "{doc}"
+        );
+        for line in doc.lines().filter(|l| l.contains("only sdf reaches it")) {
+            let target: f64 = line.split('|').nth(1).unwrap().trim().parse().unwrap();
+            for r in rows.iter().filter(|r| r.backend != "sdf") {
+                let printed: f64 = format!("{:.1}", r.psnr_db.unwrap()).parse().unwrap();
+                assert!(
+                    printed < target,
+                    "{line} but {} prints {printed}",
+                    r.config_id
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn rows_from_two_nodes_make_no_speed_claim() {
+        let mut rows = vec![
+            level("mesh", "lo", 1.0, 30.0),
+            level("sdf", "lo", 9.0, 30.0),
+        ];
+        rows[0].machine = "node-a".into();
+        rows[1].machine = "node-b".into();
+        let doc = findings_of(rows, "nodes");
+        assert!(
+            doc.contains("quality/box: rows from different machines; no speed claim."),
+            "{doc}"
+        );
+        assert!(!doc.contains("x faster than"), "{doc}");
     }
 
     #[test]

@@ -381,16 +381,34 @@ pub fn headlines(rows: &[Row], min_psnr: f64, timing: Timing<'_>) -> Vec<Headlin
     out
 }
 
-/// For every PSNR target reached in `rows` (one setting): the fastest backend reaching it
-/// against the runner-up, or `Err(backend)` when only one backend reaches it.
+/// The resolution of accuracy targets in dB: the precision every report prints a PSNR with.
+/// Two rows whose PSNRs print the same reach the same targets, so a table never shows two
+/// targets that read alike with different winners.
+pub const PSNR_TARGET_STEP_DB: f64 = 0.1;
+
+/// `psnr_db` rounded to the nearest [`PSNR_TARGET_STEP_DB`]: the highest target a row with
+/// that PSNR reaches.
+pub fn psnr_target_level(psnr_db: f64) -> f64 {
+    (psnr_db / PSNR_TARGET_STEP_DB).round() * PSNR_TARGET_STEP_DB
+}
+
+/// For every PSNR target reached in `rows` (one setting; targets are the rows' PSNRs at
+/// [`PSNR_TARGET_STEP_DB`] resolution, a row reaching every target up to its own level): the
+/// fastest backend reaching it against the runner-up, or `Err(backend)` when only one backend
+/// reaches it.
 pub fn matched_accuracy(rows: &[&Row], timing: Timing<'_>) -> Vec<(f64, Result<Contest, String>)> {
-    let mut targets: Vec<f64> = rows.iter().filter_map(|r| r.psnr_db).collect();
+    let mut targets: Vec<f64> = rows
+        .iter()
+        .filter_map(|r| r.psnr_db)
+        .map(psnr_target_level)
+        .collect();
     targets.sort_by(f64::total_cmp);
-    targets.dedup();
+    targets.dedup_by(|a, b| (*a - *b).abs() < PSNR_TARGET_STEP_DB / 2.0);
     targets
         .into_iter()
         .filter_map(|q| {
-            let best = fastest_per_backend(rows, q, timing);
+            // A row reaches `q` when its PSNR rounds to `q` or above.
+            let best = fastest_per_backend(rows, q - PSNR_TARGET_STEP_DB / 2.0, timing);
             match winner_and_runner_up(&best, timing) {
                 Some(c) => Some((q, Ok(c))),
                 None => best
@@ -602,6 +620,34 @@ mod tests {
         let v = compare_runs(&a, &b, 40.0);
         assert!(!v[0].agree);
         assert_eq!(v[0].winners, ("mesh".to_string(), "sdf".to_string()));
+    }
+
+    #[test]
+    fn speed_is_compared_only_within_one_node() {
+        // A merged cluster run: sdf measured on node-a, mesh on node-b (mesh's times would
+        // win). No headline or matched claim may set one node's time against the other's.
+        let on = |backend: &str, ms: f64, node: &str| {
+            let mut r = row(backend, "q", ms, Some(45.0), 100);
+            r.machine = node.into();
+            r
+        };
+        let rows = vec![
+            on("sdf", 10.0, "node-a"),
+            on("mesh", 1.0, "node-b"),
+            on("sdf", 12.0, "node-b"),
+        ];
+        let h = headlines(&rows, 40.0, Timing::medians_only());
+        assert_eq!(h.len(), 2, "one setting per node");
+        let a = h.iter().find(|h| h.name.contains("node-a")).unwrap();
+        assert!(a.contest.is_none(), "node-a has one backend: no contest");
+        let b = h.iter().find(|h| h.name.contains("node-b")).unwrap();
+        let c = b.contest.as_ref().unwrap();
+        assert_eq!((c.faster.as_str(), c.slower.as_str()), ("mesh", "sdf"));
+        assert!(
+            (c.ratio - 12.0).abs() < 1e-9,
+            "node-b's own sdf row: {}",
+            c.ratio
+        );
     }
 
     #[test]
