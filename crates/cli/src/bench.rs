@@ -448,6 +448,17 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
         rb.run_id,
         rb.provenance.git_commit
     );
+    let (pa, pb) = (&ra.provenance, &rb.provenance);
+    if pa.cpu_model != pb.cpu_model || pa.machine != pb.machine {
+        outln!(
+            out,
+            "note: A ran on {} ({}), B on {} ({}): the ratios compare machines as well as builds",
+            pa.machine,
+            pa.cpu_model,
+            pb.machine,
+            pb.cpu_model
+        );
+    }
     outln!(
         out,
         "{:<60} {:>10} {:>10} {:>9} {:>9} {:>9} {:>10}",

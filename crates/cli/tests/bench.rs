@@ -168,6 +168,24 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
         )),
         "{stdout}"
     );
+    assert!(!stdout.contains("compare machines"), "{stdout}");
+    // A run from another CPU: compare says its ratios compare machines too.
+    let mut elsewhere = res.clone();
+    elsewhere.provenance.cpu_model = "Another CPU".into();
+    elsewhere.provenance.machine = "node-b".into();
+    let other = out.join("elsewhere");
+    std::fs::create_dir_all(&other).unwrap();
+    elsewhere.write_json(&other.join("results.json")).unwrap();
+    let (ok, stdout, stderr) = marchmesh(
+        &["compare", run.to_str().unwrap(), other.to_str().unwrap()],
+        &repo(),
+    );
+    assert!(ok, "compare failed:\n{stdout}\n{stderr}");
+    assert!(
+        stdout.contains("B on node-b (Another CPU): the ratios compare machines as well as builds"),
+        "{stdout}"
+    );
+    std::fs::remove_dir_all(&other).ok();
 
     // A second run never overwrites the first.
     let (ok, _, stderr) = marchmesh(
