@@ -61,6 +61,9 @@ import sys
 
 root, allow_file, default_scan, paths = sys.argv[1], sys.argv[2], sys.argv[3] == "1", sys.argv[4:]
 
+# Hex standing alone: not after a letter, digit or `_` (so not the digits of a 0x constant or an
+# identifier), `#` (a colour) or `-` (a UUID group), and not before one (so not a prefix of a
+# longer digest).
 HEX = re.compile(r"(?<![0-9A-Za-z_#$\-])([0-9a-f]{7,40})(?![0-9A-Za-z_\-])")
 RUN_ID = re.compile(r"(?<!\d)\d{8}T\d{6}Z")
 LOAD = re.compile(
@@ -117,9 +120,6 @@ def findings(line):
     for m in HEX.finditer(line):
         tok = m.group(1)
         if not (re.search(r"\d", tok) and re.search(r"[a-f]", tok)):
-            continue
-        before = line[max(0, m.start() - 2):m.start()]
-        if before.endswith("0x") or before.endswith("0X"):
             continue
         # digits with a single exponent letter are numbers (1e10), not hashes
         if re.fullmatch(r"\d+e\d+", tok):
