@@ -85,7 +85,10 @@ impl Progress for Checkpointing<'_> {
         self.bars.note(message);
     }
     fn checkpoint(&mut self, so_far: &bench::Outcome) {
-        let results = results_of(self.template.clone(), so_far.clone());
+        let mut results = results_of(self.template.clone(), so_far.clone());
+        // A checkpoint is a run that has not finished: if the process is killed now, the
+        // file must say so.
+        results.interrupted = true;
         if let Err(e) = results.write_json(&self.dir.join("results.json")) {
             self.bars.note(&format!("checkpoint not written: {e}"));
         }
@@ -157,7 +160,8 @@ fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
 }
 
 pub fn bench(args: BenchArgs) -> Result<()> {
-    let suite_path = suite::locate(&args.suite, &crate::assets::root()?);
+    // The built-in scenes are needed only for a suite given by name.
+    let suite_path = suite::locate(&args.suite, crate::assets::root)?;
     let suite = suite::load(&suite_path)?;
     if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
         bail!(
@@ -179,7 +183,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     };
     let mut configs = bench::configurations(&suite, &options);
     if let Some(shard) = args.shard {
-        configs = bench::shard(&configs, shard);
+        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
     }
     for s in &suite.skipped {
         eprintln!("skipped: {s}");
@@ -243,10 +247,14 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         write_errors: Vec::new(),
         anchors,
     };
-    // The folder says from the start what is still missing.
-    template
-        .write_json(&dir.join("results.json"))
-        .with_context(|| format!("writing results into {}", dir.display()))?;
+    // The folder says from the start what is still missing, and that the run has not
+    // finished (a killed run keeps this file).
+    Results {
+        interrupted: true,
+        ..template.clone()
+    }
+    .write_json(&dir.join("results.json"))
+    .with_context(|| format!("writing results into {}", dir.display()))?;
     let options = BenchOptions {
         images_dir: suite.images.then(|| dir.join("images")),
         ..options
@@ -268,7 +276,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     let plots = report::write_run(&results, &dir)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing results into {}", dir.display()))?;
-    println!(
+    out!(
         "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
         dir.display(),
         results.rows.len(),
@@ -333,6 +341,15 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
     let plots_dir = out
         .parent()
         .map_or_else(|| PathBuf::from(&plots_link), |p| p.join(&plots_link));
+    // Checked before anything is written: with --force only a regular file is replaced.
+    if let Ok(meta) = std::fs::symlink_metadata(out)
+        && !meta.file_type().is_file()
+    {
+        bail!(
+            "--out {}: not a regular file (a folder, device or symbolic link): not replaced, even with --force (nothing was written)",
+            out.display()
+        );
+    }
     if !force {
         if out.exists() || std::fs::symlink_metadata(out).is_ok() {
             bail!(
@@ -352,7 +369,10 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
                 || results.run_id.clone(),
                 |n| n.to_string_lossy().into_owned(),
             );
-            Ok(marchmesh_harness::findings::Run { name, results })
+            Ok(marchmesh_harness::findings::Run {
+                name,
+                results: results.markdown_safe(),
+            })
         })
         .collect::<Result<Vec<_>>>()?;
     let text =
@@ -365,13 +385,39 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         marchmesh_safeio::publish_new(out, text.as_bytes())
     };
     write.with_context(|| format!("writing {}", out.display()))?;
-    println!(
+    out!(
         "{}: findings from {} runs ({} plots in {})",
         out.display(),
         inputs.len(),
         std::fs::read_dir(&plots_dir).map_or(0, Iterator::count),
         plots_dir.display()
     );
+    let unfinished: Vec<String> = inputs
+        .iter()
+        .filter(|r| r.results.is_incomplete() || !r.results.failures.is_empty())
+        .map(|r| {
+            format!(
+                "{} ({} missing, {} failed{})",
+                r.name,
+                r.results.missing.len(),
+                r.results.failures.len(),
+                if r.results.interrupted {
+                    ", interrupted"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect();
+    if !unfinished.is_empty() {
+        bail!(
+            "{} of {} runs are incomplete or have failures (marked in {}): {}",
+            unfinished.len(),
+            inputs.len(),
+            out.display(),
+            unfinished.join(", ")
+        );
+    }
     Ok(())
 }
 
@@ -395,7 +441,7 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         .with_context(|| format!("writing the merged run into {}", out.display()))?;
     let machines: std::collections::BTreeSet<&str> =
         merged.rows.iter().map(|r| r.machine.as_str()).collect();
-    println!(
+    out!(
         "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots and report.html",
         out.display(),
         merged.merged_from.len(),
@@ -405,6 +451,59 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         merged.missing.len(),
         plots.len()
     );
+    incomplete_merge(&merged)
+}
+
+/// The error of a merged run that is not the whole suite: an input was interrupted or
+/// killed, configurations failed or are missing, or shards of the suite were not given.
+fn incomplete_merge(merged: &Results) -> Result<()> {
+    let mut problems = Vec::new();
+    let mut shard_counts = std::collections::BTreeMap::<u64, Vec<u64>>::new();
+    for m in &merged.merged_from {
+        if let Some((k, n)) = m.shard.as_deref().and_then(|s| s.split_once('/'))
+            && let (Ok(k), Ok(n)) = (k.parse::<u64>(), n.parse::<u64>())
+        {
+            shard_counts.entry(n).or_default().push(k);
+        }
+    }
+    for (n, given) in &shard_counts {
+        if shard_counts.len() > 1 {
+            problems.push(format!(
+                "shards of different counts ({:?}) were merged",
+                shard_counts.keys().collect::<Vec<_>>()
+            ));
+            break;
+        }
+        let absent: Vec<String> = (1..=*n)
+            .filter(|k| !given.contains(k))
+            .take(20)
+            .map(|k| format!("{k}/{n}"))
+            .collect();
+        if !absent.is_empty() {
+            problems.push(format!(
+                "shard(s) {} not given: their configurations are missing",
+                absent.join(", ")
+            ));
+        }
+    }
+    if merged.interrupted {
+        problems.push("an input run was interrupted or killed".into());
+    }
+    for m in merged.missing.iter().take(20) {
+        eprintln!("missing: {m}");
+    }
+    if !merged.missing.is_empty() {
+        problems.push(format!("{} configurations missing", merged.missing.len()));
+    }
+    for f in &merged.failures {
+        eprintln!("failed: {}: {}", f.config_id, f.error);
+    }
+    if !merged.failures.is_empty() {
+        problems.push(format!("{} configurations failed", merged.failures.len()));
+    }
+    if !problems.is_empty() {
+        bail!("the merged run is incomplete: {}", problems.join("; "));
+    }
     Ok(())
 }
 
@@ -427,7 +526,7 @@ pub fn report(dir: &Path) -> Result<()> {
     let plots = report::write_report(&res, &out)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the report into {}", out.display()))?;
-    println!(
+    out!(
         "{}: summary.md, report.html and {} plots regenerated from {} rows",
         out.display(),
         plots.len(),
@@ -459,48 +558,55 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
         "memory",
         "PSNR B-A"
     );
+    let rows_b: std::collections::HashMap<&str, &marchmesh_harness::results::Row> =
+        rb.rows.iter().map(|y| (y.config_id.as_str(), y)).collect();
+    let ids_a: std::collections::HashSet<&str> =
+        ra.rows.iter().map(|x| x.config_id.as_str()).collect();
+    // A ratio of two measured values; `n/a` where a side is zero (no meaningful ratio).
+    let ratio = |b: f64, a: f64| (a > 0.0 && b > 0.0).then(|| b / a);
+    let show = |r: Option<f64>| r.map_or_else(|| "n/a".to_string(), |r| format!("{r:.3}x"));
     let mut matched = 0;
+    let mut ratios = 0;
     let mut log_sum = 0.0;
     for x in &ra.rows {
-        let Some(y) = rb.rows.iter().find(|y| y.config_id == x.config_id) else {
+        let Some(y) = rows_b.get(x.config_id.as_str()) else {
             continue;
         };
         matched += 1;
-        let ratio = y.render_ms_median / x.render_ms_median.max(1e-12);
-        log_sum += ratio.ln();
+        let render = ratio(y.render_ms_median, x.render_ms_median);
+        if let Some(r) = render {
+            ratios += 1;
+            log_sum += r.ln();
+        }
         let psnr = match (x.psnr_db, y.psnr_db) {
             (Some(p), Some(q)) => format!("{:+.2}", q - p),
             _ => "n/a".into(),
         };
         outln!(
             out,
-            "{:<60} {:>8.2}ms {:>8.2}ms {:>8.3}x {:>8.3}x {:>8.3}x {:>10}",
+            "{:<60} {:>8.2}ms {:>8.2}ms {:>9} {:>9} {:>9} {:>10}",
             x.config_id,
             x.render_ms_median,
             y.render_ms_median,
-            ratio,
-            y.build_ms_total / x.build_ms_total.max(1e-12),
-            y.memory_bytes as f64 / (x.memory_bytes as f64).max(1.0),
+            show(render),
+            show(ratio(y.build_ms_total, x.build_ms_total)),
+            show(ratio(y.memory_bytes as f64, x.memory_bytes as f64)),
             psnr
         );
     }
-    let only_a = ra
-        .rows
-        .iter()
-        .filter(|x| !rb.rows.iter().any(|y| y.config_id == x.config_id))
-        .count();
+    let only_a = ra.rows.len() - matched;
     let only_b = rb
         .rows
         .iter()
-        .filter(|y| !ra.rows.iter().any(|x| x.config_id == y.config_id))
+        .filter(|y| !ids_a.contains(y.config_id.as_str()))
         .count();
     if matched == 0 {
         bail!("the runs share no configuration ({only_a} only in A, {only_b} only in B)");
     }
     outln!(
         out,
-        "{matched} configurations matched (geometric mean render ratio {:.3}x); {only_a} only in A, {only_b} only in B",
-        (log_sum / matched as f64).exp()
+        "{matched} configurations matched (geometric mean render ratio {}); {only_a} only in A, {only_b} only in B",
+        show((ratios > 0).then(|| (log_sum / ratios as f64).exp()))
     );
     verdict_view(&mut out, &ra, &rb);
     print_ignoring_broken_pipe(&out)
@@ -568,6 +674,17 @@ fn verdict_view(out: &mut String, ra: &Results, rb: &Results) {
 }
 
 pub fn stability(args: StabilityArgs) -> Result<()> {
+    let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
+    // The truth, the render and their comparison are held at once.
+    let images_bytes =
+        marchmesh_core::Framebuffer::bytes_for(args.side, args.side).saturating_mul(3);
+    if args.side == 0 || images_bytes > memory_limit_bytes {
+        bail!(
+            "--side {}: a case holds three {0}x{0} images ({images_bytes} bytes), over --memory-limit-mib {} (or the side is 0)",
+            args.side,
+            args.memory_limit_mib
+        );
+    }
     let root = crate::assets::root()?;
     let out = match args.out {
         Some(o) => o,
@@ -588,8 +705,22 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         scenes_dir: root.join("scenes"),
         include_large: args.large,
     };
-    let cases = marchmesh_stability::all_cases(&ctx)
-        .with_context(|| format!("generating the cases under {}", ctx.generated_dir.display()))?;
+    let cases = match marchmesh_stability::all_cases(&ctx) {
+        Ok(cases) => cases,
+        Err(e) => {
+            // Leave no partial generated/ behind: the folder was new or empty.
+            let _ = std::fs::remove_dir_all(&ctx.generated_dir);
+            if !out_existed {
+                let _ = std::fs::remove_dir(&out);
+            }
+            return Err(e).with_context(|| {
+                format!(
+                    "generating the cases under {} (removed again)",
+                    ctx.generated_dir.display()
+                )
+            });
+        }
+    };
     if let Some(dir) = &args.write_scenes {
         let selected: Vec<_> = cases
             .iter()
@@ -608,6 +739,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     let opts = marchmesh_stability::RunOptions {
         side: args.side,
         threads: args.threads,
+        memory_limit_bytes,
     };
     let (rows, errors) =
         marchmesh_stability::run_cases(&cases, args.filter.as_deref(), &opts, &mut |i, n, id| {
@@ -636,7 +768,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     marchmesh_stability::report::write(&out, &rows, &errors, args.side, &command_line())
         .with_context(|| format!("writing the report into {}", out.display()))?;
     let counts = marchmesh_stability::report::verdict_counts(&rows);
-    println!(
+    out!(
         "{}: {} rows ({}), {} cases could not run",
         out.display(),
         rows.len(),
