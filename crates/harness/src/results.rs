@@ -403,7 +403,7 @@ impl Results {
     }
 
     /// Reads a `results.json` (a regular file within the `MARCHMESH_MAX_READ_MIB` read cap)
-    /// and checks its numbers ([`check_values`]); errors name the file and the JSON path (the
+    /// and checks its numbers ([`Self::check_values`]); errors name the file and the JSON path (the
     /// row's configuration id for a bad value).
     pub fn read_json(path: &Path) -> Result<Self, ResultsError> {
         let bytes = marchmesh_safeio::read_regular(path)?;

@@ -304,6 +304,21 @@ mod tests {
     }
 
     #[test]
+    fn fifos_are_refused_without_blocking_even_behind_a_symlink() {
+        let dir = scratch("fifo");
+        let fifo = dir.join("pipe.json");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        let link = dir.join("link.json");
+        std::os::unix::fs::symlink(&fifo, &link).unwrap();
+        for p in [&fifo, &link] {
+            // Opening a FIFO for reading without O_NONBLOCK would wait here for a writer.
+            let e = read_capped(p, 1 << 20).unwrap_err();
+            assert!(matches!(e, SafeIoError::NotRegularFile { .. }), "{e}");
+        }
+    }
+
+    #[test]
     fn folders_are_refused_as_folders() {
         let dir = scratch("folder");
         let e = read_capped(&dir, 1 << 20).unwrap_err();
