@@ -119,7 +119,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
     if let Some(step) = args.step
         && !(step.is_finite() && step > 0.0 && step <= MAX_STEP)
     {
-        bail!("--step {step}: must be a positive number of world units, at most {MAX_STEP:e}");
+        bail!("--step {step:e}: must be a positive number of world units, at most {MAX_STEP:e}");
     }
     let options = parse_options(&args.options, kind)?;
     // Read the script first: a malformed script fails before anything is built.

@@ -120,12 +120,18 @@ fn view_refuses_a_nonsense_step_before_opening_anything() {
         r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
     )
     .unwrap();
+    let script = dir.join("walk.json");
+    std::fs::write(&script, r#"[{"key": "W", "frames": 2}]"#).unwrap();
     for step in ["1e308", "-1", "NaN", "0"] {
         let o = marchmesh(
             &[
                 "view",
                 scene.to_str().unwrap(),
                 "--headless",
+                "--script",
+                script.to_str().unwrap(),
+                "--frames",
+                "frames",
                 "--step",
                 step,
             ],
