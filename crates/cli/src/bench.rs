@@ -95,20 +95,23 @@ impl Progress for Checkpointing<'_> {
     }
 }
 
-/// `template` (suite, provenance, ...) filled with what `outcome` measured.
+/// `template` (suite, provenance, ...) with what `outcome` measured appended to what it
+/// holds (nothing for a new run; the measured part of a resumed one); `missing` is the
+/// outcome's.
 fn results_of(template: Results, outcome: bench::Outcome) -> Results {
-    Results {
+    let mut r = Results {
         interrupted: outcome.interrupted,
-        rows: outcome.rows,
-        failures: outcome.failures,
-        references: outcome.references,
-        steps_histograms: outcome.steps_histograms,
-        timings: outcome.timings,
-        rotation_seed: Some(outcome.rotation_seed),
+        rotation_seed: template.rotation_seed.or(Some(outcome.rotation_seed)),
         missing: outcome.missing,
-        write_errors: outcome.write_errors,
         ..template
-    }
+    };
+    r.rows.extend(outcome.rows);
+    r.failures.extend(outcome.failures);
+    r.references.extend(outcome.references);
+    r.steps_histograms.extend(outcome.steps_histograms);
+    r.timings.extend(outcome.timings);
+    r.write_errors.extend(outcome.write_errors);
+    r
 }
 
 impl Progress for Bars {
@@ -160,6 +163,9 @@ fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
 }
 
 pub fn bench(args: BenchArgs) -> Result<()> {
+    if let Some(run) = &args.resume {
+        return resume(&args, run);
+    }
     // The built-in scenes are needed only for a suite given by name.
     let suite_path = suite::locate(&args.suite, crate::assets::root)?;
     let suite = suite::load(&suite_path)?;
@@ -259,21 +265,130 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         images_dir: suite.images.then(|| dir.join("images")),
         ..options
     };
+    measure(&configs, &options, &template, &dir, &Default::default())
+}
+
+/// `bench --resume RUN`: the configurations RUN's results.json lists as missing, measured
+/// into RUN on top of what it holds.
+fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
+    let json = run.join("results.json");
+    let previous = Results::read_json(&json)?;
+    if !previous.is_incomplete() {
+        bail!(
+            "{}: the run finished (nothing missing, not interrupted): nothing to resume",
+            run.display()
+        );
+    }
+    let suite_path = PathBuf::from(&previous.suite_file);
+    let suite =
+        suite::load(&suite_path).with_context(|| format!("the suite of {}", json.display()))?;
+    if suite.name != previous.suite {
+        bail!(
+            "{}: the run is of suite {:?} but {} is now suite {:?}",
+            run.display(),
+            previous.suite,
+            suite_path.display(),
+            suite.name
+        );
+    }
+    if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
+        bail!(
+            "--threads {t} is over the limit of {} (0 = all cores)",
+            marchmesh_core::MAX_THREADS
+        );
+    }
+    let options = BenchOptions {
+        quick: args.quick,
+        threads: args.threads,
+        filter: args.filter.clone(),
+        images_dir: suite.images.then(|| run.join("images")),
+        seed: previous.rotation_seed.unwrap_or_default(),
+        hold_memory_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
+        machine: marchmesh_harness::results::hostname(),
+    };
+    let wanted: std::collections::HashSet<&str> =
+        previous.missing.iter().map(String::as_str).collect();
+    let configs: Vec<bench::Config> = bench::configurations(&suite, &options)
+        .into_iter()
+        .filter(|c| wanted.contains(c.id.as_str()))
+        .collect();
+    let found: std::collections::HashSet<&str> = configs.iter().map(|c| c.id.as_str()).collect();
+    let unknown: Vec<&str> = previous
+        .missing
+        .iter()
+        .map(String::as_str)
+        .filter(|id| !found.contains(id))
+        .collect();
+    if !unknown.is_empty() {
+        bail!(
+            "{} missing configurations of {} are not in {} as expanded now (first: {}): pass the run's --filter, --threads and --quick",
+            unknown.len(),
+            run.display(),
+            suite_path.display(),
+            unknown[0]
+        );
+    }
+    // Reference images the interrupted run already wrote stay; a second copy is not an error.
+    let existing_images: std::collections::HashSet<PathBuf> = std::fs::read_dir(run.join("images"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    let mut template = Results {
+        interrupted: true,
+        missing: configs.iter().map(|c| c.id.clone()).collect(),
+        ..previous
+    };
+    template.provenance.command = format!(
+        "{} (resumed: {})",
+        template.provenance.command,
+        command_line()
+    );
+    template
+        .write_json(&json)
+        .with_context(|| format!("writing {}", json.display()))?;
+    eprintln!(
+        "resuming {}: {} configurations missing, rotation seed {}",
+        run.display(),
+        configs.len(),
+        options.seed
+    );
+    let template = Results {
+        interrupted: false,
+        ..template
+    };
+    measure(&configs, &options, &template, run, &existing_images)
+}
+
+/// Runs `configs` into the run folder `dir` (checkpointing `results.json` after every
+/// rotation block on top of `template`), writes the report and fails when anything is
+/// missing, failed or not written. Images in `kept` (written by the run being resumed) are
+/// not written again, and that is not an error.
+fn measure(
+    configs: &[bench::Config],
+    options: &BenchOptions,
+    template: &Results,
+    dir: &Path,
+    kept: &std::collections::HashSet<PathBuf>,
+) -> Result<()> {
     let stop = stop_flag();
     let mut progress = Checkpointing {
         bars: Bars::new(),
-        template: &template,
-        dir: &dir,
+        template,
+        dir,
     };
-    let outcome = bench::run(&configs, &options, &mut progress, &stop);
+    let outcome = bench::run(configs, options, &mut progress, &stop);
     if let Some(b) = progress.bars.current.take() {
         b.finish_and_clear();
     }
     progress.bars.overall.finish_and_clear();
     let elapsed = progress.bars.started.elapsed();
     let mut results = results_of(template.clone(), outcome);
+    results.write_errors.retain(|e| {
+        !kept
+            .iter()
+            .any(|p| e.starts_with(&format!("{}: already exists", p.display())))
+    });
     results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
-    let plots = report::write_run(&results, &dir)
+    let plots = report::write_run(&results, dir)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing results into {}", dir.display()))?;
     out!(

@@ -130,6 +130,11 @@ struct BenchArgs {
     /// rotation stay within this many MiB (by their reported memory); also each build's limit.
     #[arg(long, default_value_t = marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES >> 20)]
     memory_limit_mib: u64,
+    /// Resume the interrupted or killed run in this run folder: measure the configurations
+    /// its results.json lists as missing (with the same --filter, --threads and --quick as
+    /// the original run) into the same folder, keeping what it measured.
+    #[arg(long, value_name = "RUN", conflicts_with_all = ["list", "shard"])]
+    resume: Option<PathBuf>,
     /// Record an external anchor run with this run (repeatable): the JSON of
     /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf
     /// backend vs fidget), shown in summary.md and the findings beside the verdicts.

@@ -411,3 +411,62 @@ fn the_built_in_scene_cache_is_private_and_verified() {
         .unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
 }
+
+#[test]
+fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
+    let dir = tmp("resume");
+    let out = dir.join("runs");
+    let args = [
+        "bench",
+        "--suite",
+        "smoke",
+        "--filter",
+        "smoke/csg/",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(repo())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it as soon as the run folder holds its first results.json.
+    let start = Instant::now();
+    let json = loop {
+        let found = std::fs::read_dir(&out).ok().and_then(|d| {
+            d.flatten()
+                .map(|e| e.path().join("results.json"))
+                .find(|p| p.exists())
+        });
+        if let Some(p) = found {
+            break p;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "no results.json");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let res = marchmesh_harness::results::Results::read_json(&json).unwrap();
+    assert!(
+        res.interrupted || res.missing.is_empty(),
+        "a killed run with {} missing says interrupted: false",
+        res.missing.len()
+    );
+    let run = json.parent().unwrap();
+    let mut resume_args = args.to_vec();
+    resume_args.truncate(5);
+    resume_args.extend(["--resume", run.to_str().unwrap()]);
+    let o = marchmesh(&resume_args, &repo());
+    if res.missing.is_empty() {
+        // The run finished before the kill: nothing to resume, said so.
+        assert!(stderr(&o).contains("nothing to resume"), "{}", stderr(&o));
+        return;
+    }
+    assert!(o.status.success(), "{}", stderr(&o));
+    let done = marchmesh_harness::results::Results::read_json(&json).unwrap();
+    assert!(!done.interrupted && done.missing.is_empty());
+    assert_eq!(done.rows.len(), 2, "{:?}", done.rows.len());
+    assert!(run.join("summary.md").exists());
+}
