@@ -11,26 +11,31 @@
 #   embree-<UTC stamp>.json   every figure per round (read by `marchmesh bench --anchor` and
 #                             `marchmesh findings --anchor`)
 #   embree-<UTC stamp>.md     the printed tables
-# The Python environment is EMBREE_VENV (default /tmp/embree-venv), created with embreex and
-# numpy from the Python package index when missing. CARGO_TARGET_DIR is honoured.
+# (a suffix -2, -3, ... when that name is taken). The Python environment is EMBREE_VENV
+# (default ~/.cache/marchmesh/embree-venv; one not owned by you or writable by others is
+# refused), created with embreex and numpy from the Python package index when missing.
+# Temporary files go to a private folder removed at exit. CARGO_TARGET_DIR is honoured.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-venv="${EMBREE_VENV:-/tmp/embree-venv}"
+# shellcheck source=scripts/anchor_common.sh
+. "$root/scripts/anchor_common.sh"
+venv="$(anchor_venv embree-venv)"
 out="$root/bench-results/anchors"
-stamp="$(date -u +%Y%m%dT%H%M%SZ)"
+anchor_private_tmp
 
 # The command line as given (the shift below drops --large from "$@").
 given="$*"
 meshes=("$root/scenes/meshes/bunny.obj" "$root/scenes/meshes/dragon_res3.obj")
 if [ "${1:-}" = "--large" ]; then
     shift
-    dragon="${DRAGON_OBJ:-/tmp/dragon.obj}"
-    if [ ! -s "$dragon" ]; then
+    dragon="${DRAGON_OBJ:-}"
+    if [ -z "$dragon" ] || [ ! -s "$dragon" ]; then
         shared="$root/../shared/data/dragon_full.obj.gz"
         if [ -s "$shared" ]; then
-            gunzip -c "$shared" >"$dragon.tmp" && mv "$dragon.tmp" "$dragon"
+            dragon="$anchor_tmp/dragon.obj"
+            gunzip -c "$shared" >"$dragon"
         else
-            echo "no full dragon at $dragon or $shared: run scripts/fetch_dragon.sh and set DRAGON_OBJ" >&2
+            echo "no full dragon at ${DRAGON_OBJ:-\$DRAGON_OBJ} or $shared: run scripts/fetch_dragon.sh and set DRAGON_OBJ" >&2
             exit 1
         fi
     fi
@@ -38,23 +43,25 @@ if [ "${1:-}" = "--large" ]; then
 fi
 
 if [ ! -x "$venv/bin/python" ]; then
+    mkdir -p -m 700 "$(dirname "$venv")"
     python3 -m venv "$venv"
     "$venv/bin/pip" install --quiet embreex numpy
 fi
 (cd "$root" && cargo build --release --quiet -p marchmesh-mesh --example anchor_rays)
 mkdir -p "$out"
+base="$(anchor_reserve "$out" embree)"
+stamp="${base##*/embree-}"
 echo "load at start: $(uptime)"
 "$venv/bin/python" "$root/scripts/anchor_embree.py" "${meshes[@]}" --bvh wide1,wide4x2 \
-    --json "$out/embree-$stamp.json" "$@" | tee "$out/embree-$stamp.md.tmp"
+    --json "$base.json" "$@" | tee "$anchor_tmp/tables.md"
 {
     echo "# Embree anchor, $stamp"
     echo
     echo "Command: scripts/anchor_embree.sh $given"
     echo
     echo '```'
-    cat "$out/embree-$stamp.md.tmp"
+    cat "$anchor_tmp/tables.md"
     echo '```'
-} >"$out/embree-$stamp.md"
-rm -f "$out/embree-$stamp.md.tmp"
+} >>"$base.md"
 echo "load at end: $(uptime)"
-echo "wrote $out/embree-$stamp.json and .md"
+echo "wrote $base.json and .md"

@@ -368,7 +368,9 @@ pub(crate) fn read_cached<T>(
     decode: impl FnOnce(&[u8]) -> Result<T, String>,
     notes: &mut Vec<String>,
 ) -> Option<T> {
-    match std::fs::read(file) {
+    // A regular file within the read cap only: a cache file linked to /dev/zero or a FIFO is
+    // rejected without reading (or blocking).
+    match marchmesh_safeio::read_regular(file) {
         Ok(bytes) => match decode(&bytes) {
             Ok(grid) => return Some(grid),
             Err(why) => notes.push(format!(
@@ -376,11 +378,9 @@ pub(crate) fn read_cached<T>(
                 file.display()
             )),
         },
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => notes.push(format!(
-            "{what} cache file {} unreadable ({e}); re-baked",
-            file.display()
-        )),
+        Err(marchmesh_safeio::SafeIoError::Io { source, .. })
+            if source.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => notes.push(format!("{what} cache file rejected ({e}); re-baked")),
     }
     None
 }

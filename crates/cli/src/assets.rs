@@ -4,9 +4,12 @@
 //! 1. `$MARCHMESH_ROOT`, a folder holding `scenes/suites/` (e.g. a checkout elsewhere);
 //! 2. the current folder, when it holds `scenes/suites/` (a checkout);
 //! 3. the copy embedded in the binary at build time (`build.rs`), extracted once into
-//!    `$XDG_CACHE_HOME/marchmesh/<version>-<content hash>/` (or `~/.cache/...`, else the
-//!    temporary folder): extraction goes to a unique folder renamed into place, so concurrent
-//!    runs never see a half-written copy.
+//!    `$XDG_CACHE_HOME/marchmesh/<version>-<content hash>/` (or `~/.cache/...`; when that is
+//!    unset or not writable, `marchmesh-<uid>` in the temporary folder): extraction goes to a
+//!    unique folder renamed into place, so concurrent runs never see a half-written copy. The
+//!    `marchmesh` folder is private (mode 0700, owned by the user: anything else is not
+//!    used), and an existing copy is used only if every file still holds the embedded bytes
+//!    (otherwise it is replaced).
 //!
 //! Results always go under the current folder unless `--out` says otherwise.
 
@@ -43,33 +46,119 @@ fn content_hash() -> u64 {
     h
 }
 
-fn cache_base() -> PathBuf {
-    std::env::var_os("XDG_CACHE_HOME")
+/// The user id of this process: the owner of `/proc/self` (no libc needed).
+#[cfg(unix)]
+fn my_uid() -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").ok().map(|m| m.uid())
+}
+
+/// The cache folders to try, in order: `$XDG_CACHE_HOME/marchmesh` (absolute only) or
+/// `~/.cache/marchmesh`, then `marchmesh-<uid>` in the temporary folder (never a folder
+/// shared between users).
+fn cache_bases() -> Vec<PathBuf> {
+    let mut bases: Vec<PathBuf> = std::env::var_os("XDG_CACHE_HOME")
         .map(PathBuf::from)
         .filter(|p| p.is_absolute())
-        .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))
-        .unwrap_or_else(std::env::temp_dir)
-        .join("marchmesh")
+        .or_else(|| {
+            std::env::var_os("HOME")
+                .map(PathBuf::from)
+                .filter(|p| p.is_absolute())
+                .map(|h| h.join(".cache"))
+        })
+        .map(|p| p.join("marchmesh"))
+        .into_iter()
+        .collect();
+    #[cfg(unix)]
+    if let Some(uid) = my_uid() {
+        bases.push(std::env::temp_dir().join(format!("marchmesh-{uid}")));
+    }
+    bases
+}
+
+/// Creates `base` (mode 0700) if absent and checks that it is a real folder owned by this
+/// user that nobody else can write into.
+///
+/// Errors: it cannot be created, is a symlink or not a folder, has another owner, or is
+/// writable by group or others.
+fn private_folder(base: &Path) -> Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::{DirBuilderExt, MetadataExt};
+        let mut builder = std::fs::DirBuilder::new();
+        builder.recursive(true).mode(0o700);
+        builder
+            .create(base)
+            .with_context(|| format!("creating {}", base.display()))?;
+        let meta = std::fs::symlink_metadata(base)
+            .with_context(|| format!("checking {}", base.display()))?;
+        if !meta.is_dir() {
+            anyhow::bail!("{} is not a folder (a symlink?)", base.display());
+        }
+        if Some(meta.uid()) != my_uid() {
+            anyhow::bail!("{} belongs to another user", base.display());
+        }
+        if meta.mode() & 0o022 != 0 {
+            anyhow::bail!(
+                "{} is writable by other users (mode {:o})",
+                base.display(),
+                meta.mode() & 0o777
+            );
+        }
+    }
+    #[cfg(not(unix))]
+    std::fs::create_dir_all(base).with_context(|| format!("creating {}", base.display()))?;
+    Ok(())
+}
+
+/// Whether `root` holds exactly the embedded bytes of every embedded file.
+fn holds_the_embedded_copy(root: &Path) -> bool {
+    let scenes = root.join("scenes");
+    EMBEDDED_SCENES.iter().all(|(name, bytes)| {
+        marchmesh_safeio::read_capped(&scenes.join(name), bytes.len() as u64)
+            .is_ok_and(|b| b == *bytes)
+    })
 }
 
 fn extracted() -> Result<PathBuf> {
-    let base = cache_base();
+    let mut errors = Vec::new();
+    for base in cache_bases() {
+        match extract_into(&base) {
+            Ok(root) => return Ok(root),
+            Err(e) => errors.push(format!("{e:#}")),
+        }
+    }
+    anyhow::bail!(
+        "no private cache folder for the built-in scenes ({}); set MARCHMESH_ROOT to a checkout or XDG_CACHE_HOME to a writable folder",
+        errors.join("; ")
+    )
+}
+
+fn extract_into(base: &Path) -> Result<PathBuf> {
+    private_folder(base)?;
     let root = base.join(format!(
         "{}-{:016x}",
         env!("CARGO_PKG_VERSION"),
         content_hash()
     ));
-    if root.join("scenes/suites").is_dir() {
+    if root.join("scenes/suites").is_dir() && holds_the_embedded_copy(&root) {
         return Ok(root);
     }
-    std::fs::create_dir_all(&base).with_context(|| format!("creating {}", base.display()))?;
-    let staging = base.join(format!(
-        ".extract-{}-{}",
+    let unique = format!(
+        "{}-{}",
         std::process::id(),
         std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos())
-    ));
+    );
+    if std::fs::symlink_metadata(&root).is_ok() {
+        // A damaged or altered copy: move it aside and extract afresh.
+        let stale = base.join(format!(".stale-{unique}"));
+        std::fs::rename(&root, &stale)
+            .with_context(|| format!("moving the altered copy {} aside", root.display()))?;
+        let _ = std::fs::remove_dir_all(&stale);
+    }
+    let staging = base.join(format!(".extract-{unique}"));
     let write = |staging: &Path| -> Result<()> {
         for (name, bytes) in EMBEDDED_SCENES {
             let path = staging.join("scenes").join(name);
@@ -77,15 +166,16 @@ fn extracted() -> Result<PathBuf> {
                 std::fs::create_dir_all(parent)
                     .with_context(|| format!("creating {}", parent.display()))?;
             }
-            std::fs::write(&path, bytes).with_context(|| format!("writing {}", path.display()))?;
+            marchmesh_safeio::publish_new(&path, bytes)
+                .with_context(|| format!("writing {}", path.display()))?;
         }
         Ok(())
     };
     let result = write(&staging).and_then(|()| {
         match std::fs::rename(&staging, &root) {
             Ok(()) => Ok(()),
-            // Another run extracted it first: use theirs.
-            Err(_) if root.join("scenes/suites").is_dir() => Ok(()),
+            // Another run extracted it first: use theirs if it is intact.
+            Err(_) if holds_the_embedded_copy(&root) => Ok(()),
             Err(e) => {
                 Err(e).with_context(|| format!("moving the built-in scenes to {}", root.display()))
             }

@@ -85,27 +85,33 @@ impl Progress for Checkpointing<'_> {
         self.bars.note(message);
     }
     fn checkpoint(&mut self, so_far: &bench::Outcome) {
-        let results = results_of(self.template.clone(), so_far.clone());
+        let mut results = results_of(self.template.clone(), so_far.clone());
+        // A checkpoint is a run that has not finished: if the process is killed now, the
+        // file must say so.
+        results.interrupted = true;
         if let Err(e) = results.write_json(&self.dir.join("results.json")) {
             self.bars.note(&format!("checkpoint not written: {e}"));
         }
     }
 }
 
-/// `template` (suite, provenance, ...) filled with what `outcome` measured.
+/// `template` (suite, provenance, ...) with what `outcome` measured appended to what it
+/// holds (nothing for a new run; the measured part of a resumed one); `missing` is the
+/// outcome's.
 fn results_of(template: Results, outcome: bench::Outcome) -> Results {
-    Results {
+    let mut r = Results {
         interrupted: outcome.interrupted,
-        rows: outcome.rows,
-        failures: outcome.failures,
-        references: outcome.references,
-        steps_histograms: outcome.steps_histograms,
-        timings: outcome.timings,
-        rotation_seed: Some(outcome.rotation_seed),
+        rotation_seed: template.rotation_seed.or(Some(outcome.rotation_seed)),
         missing: outcome.missing,
-        write_errors: outcome.write_errors,
         ..template
-    }
+    };
+    r.rows.extend(outcome.rows);
+    r.failures.extend(outcome.failures);
+    r.references.extend(outcome.references);
+    r.steps_histograms.extend(outcome.steps_histograms);
+    r.timings.extend(outcome.timings);
+    r.write_errors.extend(outcome.write_errors);
+    r
 }
 
 impl Progress for Bars {
@@ -157,7 +163,11 @@ fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
 }
 
 pub fn bench(args: BenchArgs) -> Result<()> {
-    let suite_path = suite::locate(&args.suite, &crate::assets::root()?);
+    if let Some(run) = &args.resume {
+        return resume(&args, run);
+    }
+    // The built-in scenes are needed only for a suite given by name.
+    let suite_path = suite::locate(&args.suite, crate::assets::root)?;
     let suite = suite::load(&suite_path)?;
     if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
         bail!(
@@ -179,7 +189,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     };
     let mut configs = bench::configurations(&suite, &options);
     if let Some(shard) = args.shard {
-        configs = bench::shard(&configs, shard);
+        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
     }
     for s in &suite.skipped {
         eprintln!("skipped: {s}");
@@ -243,32 +253,145 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         write_errors: Vec::new(),
         anchors,
     };
-    // The folder says from the start what is still missing.
-    template
-        .write_json(&dir.join("results.json"))
-        .with_context(|| format!("writing results into {}", dir.display()))?;
+    // The folder says from the start what is still missing, and that the run has not
+    // finished (a killed run keeps this file).
+    Results {
+        interrupted: true,
+        ..template.clone()
+    }
+    .write_json(&dir.join("results.json"))
+    .with_context(|| format!("writing results into {}", dir.display()))?;
     let options = BenchOptions {
         images_dir: suite.images.then(|| dir.join("images")),
         ..options
     };
+    measure(&configs, &options, &template, &dir, &Default::default())
+}
+
+/// `bench --resume RUN`: the configurations RUN's results.json lists as missing, measured
+/// into RUN on top of what it holds.
+fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
+    let json = run.join("results.json");
+    let previous = Results::read_json(&json)?;
+    if !previous.is_incomplete() {
+        bail!(
+            "{}: the run finished (nothing missing, not interrupted): nothing to resume",
+            run.display()
+        );
+    }
+    let suite_path = PathBuf::from(&previous.suite_file);
+    let suite =
+        suite::load(&suite_path).with_context(|| format!("the suite of {}", json.display()))?;
+    if suite.name != previous.suite {
+        bail!(
+            "{}: the run is of suite {:?} but {} is now suite {:?}",
+            run.display(),
+            previous.suite,
+            suite_path.display(),
+            suite.name
+        );
+    }
+    if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
+        bail!(
+            "--threads {t} is over the limit of {} (0 = all cores)",
+            marchmesh_core::MAX_THREADS
+        );
+    }
+    let options = BenchOptions {
+        quick: args.quick,
+        threads: args.threads,
+        filter: args.filter.clone(),
+        images_dir: suite.images.then(|| run.join("images")),
+        seed: previous.rotation_seed.unwrap_or_default(),
+        hold_memory_bytes: args.memory_limit_mib.saturating_mul(1 << 20),
+        machine: marchmesh_harness::results::hostname(),
+    };
+    let wanted: std::collections::HashSet<&str> =
+        previous.missing.iter().map(String::as_str).collect();
+    let configs: Vec<bench::Config> = bench::configurations(&suite, &options)
+        .into_iter()
+        .filter(|c| wanted.contains(c.id.as_str()))
+        .collect();
+    let found: std::collections::HashSet<&str> = configs.iter().map(|c| c.id.as_str()).collect();
+    let unknown: Vec<&str> = previous
+        .missing
+        .iter()
+        .map(String::as_str)
+        .filter(|id| !found.contains(id))
+        .collect();
+    if !unknown.is_empty() {
+        bail!(
+            "{} missing configurations of {} are not in {} as expanded now (first: {}): pass the run's --filter, --threads and --quick",
+            unknown.len(),
+            run.display(),
+            suite_path.display(),
+            unknown[0]
+        );
+    }
+    // Reference images the interrupted run already wrote stay; a second copy is not an error.
+    let existing_images: std::collections::HashSet<PathBuf> = std::fs::read_dir(run.join("images"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    let mut template = Results {
+        interrupted: true,
+        missing: configs.iter().map(|c| c.id.clone()).collect(),
+        ..previous
+    };
+    template.provenance.command = format!(
+        "{} (resumed: {})",
+        template.provenance.command,
+        command_line()
+    );
+    template
+        .write_json(&json)
+        .with_context(|| format!("writing {}", json.display()))?;
+    eprintln!(
+        "resuming {}: {} configurations missing, rotation seed {}",
+        run.display(),
+        configs.len(),
+        options.seed
+    );
+    let template = Results {
+        interrupted: false,
+        ..template
+    };
+    measure(&configs, &options, &template, run, &existing_images)
+}
+
+/// Runs `configs` into the run folder `dir` (checkpointing `results.json` after every
+/// rotation block on top of `template`), writes the report and fails when anything is
+/// missing, failed or not written. Images in `kept` (written by the run being resumed) are
+/// not written again, and that is not an error.
+fn measure(
+    configs: &[bench::Config],
+    options: &BenchOptions,
+    template: &Results,
+    dir: &Path,
+    kept: &std::collections::HashSet<PathBuf>,
+) -> Result<()> {
     let stop = stop_flag();
     let mut progress = Checkpointing {
         bars: Bars::new(),
-        template: &template,
-        dir: &dir,
+        template,
+        dir,
     };
-    let outcome = bench::run(&configs, &options, &mut progress, &stop);
+    let outcome = bench::run(configs, options, &mut progress, &stop);
     if let Some(b) = progress.bars.current.take() {
         b.finish_and_clear();
     }
     progress.bars.overall.finish_and_clear();
     let elapsed = progress.bars.started.elapsed();
     let mut results = results_of(template.clone(), outcome);
+    results.write_errors.retain(|e| {
+        !kept
+            .iter()
+            .any(|p| e.starts_with(&format!("{}: already exists", p.display())))
+    });
     results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
-    let plots = report::write_run(&results, &dir)
+    let plots = report::write_run(&results, dir)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing results into {}", dir.display()))?;
-    println!(
+    out!(
         "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
         dir.display(),
         results.rows.len(),
@@ -333,6 +456,15 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
     let plots_dir = out
         .parent()
         .map_or_else(|| PathBuf::from(&plots_link), |p| p.join(&plots_link));
+    // Checked before anything is written: with --force only a regular file is replaced.
+    if let Ok(meta) = std::fs::symlink_metadata(out)
+        && !meta.file_type().is_file()
+    {
+        bail!(
+            "--out {}: not a regular file (a folder, device or symbolic link): not replaced, even with --force (nothing was written)",
+            out.display()
+        );
+    }
     if !force {
         if out.exists() || std::fs::symlink_metadata(out).is_ok() {
             bail!(
@@ -352,7 +484,10 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
                 || results.run_id.clone(),
                 |n| n.to_string_lossy().into_owned(),
             );
-            Ok(marchmesh_harness::findings::Run { name, results })
+            Ok(marchmesh_harness::findings::Run {
+                name,
+                results: results.markdown_safe(),
+            })
         })
         .collect::<Result<Vec<_>>>()?;
     let text =
@@ -365,13 +500,39 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         marchmesh_safeio::publish_new(out, text.as_bytes())
     };
     write.with_context(|| format!("writing {}", out.display()))?;
-    println!(
+    out!(
         "{}: findings from {} runs ({} plots in {})",
         out.display(),
         inputs.len(),
         std::fs::read_dir(&plots_dir).map_or(0, Iterator::count),
         plots_dir.display()
     );
+    let unfinished: Vec<String> = inputs
+        .iter()
+        .filter(|r| r.results.is_incomplete() || !r.results.failures.is_empty())
+        .map(|r| {
+            format!(
+                "{} ({} missing, {} failed{})",
+                r.name,
+                r.results.missing.len(),
+                r.results.failures.len(),
+                if r.results.interrupted {
+                    ", interrupted"
+                } else {
+                    ""
+                }
+            )
+        })
+        .collect();
+    if !unfinished.is_empty() {
+        bail!(
+            "{} of {} runs are incomplete or have failures (marked in {}): {}",
+            unfinished.len(),
+            inputs.len(),
+            out.display(),
+            unfinished.join(", ")
+        );
+    }
     Ok(())
 }
 
@@ -395,7 +556,7 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         .with_context(|| format!("writing the merged run into {}", out.display()))?;
     let machines: std::collections::BTreeSet<&str> =
         merged.rows.iter().map(|r| r.machine.as_str()).collect();
-    println!(
+    out!(
         "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots and report.html",
         out.display(),
         merged.merged_from.len(),
@@ -405,6 +566,59 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         merged.missing.len(),
         plots.len()
     );
+    incomplete_merge(&merged)
+}
+
+/// The error of a merged run that is not the whole suite: an input was interrupted or
+/// killed, configurations failed or are missing, or shards of the suite were not given.
+fn incomplete_merge(merged: &Results) -> Result<()> {
+    let mut problems = Vec::new();
+    let mut shard_counts = std::collections::BTreeMap::<u64, Vec<u64>>::new();
+    for m in &merged.merged_from {
+        if let Some((k, n)) = m.shard.as_deref().and_then(|s| s.split_once('/'))
+            && let (Ok(k), Ok(n)) = (k.parse::<u64>(), n.parse::<u64>())
+        {
+            shard_counts.entry(n).or_default().push(k);
+        }
+    }
+    for (n, given) in &shard_counts {
+        if shard_counts.len() > 1 {
+            problems.push(format!(
+                "shards of different counts ({:?}) were merged",
+                shard_counts.keys().collect::<Vec<_>>()
+            ));
+            break;
+        }
+        let absent: Vec<String> = (1..=*n)
+            .filter(|k| !given.contains(k))
+            .take(20)
+            .map(|k| format!("{k}/{n}"))
+            .collect();
+        if !absent.is_empty() {
+            problems.push(format!(
+                "shard(s) {} not given: their configurations are missing",
+                absent.join(", ")
+            ));
+        }
+    }
+    if merged.interrupted {
+        problems.push("an input run was interrupted or killed".into());
+    }
+    for m in merged.missing.iter().take(20) {
+        eprintln!("missing: {m}");
+    }
+    if !merged.missing.is_empty() {
+        problems.push(format!("{} configurations missing", merged.missing.len()));
+    }
+    for f in &merged.failures {
+        eprintln!("failed: {}: {}", f.config_id, f.error);
+    }
+    if !merged.failures.is_empty() {
+        problems.push(format!("{} configurations failed", merged.failures.len()));
+    }
+    if !problems.is_empty() {
+        bail!("the merged run is incomplete: {}", problems.join("; "));
+    }
     Ok(())
 }
 
@@ -427,7 +641,7 @@ pub fn report(dir: &Path) -> Result<()> {
     let plots = report::write_report(&res, &out)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the report into {}", out.display()))?;
-    println!(
+    out!(
         "{}: summary.md, report.html and {} plots regenerated from {} rows",
         out.display(),
         plots.len(),
@@ -470,48 +684,55 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
         "memory",
         "PSNR B-A"
     );
+    let rows_b: std::collections::HashMap<&str, &marchmesh_harness::results::Row> =
+        rb.rows.iter().map(|y| (y.config_id.as_str(), y)).collect();
+    let ids_a: std::collections::HashSet<&str> =
+        ra.rows.iter().map(|x| x.config_id.as_str()).collect();
+    // A ratio of two measured values; `n/a` where a side is zero (no meaningful ratio).
+    let ratio = |b: f64, a: f64| (a > 0.0 && b > 0.0).then(|| b / a);
+    let show = |r: Option<f64>| r.map_or_else(|| "n/a".to_string(), |r| format!("{r:.3}x"));
     let mut matched = 0;
+    let mut ratios = 0;
     let mut log_sum = 0.0;
     for x in &ra.rows {
-        let Some(y) = rb.rows.iter().find(|y| y.config_id == x.config_id) else {
+        let Some(y) = rows_b.get(x.config_id.as_str()) else {
             continue;
         };
         matched += 1;
-        let ratio = y.render_ms_median / x.render_ms_median.max(1e-12);
-        log_sum += ratio.ln();
+        let render = ratio(y.render_ms_median, x.render_ms_median);
+        if let Some(r) = render {
+            ratios += 1;
+            log_sum += r.ln();
+        }
         let psnr = match (x.psnr_db, y.psnr_db) {
             (Some(p), Some(q)) => format!("{:+.2}", q - p),
             _ => "n/a".into(),
         };
         outln!(
             out,
-            "{:<60} {:>8.2}ms {:>8.2}ms {:>8.3}x {:>8.3}x {:>8.3}x {:>10}",
+            "{:<60} {:>8.2}ms {:>8.2}ms {:>9} {:>9} {:>9} {:>10}",
             x.config_id,
             x.render_ms_median,
             y.render_ms_median,
-            ratio,
-            y.build_ms_total / x.build_ms_total.max(1e-12),
-            y.memory_bytes as f64 / (x.memory_bytes as f64).max(1.0),
+            show(render),
+            show(ratio(y.build_ms_total, x.build_ms_total)),
+            show(ratio(y.memory_bytes as f64, x.memory_bytes as f64)),
             psnr
         );
     }
-    let only_a = ra
-        .rows
-        .iter()
-        .filter(|x| !rb.rows.iter().any(|y| y.config_id == x.config_id))
-        .count();
+    let only_a = ra.rows.len() - matched;
     let only_b = rb
         .rows
         .iter()
-        .filter(|y| !ra.rows.iter().any(|x| x.config_id == y.config_id))
+        .filter(|y| !ids_a.contains(y.config_id.as_str()))
         .count();
     if matched == 0 {
         bail!("the runs share no configuration ({only_a} only in A, {only_b} only in B)");
     }
     outln!(
         out,
-        "{matched} configurations matched (geometric mean render ratio {:.3}x); {only_a} only in A, {only_b} only in B",
-        (log_sum / matched as f64).exp()
+        "{matched} configurations matched (geometric mean render ratio {}); {only_a} only in A, {only_b} only in B",
+        show((ratios > 0).then(|| (log_sum / ratios as f64).exp()))
     );
     verdict_view(&mut out, &ra, &rb);
     print_ignoring_broken_pipe(&out)
@@ -579,6 +800,17 @@ fn verdict_view(out: &mut String, ra: &Results, rb: &Results) {
 }
 
 pub fn stability(args: StabilityArgs) -> Result<()> {
+    let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
+    // The truth, the render and their comparison are held at once.
+    let images_bytes =
+        marchmesh_core::Framebuffer::bytes_for(args.side, args.side).saturating_mul(3);
+    if args.side == 0 || images_bytes > memory_limit_bytes {
+        bail!(
+            "--side {}: a case holds three {0}x{0} images ({images_bytes} bytes), over --memory-limit-mib {} (or the side is 0)",
+            args.side,
+            args.memory_limit_mib
+        );
+    }
     let root = crate::assets::root()?;
     let out = match args.out {
         Some(o) => o,
@@ -599,8 +831,22 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         scenes_dir: root.join("scenes"),
         include_large: args.large,
     };
-    let cases = marchmesh_stability::all_cases(&ctx)
-        .with_context(|| format!("generating the cases under {}", ctx.generated_dir.display()))?;
+    let cases = match marchmesh_stability::all_cases(&ctx) {
+        Ok(cases) => cases,
+        Err(e) => {
+            // Leave no partial generated/ behind: the folder was new or empty.
+            let _ = std::fs::remove_dir_all(&ctx.generated_dir);
+            if !out_existed {
+                let _ = std::fs::remove_dir(&out);
+            }
+            return Err(e).with_context(|| {
+                format!(
+                    "generating the cases under {} (removed again)",
+                    ctx.generated_dir.display()
+                )
+            });
+        }
+    };
     if let Some(dir) = &args.write_scenes {
         let selected: Vec<_> = cases
             .iter()
@@ -619,6 +865,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     let opts = marchmesh_stability::RunOptions {
         side: args.side,
         threads: args.threads,
+        memory_limit_bytes,
     };
     let (rows, errors) =
         marchmesh_stability::run_cases(&cases, args.filter.as_deref(), &opts, &mut |i, n, id| {
@@ -647,7 +894,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     marchmesh_stability::report::write(&out, &rows, &errors, args.side, &command_line())
         .with_context(|| format!("writing the report into {}", out.display()))?;
     let counts = marchmesh_stability::report::verdict_counts(&rows);
-    println!(
+    out!(
         "{}: {} rows ({}), {} cases could not run",
         out.display(),
         rows.len(),

@@ -11,6 +11,14 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
 use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
 
+/// Prints a line to stdout like `println!`, but a closed stdout ends the process quietly
+/// (see [`say`]) instead of panicking.
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::say(format_args!($($arg)*))
+    };
+}
+
 mod assets;
 mod bench;
 mod view;
@@ -122,6 +130,11 @@ struct BenchArgs {
     /// rotation stay within this many MiB (by their reported memory); also each build's limit.
     #[arg(long, default_value_t = marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES >> 20)]
     memory_limit_mib: u64,
+    /// Resume the interrupted or killed run in this run folder: measure the configurations
+    /// its results.json lists as missing (with the same --filter, --threads and --quick as
+    /// the original run) into the same folder, keeping what it measured.
+    #[arg(long, value_name = "RUN", conflicts_with_all = ["list", "shard"])]
+    resume: Option<PathBuf>,
     /// Record an external anchor run with this run (repeatable): the JSON of
     /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf
     /// backend vs fidget), shown in summary.md and the findings beside the verdicts.
@@ -143,6 +156,10 @@ struct StabilityArgs {
     /// Render threads (0 = all cores).
     #[arg(long, default_value_t = 0)]
     threads: usize,
+    /// Refuse before allocating when a case's images (the truth, the render and their
+    /// comparison: three framebuffers) or one build would exceed this many MiB.
+    #[arg(long, default_value_t = marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES >> 20)]
+    memory_limit_mib: u64,
     /// Include the slow cases (1M+ triangle meshes, 10^5 steps).
     #[arg(long)]
     large: bool,
@@ -186,7 +203,44 @@ struct RenderArgs {
     /// instances; then the image buffers) would exceed this many MiB.
     #[arg(long, default_value_t = 4096)]
     memory_limit_mib: u64,
+    /// Stop (writing nothing) as soon as the render's projected time, from the rows done so
+    /// far, exceeds this many seconds.
+    #[arg(long, value_name = "SECONDS")]
+    max_seconds: Option<f64>,
 }
+
+/// Most rays `scene` can trace: camera samples times, per hit, the shadow rays of every
+/// light (area lights: their samples) and the AO rays, times the reflection depth; for the
+/// path tracer, a bounce ray and a shadow ray per bounce. An upper bound for the estimate
+/// printed before long renders.
+fn ray_bound(scene: &marchmesh_scene::Scene) -> f64 {
+    use marchmesh_scene::{Integrator, Light};
+    let r = &scene.render;
+    let camera = f64::from(scene.camera.width)
+        * f64::from(scene.camera.height)
+        * f64::from(r.samples_per_pixel);
+    match r.integrator {
+        Integrator::Path => camera * (2.0 * f64::from(r.max_bounces) + 1.0),
+        Integrator::Whitted => {
+            let per_hit: f64 = scene
+                .lights
+                .iter()
+                .map(|l| match l {
+                    Light::Ambient { .. } => 0.0,
+                    Light::Point { .. } | Light::Directional { .. } => 1.0,
+                    Light::Sphere { .. } | Light::Rectangle { .. } => {
+                        f64::from(r.area_light_samples)
+                    }
+                })
+                .sum::<f64>()
+                + r.ambient_occlusion.map_or(0.0, |a| f64::from(a.samples));
+            camera * (1.0 + per_hit) * (f64::from(r.max_reflection_depth) + 1.0)
+        }
+    }
+}
+
+/// Renders with at most this many rays go without an up-front estimate.
+const QUIET_RAY_BOUND: f64 = 1e9;
 
 #[global_allocator]
 static ALLOC: marchmesh_harness::alloc::CountingAlloc = marchmesh_harness::alloc::CountingAlloc;
@@ -214,15 +268,32 @@ fn main() {
         Command::View(args) => view::view(args),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", error_chain(&e));
         std::process::exit(1);
     }
+}
+
+/// The error and its causes joined with `: `, leaving out a cause whose text the message
+/// already holds (library errors name their OS error in their own text too).
+fn error_chain(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let cause = cause.to_string();
+        if text.contains(&cause) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&cause);
+    }
+    text
 }
 
 /// Prints one line to stdout. A closed stdout (`marchmesh schema | head -c1`) ends the process
 /// quietly with status 141 (128 + SIGPIPE, what a shell reports for a killed writer) instead
 /// of panicking like `println!`; other write errors end it with status 1 and a message.
-fn say(line: std::fmt::Arguments) {
+pub(crate) fn say(line: std::fmt::Arguments) {
     use std::io::Write;
     if let Err(e) = writeln!(std::io::stdout().lock(), "{line}") {
         if e.kind() == std::io::ErrorKind::BrokenPipe {
@@ -256,15 +327,24 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
                     .filter(|m| !m.exists())
                     .map(|m| format!("mesh file {}", m.display()))
                     .collect();
+                let mut problems: Vec<String> = missing
+                    .drain(..)
+                    .map(|m| format!("{m} does not exist"))
+                    .collect();
                 if let marchmesh_scene::Background::Environment { path, .. } = &s.background
                     && !path.exists()
                 {
-                    missing.push(format!("environment map {}", path.display()));
+                    problems.push(format!("environment map {} does not exist", path.display()));
+                } else if let Err(e) = marchmesh_core::check_background(
+                    &s.background,
+                    marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES,
+                ) {
+                    problems.push(e.to_string());
                 }
-                if !missing.is_empty() {
+                if !problems.is_empty() {
                     failed += 1;
-                    for m in missing {
-                        eprintln!("{}: {m} does not exist", p.display());
+                    for m in problems {
+                        eprintln!("{}: {m}", p.display());
                     }
                 }
             }
@@ -318,7 +398,7 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
 fn render(args: RenderArgs) -> Result<()> {
     let kind: BackendKind = args.backend.parse()?;
     if args.options.iter().any(|o| o == "help") {
-        print!("{}", backend::option_help(kind));
+        out!("{}", backend::option_help(kind).trim_end_matches('\n'));
         return Ok(());
     }
     let options = args
@@ -341,6 +421,7 @@ fn render(args: RenderArgs) -> Result<()> {
     for t in &targets {
         check_writable(t, args.force)?;
     }
+    let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
     let mut scene = marchmesh_scene::load(&args.scene)?;
     let (w, h) = (
         args.width.unwrap_or(scene.camera.width),
@@ -356,16 +437,27 @@ fn render(args: RenderArgs) -> Result<()> {
             .map_err(anyhow::Error::msg)
             .context("--spp")?;
     }
-    let background = BackgroundSampler::load(&scene.background)
+    let background = BackgroundSampler::load_within(&scene.background, memory_limit_bytes)
         .with_context(|| format!("scene {}", args.scene.display()))?;
 
     let t0 = Instant::now();
     let spec = BackendSpec { kind, options };
-    let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
     let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
         .with_context(|| format!("building scene {}", args.scene.display()))?;
     let build_time = t0.elapsed();
 
+    if let Some(limit) = args.max_seconds
+        && !(limit.is_finite() && limit > 0.0)
+    {
+        bail!("--max-seconds {limit}: must be a positive number");
+    }
+    let bound = ray_bound(&scene);
+    if bound > QUIET_RAY_BOUND {
+        eprintln!(
+            "note: up to {bound:.2e} rays ({}x{}, {} spp); progress follows after a second, --max-seconds stops a render projected to take longer",
+            w, h, scene.render.samples_per_pixel
+        );
+    }
     let bar = ProgressBar::with_draw_target(Some(h as u64), ProgressDrawTarget::hidden());
     bar.set_style(
         ProgressStyle::with_template("{spinner} rendering [{bar:40}] {pos}/{len} rows, eta {eta}")
@@ -379,13 +471,47 @@ fn render(args: RenderArgs) -> Result<()> {
             shown.store(true, Ordering::Relaxed);
             bar.set_draw_target(ProgressDrawTarget::stderr());
         }
+        if let Some(limit) = args.max_seconds {
+            let elapsed = start.elapsed().as_secs_f64();
+            let projected = elapsed * f64::from(h) / bar.position().max(1) as f64;
+            if projected > limit {
+                bar.finish_and_clear();
+                eprintln!(
+                    "error: the render is projected to take {projected:.0} s ({} of {h} rows in {elapsed:.1} s), over --max-seconds {limit}; nothing was written",
+                    bar.position()
+                );
+                std::process::exit(1);
+            }
+        }
     };
     let opts = RenderOptions {
         threads: args.threads,
         memory_limit_bytes,
         ..Default::default()
     };
+    // The deadline also holds while no row has finished yet (a band of a render at the
+    // caps can take minutes).
+    let finished = std::sync::Arc::new(AtomicBool::new(false));
+    if let Some(limit) = args.max_seconds {
+        let finished = finished.clone();
+        std::thread::spawn(move || {
+            let deadline = start + Duration::from_secs_f64(limit);
+            while Instant::now() < deadline {
+                if finished.load(Ordering::Relaxed) {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            if !finished.load(Ordering::Relaxed) {
+                eprintln!(
+                    "\nerror: the render did not finish within --max-seconds {limit}; nothing was written"
+                );
+                std::process::exit(1);
+            }
+        });
+    }
     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
+    finished.store(true, Ordering::Relaxed);
     bar.finish_and_clear();
 
     // Encode everything first, then publish all-or-nothing.
@@ -402,7 +528,7 @@ fn render(args: RenderArgs) -> Result<()> {
     let report = geometry.report();
     let s = &out.stats;
     let secs = out.elapsed.as_secs_f64();
-    println!(
+    out!(
         "{}: {}x{} {} spp, backend {}: build {:.1} ms, render {:.1} ms, {:.2} Mrays/s ({} rays), {} bytes of geometry",
         args.out.display(),
         w,
@@ -421,7 +547,7 @@ fn render(args: RenderArgs) -> Result<()> {
             Some(m) => format!("{rays} ({m:.2} Mrays per thread-second)"),
             None => rays.to_string(),
         };
-        println!(
+        out!(
             "  rays: camera {}, shadow {}, ambient occlusion {}, reflection/bounce {}",
             rate(s.primary_rays, r.camera),
             rate(s.shadow_rays, r.shadow),
@@ -430,21 +556,21 @@ fn render(args: RenderArgs) -> Result<()> {
         );
     }
     if s.steps > 0 {
-        println!(
+        out!(
             "  sdf steps: mean {:.1}, max {}",
             s.mean_steps(),
             s.max_steps_seen
         );
     }
     if s.node_visits > 0 {
-        println!(
+        out!(
             "  bvh node visits: mean {:.1}, max {}",
             s.mean_node_visits(),
             s.max_node_visits_seen
         );
     }
     for note in &report.notes {
-        println!("  note: {note}");
+        out!("  note: {note}");
     }
     let exhausted = s.closest_max_steps + s.occlusion_max_steps;
     if exhausted > 0 {

@@ -99,7 +99,7 @@ fn parse_options(
             None => (first, o.as_str()),
         };
         if pair.trim() == "help" {
-            print!("{}", backend::option_help(kind));
+            out!("{}", backend::option_help(kind).trim_end_matches('\n'));
             std::process::exit(0);
         }
         let kv = backend::parse_option(pair)
@@ -110,9 +110,17 @@ fn parse_options(
     Ok(out)
 }
 
+/// Largest `--step`: beyond it a camera position leaves the range f32 render space can hold.
+const MAX_STEP: f64 = 1e12;
+
 /// Runs `marchmesh view`.
 pub fn view(args: ViewArgs) -> Result<()> {
     let kind: BackendKind = args.backend.parse()?;
+    if let Some(step) = args.step
+        && !(step.is_finite() && step > 0.0 && step <= MAX_STEP)
+    {
+        bail!("--step {step:e}: must be a positive number of world units, at most {MAX_STEP:e}");
+    }
     let options = parse_options(&args.options, kind)?;
     // Read the script first: a malformed script fails before anything is built.
     let script = match &args.script {
@@ -139,7 +147,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
         let out = headless::run(&mut session, &script, dir, args.overlay)
             .with_context(|| format!("replaying the script into {}", dir.display()))?;
         let total: f64 = out.frames.iter().map(|f| f.ms).sum();
-        println!(
+        out!(
             "{}: {} frames ({:.1} ms rendering), {} shots, {}",
             dir.display(),
             out.frames.len(),
@@ -154,7 +162,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
         exit_after_frames: args.exit_after_frames,
     };
     let summary = window::run(&mut session, &run)?;
-    println!(
+    out!(
         "window closed after {} frames ({} updates), {} shots",
         summary.frames,
         summary.updates,

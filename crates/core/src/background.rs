@@ -16,6 +16,24 @@ pub enum BackgroundError {
         /// The decoder's message.
         reason: String,
     },
+    /// Decoding the image would need more memory than the limit allows (checked from its
+    /// header, before any pixel is decoded).
+    #[error(
+        "{}: environment map of {width}x{height} pixels needs about {needed_bytes} bytes to load, over the memory limit of {limit_bytes} bytes",
+        path.display()
+    )]
+    TooLarge {
+        /// The image file.
+        path: PathBuf,
+        /// Width in pixels, from the header.
+        width: u32,
+        /// Height in pixels, from the header.
+        height: u32,
+        /// The estimate ([`ENVIRONMENT_BYTES_PER_TEXEL`] per pixel).
+        needed_bytes: u64,
+        /// The limit.
+        limit_bytes: u64,
+    },
     /// The image has no pixels.
     #[error("{}: environment map is empty", path.display())]
     Empty {
@@ -40,13 +58,106 @@ pub enum BackgroundSampler {
     },
 }
 
+/// Bytes loading an environment map takes per pixel at its peak: the decoded image (at most
+/// 16, four f32 channels), its f32 RGB copy (12) and the texels (12).
+pub const ENVIRONMENT_BYTES_PER_TEXEL: u64 = 40;
+
+/// The bytes of the environment map at `path`: a regular file within the read cap, read
+/// without blocking on a FIFO.
+fn environment_bytes(path: &std::path::Path) -> Result<Vec<u8>, BackgroundError> {
+    marchmesh_safeio::read_regular(path).map_err(|e| BackgroundError::Load {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })
+}
+
+/// A reader of image `bytes` with the format guessed from them; errors name `path`.
+fn environment_reader<'a>(
+    path: &std::path::Path,
+    bytes: &'a [u8],
+) -> Result<image::ImageReader<std::io::Cursor<&'a [u8]>>, BackgroundError> {
+    image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| BackgroundError::Load {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })
+}
+
+/// Checks the environment map of `background` (if any) from its header alone: readable,
+/// decodable format, not empty, and loadable within `memory_limit_bytes` (what `validate`
+/// reports before a render would fail).
+///
+/// Errors: as [`BackgroundSampler::load_within`], without decoding the pixels.
+pub fn check_background(
+    background: &Background,
+    memory_limit_bytes: u64,
+) -> Result<(), BackgroundError> {
+    if let Background::Environment { path, .. } = background {
+        environment_size(path, &environment_bytes(path)?, memory_limit_bytes)?;
+    }
+    Ok(())
+}
+
+/// The size of the environment map `bytes` (of `path`) from its header, checked against the
+/// budget.
+fn environment_size(
+    path: &std::path::Path,
+    bytes: &[u8],
+    memory_limit_bytes: u64,
+) -> Result<(u32, u32), BackgroundError> {
+    let (width, height) = environment_reader(path, bytes)?
+        .into_dimensions()
+        .map_err(|e| BackgroundError::Load {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+    if width == 0 || height == 0 {
+        return Err(BackgroundError::Empty {
+            path: path.to_path_buf(),
+        });
+    }
+    let needed_bytes = u64::from(width)
+        .saturating_mul(u64::from(height))
+        .saturating_mul(ENVIRONMENT_BYTES_PER_TEXEL);
+    if needed_bytes > memory_limit_bytes {
+        return Err(BackgroundError::TooLarge {
+            path: path.to_path_buf(),
+            width,
+            height,
+            needed_bytes,
+            limit_bytes: memory_limit_bytes,
+        });
+    }
+    Ok((width, height))
+}
+
 impl BackgroundSampler {
-    /// Loads the scene's background (reads the environment image, if any).
+    /// Loads the scene's background (reads the environment image, if any) within
+    /// [`crate::DEFAULT_MEMORY_LIMIT_BYTES`]; see [`Self::load_within`].
     pub fn load(background: &Background) -> Result<Self, BackgroundError> {
+        Self::load_within(background, crate::DEFAULT_MEMORY_LIMIT_BYTES)
+    }
+
+    /// Loads the scene's background. An environment map is read as a regular file within the
+    /// read cap and its size is checked from the header against `memory_limit_bytes`
+    /// ([`ENVIRONMENT_BYTES_PER_TEXEL`] per pixel) before any pixel is decoded.
+    ///
+    /// Errors: the file is unreadable or not an image, empty, or over the limit.
+    pub fn load_within(
+        background: &Background,
+        memory_limit_bytes: u64,
+    ) -> Result<Self, BackgroundError> {
         match background {
             Background::Color(c) => Ok(Self::Color(c.as_vec3())),
             Background::Environment { path, intensity } => {
-                let img = image::open(path).map_err(|e| BackgroundError::Load {
+                let bytes = environment_bytes(path)?;
+                environment_size(path, &bytes, memory_limit_bytes)?;
+                let mut reader = environment_reader(path, &bytes)?;
+                let mut limits = image::Limits::default();
+                limits.max_alloc = Some(memory_limit_bytes);
+                reader.limits(limits);
+                let img = reader.decode().map_err(|e| BackgroundError::Load {
                     path: path.clone(),
                     reason: e.to_string(),
                 })?;

@@ -5,7 +5,7 @@
 //! rows from the *bottom* of the image to the top, as the format requires. PFM is read by
 //! ImageMagick, GIMP, OpenCV and numpy in a few lines.
 
-use std::io::{BufWriter, Read, Write};
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use glam::Vec3;
@@ -168,10 +168,10 @@ pub type PfmImage = (u32, u32, usize, Vec<f32>);
 
 /// Reads a PFM written by [`write_pfm`] (either endianness).
 pub fn read_pfm(path: &Path) -> Result<PfmImage, ImageIoError> {
-    let mut bytes = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|mut f| f.read_to_end(&mut bytes))
-        .map_err(io_err(path))?;
+    let bytes = marchmesh_safeio::read_regular(path).map_err(|e| ImageIoError::BadPfm {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
     let bad = |reason: &str| ImageIoError::BadPfm {
         path: path.to_path_buf(),
         reason: reason.to_string(),

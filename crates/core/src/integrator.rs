@@ -883,6 +883,56 @@ struct PendingLight {
     amount: Vec3,
 }
 
+/// Most shadow (or ambient-occlusion) rays one batch holds: a wavefront's rays are traced
+/// whenever this many are queued, so the buffers stay bounded (about 64 MiB per kind) however
+/// many light and AO samples a shading point takes (4096 x 4096 at 1024 spp would otherwise
+/// queue gigabytes). Ordinary scenes queue far fewer, so their batches are unchanged.
+pub(crate) const MAX_OCCLUSION_BATCH: usize = 1 << 20;
+
+/// What tracing a batch of occlusion rays needs besides the rays: the geometry, the result
+/// buffer, the paths and colour sums the unblocked contributions go to, and the counters.
+struct OcclusionBatch<'a, 'g> {
+    geometry: &'g dyn Geometry,
+    occlusion: &'a mut Vec<OcclusionResult>,
+    paths: &'a [Path],
+    sum: &'a mut [Vec3],
+    stats: &'a mut RenderStats,
+}
+
+impl OcclusionBatch<'_, '_> {
+    /// Traces `rays`, adds the contribution in `pending` of each unblocked ray to its path's
+    /// pixel, counts them (as ambient occlusion when `ao`, else as shadows) and empties both.
+    fn flush(self, rays: &mut Vec<Ray>, pending: &mut Vec<PendingLight>, ao: bool) {
+        if rays.is_empty() {
+            return;
+        }
+        let Self {
+            geometry,
+            occlusion,
+            paths,
+            sum,
+            stats,
+        } = self;
+        let ns = timed(occlusion, rays.len(), |o| geometry.occluded_many(rays, o));
+        if ao {
+            stats.trace_time.ambient_occlusion_ns += ns;
+            stats.ao_rays += rays.len() as u64;
+        } else {
+            stats.trace_time.shadow_ns += ns;
+            stats.shadow_rays += rays.len() as u64;
+        }
+        for (p, o) in pending.iter().zip(occlusion.iter()) {
+            stats.add_work(&o.work);
+            stats.add_termination(o.termination, true);
+            if !o.occluded {
+                sum[paths[p.path as usize].pixel as usize] += p.amount;
+            }
+        }
+        rays.clear();
+        pending.clear();
+    }
+}
+
 /// One worker's buffers, reused from tile to tile.
 #[derive(Default)]
 pub(crate) struct Scratch {
@@ -1099,6 +1149,16 @@ fn trace_tile(
                             amount: share,
                         });
                     }
+                    if ao_rays.len() >= MAX_OCCLUSION_BATCH {
+                        OcclusionBatch {
+                            geometry,
+                            occlusion: &mut *occlusion,
+                            paths: &paths[..],
+                            sum: &mut sum[..],
+                            stats: &mut *stats,
+                        }
+                        .flush(ao_rays, ao_pending, true);
+                    }
                 }
                 _ => sum[px] += ambient,
             }
@@ -1180,6 +1240,16 @@ fn trace_tile(
                                 sum[px] += contribution;
                             }
                         }
+                        if shadow_rays.len() >= MAX_OCCLUSION_BATCH {
+                            OcclusionBatch {
+                                geometry,
+                                occlusion: &mut *occlusion,
+                                paths: &paths[..],
+                                sum: &mut sum[..],
+                                stats: &mut *stats,
+                            }
+                            .flush(shadow_rays, pending, false);
+                        }
                         continue;
                     }
                 };
@@ -1220,19 +1290,14 @@ fn trace_tile(
                 });
             }
         }
-        if !shadow_rays.is_empty() {
-            stats.trace_time.shadow_ns += timed(occlusion, shadow_rays.len(), |o| {
-                geometry.occluded_many(shadow_rays, o)
-            });
-            stats.shadow_rays += shadow_rays.len() as u64;
-            for (p, o) in pending.iter().zip(occlusion.iter()) {
-                stats.add_work(&o.work);
-                stats.add_termination(o.termination, true);
-                if !o.occluded {
-                    sum[paths[p.path as usize].pixel as usize] += p.amount;
-                }
-            }
+        OcclusionBatch {
+            geometry,
+            occlusion: &mut *occlusion,
+            paths: &paths[..],
+            sum: &mut sum[..],
+            stats: &mut *stats,
         }
+        .flush(shadow_rays, pending, false);
         if !cones.is_empty() {
             stats.trace_time.shadow_ns += timed(visibility, cones.len(), |v| {
                 geometry.cone_visibility(cones, v)
@@ -1256,19 +1321,14 @@ fn trace_tile(
                 sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
             }
         }
-        if !ao_rays.is_empty() {
-            stats.trace_time.ambient_occlusion_ns += timed(occlusion, ao_rays.len(), |o| {
-                geometry.occluded_many(ao_rays, o)
-            });
-            stats.ao_rays += ao_rays.len() as u64;
-            for (p, o) in ao_pending.iter().zip(occlusion.iter()) {
-                stats.add_work(&o.work);
-                stats.add_termination(o.termination, true);
-                if !o.occluded {
-                    sum[paths[p.path as usize].pixel as usize] += p.amount;
-                }
-            }
+        OcclusionBatch {
+            geometry,
+            occlusion: &mut *occlusion,
+            paths: &paths[..],
+            sum: &mut sum[..],
+            stats: &mut *stats,
         }
+        .flush(ao_rays, ao_pending, true);
         stats.reflection_rays += next.len() as u64;
         std::mem::swap(paths, next);
         std::mem::swap(rays, next_rays);

@@ -23,7 +23,9 @@ mod stream;
 pub mod tolerance;
 
 pub use backend::Backend;
-pub use background::{BackgroundError, BackgroundSampler};
+pub use background::{
+    BackgroundError, BackgroundSampler, ENVIRONMENT_BYTES_PER_TEXEL, check_background,
+};
 pub use camera::{PrimarySamples, Tile};
 pub use compare::{Accuracy, compare};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};

@@ -163,12 +163,13 @@ fn parse<T: serde::de::DeserializeOwned>(file: &str, text: &str) -> Result<T, An
 /// that is not finite and positive.
 pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
     let file = path.display().to_string();
-    let bytes = marchmesh_safeio::read_capped(path, MAX_ANCHOR_FILE_BYTES).map_err(|e| {
-        AnchorError::Read {
-            file: file.clone(),
-            reason: e.to_string(),
-        }
-    })?;
+    let bytes =
+        marchmesh_safeio::read_regular_within(path, MAX_ANCHOR_FILE_BYTES).map_err(|e| {
+            AnchorError::Read {
+                file: file.clone(),
+                reason: e.to_string(),
+            }
+        })?;
     let text = String::from_utf8_lossy(&bytes);
     let anchor = match parse::<Tool>(&file, &text)?.tool.as_str() {
         "anchor-embree" => {

@@ -603,7 +603,13 @@ fn image_written(
     errors: &mut Vec<String>,
 ) {
     if let Err(e) = result {
-        errors.push(format!("{}: {e}", path.display()));
+        let e = e.to_string();
+        // Errors of safeio name the file already.
+        if e.contains(&*path.to_string_lossy()) {
+            errors.push(e);
+        } else {
+            errors.push(format!("{}: {e}", path.display()));
+        }
     }
 }
 
@@ -645,7 +651,11 @@ fn reference_render(
             info.render_ms = Some(o.elapsed.as_secs_f64() * 1e3);
             if let Some(dir) = &options.images_dir {
                 let p = dir.join(format!("{}_{w}x{h}_reference.png", slug(&c.scene)));
-                image_written(image_io::write_png(&o.framebuffer, &p), &p, write_errors);
+                image_written(
+                    images::publish_png(image_io::encode_color(&o.framebuffer, false, &p), &p),
+                    &p,
+                    write_errors,
+                );
             }
             let size = images::visible_scene_size(&l.scene, &o.framebuffer);
             (
@@ -705,7 +715,11 @@ fn prepare(
     let mut write_errors = Vec::new();
     if let Some(dir) = &options.images_dir {
         let p = dir.join(format!("{slug_id}.png"));
-        image_written(image_io::write_png(fb, &p), &p, &mut write_errors);
+        image_written(
+            images::publish_png(image_io::encode_color(fb, false, &p), &p),
+            &p,
+            &mut write_errors,
+        );
     }
     let acc = match truth {
         Some(Ok(truth)) => {
@@ -713,7 +727,7 @@ fn prepare(
             if let Some(dir) = &options.images_dir {
                 let p = dir.join(format!("{slug_id}.diff.png"));
                 image_written(
-                    images::write_diff_png(fb, &truth.fb, &p),
+                    images::publish_png(images::diff_png(fb, &truth.fb), &p),
                     &p,
                     &mut write_errors,
                 );
@@ -848,16 +862,26 @@ impl std::fmt::Display for Shard {
 /// together, so each scene's reference renders and rotation blocks are made once. Scenes go
 /// to shards greedily, most configurations first, each to the shard with the fewest so far
 /// (ties: lowest shard, then suite order). Suite order is kept within a shard.
-pub fn shard(configs: &[Config], shard: Shard) -> Vec<Config> {
+///
+/// Errors: more shards than configurations (checked before anything is allocated per shard).
+pub fn shard(configs: &[Config], shard: Shard) -> Result<Vec<Config>, String> {
+    if shard.count > configs.len() {
+        return Err(format!(
+            "--shard {shard}: {} shards but only {} configurations; N must be at most the number of configurations",
+            shard.count,
+            configs.len()
+        ));
+    }
+    let mut scene_index: HashMap<&Path, usize> = HashMap::new();
     let mut scenes: Vec<(&Path, usize)> = Vec::new();
     for c in configs {
-        match scenes
-            .iter_mut()
-            .find(|(p, _)| *p == c.scene_path.as_path())
-        {
-            Some(s) => s.1 += 1,
-            None => scenes.push((c.scene_path.as_path(), 1)),
-        }
+        let i = *scene_index
+            .entry(c.scene_path.as_path())
+            .or_insert_with(|| {
+                scenes.push((c.scene_path.as_path(), 0));
+                scenes.len() - 1
+            });
+        scenes[i].1 += 1;
     }
     let mut order: Vec<usize> = (0..scenes.len()).collect();
     order.sort_by(|&a, &b| scenes[b].1.cmp(&scenes[a].1).then(a.cmp(&b)));
@@ -872,16 +896,15 @@ pub fn shard(configs: &[Config], shard: Shard) -> Vec<Config> {
         owner[i] = s;
         load[s] += scenes[i].1;
     }
-    configs
+    Ok(configs
         .iter()
         .filter(|c| {
-            scenes
-                .iter()
-                .position(|(p, _)| *p == c.scene_path.as_path())
-                .is_some_and(|i| owner[i] == shard.index - 1)
+            scene_index
+                .get(c.scene_path.as_path())
+                .is_some_and(|&i| owner[i] == shard.index - 1)
         })
         .cloned()
-        .collect()
+        .collect())
 }
 
 #[cfg(test)]
@@ -921,7 +944,7 @@ mod tests {
         }
         for count in 1..=8 {
             let shards: Vec<Vec<Config>> = (1..=count)
-                .map(|index| shard(&configs, Shard { index, count }))
+                .map(|index| shard(&configs, Shard { index, count }).unwrap())
                 .collect();
             let mut seen: Vec<&str> = shards.iter().flatten().map(|c| c.id.as_str()).collect();
             seen.sort_unstable();
@@ -947,14 +970,30 @@ mod tests {
                 assert!(pos.windows(2).all(|w| w[0] < w[1]));
             }
             // Deterministic.
-            assert_eq!(shard(&configs, Shard { index: 1, count }), shards[0]);
+            assert_eq!(
+                shard(&configs, Shard { index: 1, count }).unwrap(),
+                shards[0]
+            );
         }
         // Two shards balance 21 configurations as 11 / 10 (f+b+e... greedily).
         let two: Vec<usize> = (1..=2)
-            .map(|index| shard(&configs, Shard { index, count: 2 }).len())
+            .map(|index| shard(&configs, Shard { index, count: 2 }).unwrap().len())
             .collect();
         assert_eq!(two.iter().sum::<usize>(), 21);
         assert!(two.iter().all(|&n| (10..=11).contains(&n)), "{two:?}");
+    }
+
+    #[test]
+    fn more_shards_than_configurations_are_refused_before_allocating() {
+        let configs = vec![config("a", "sdf"), config("b", "sdf")];
+        for count in [3, 1_000_000_000_000, usize::MAX] {
+            let e = shard(&configs, Shard { index: 1, count }).unwrap_err();
+            assert!(e.contains("only 2 configurations"), "{e}");
+        }
+        assert_eq!(
+            shard(&configs, Shard { index: 2, count: 2 }).unwrap().len(),
+            1
+        );
     }
 
     #[test]

@@ -198,8 +198,34 @@ struct Section {
     body: String,
 }
 
+/// A link to the run's `summary.md`; a run that did not finish (interrupted, killed or with
+/// configurations missing) has none, so it is named and marked incomplete instead.
 fn link(runs: &[Run], run: usize) -> String {
-    format!("[{0}]({0}/summary.md)", runs[run].name)
+    let r = &runs[run];
+    if r.results.is_incomplete() {
+        format!(
+            "{} (incomplete run: {} configurations missing)",
+            crate::report::md_escape(&r.name),
+            r.results.missing.len()
+        )
+    } else {
+        let url: String = r
+            .name
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || "-._~/=,+:".contains(c) {
+                    c.to_string()
+                } else {
+                    let mut b = [0u8; 4];
+                    c.encode_utf8(&mut b)
+                        .bytes()
+                        .map(|x| format!("%{x:02X}"))
+                        .collect()
+                }
+            })
+            .collect();
+        format!("[{}]({url}/summary.md)", crate::report::md_escape(&r.name))
+    }
 }
 
 fn run_links(runs: &[Run], points: &[Point<'_>]) -> String {

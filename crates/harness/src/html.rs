@@ -390,15 +390,9 @@ struct ViewerEntry {
 
 fn viewer_entries(res: &Results, dir: &Path) -> Vec<ViewerEntry> {
     let existing = |rel: String| dir.join(&rel).is_file().then(|| url_path(&rel));
-    let mut order: Vec<(&str, &str)> = Vec::new();
-    for r in &res.rows {
-        if !order.contains(&(r.group.as_str(), r.scene.as_str())) {
-            order.push((r.group.as_str(), r.scene.as_str()));
-        }
-    }
     let mut out = Vec::new();
-    for (g, sc) in order {
-        for r in res.rows.iter().filter(|r| r.group == g && r.scene == sc) {
+    for (_, rows) in crate::report::group_scenes(res) {
+        for r in rows {
             out.push(ViewerEntry {
                 id: r.config_id.clone(),
                 group: r.group.clone(),

@@ -121,12 +121,9 @@ fn ramp(t: f64) -> [u8; 3] {
 
 /// Difference heatmap of `test` against `reference` (same size): magenta where exactly one
 /// of them hits (silhouette error), black where neither hits, otherwise the colour ramp of
-/// the 8-bit colour difference (0 .. 64 levels mapped to the full ramp). Written as PNG.
-pub fn write_diff_png(
-    test: &Framebuffer,
-    reference: &Framebuffer,
-    path: &Path,
-) -> image::ImageResult<()> {
+/// the 8-bit colour difference (0 .. 64 levels mapped to the full ramp), as PNG bytes (the
+/// caller publishes them, see [`publish_png`]).
+pub fn diff_png(test: &Framebuffer, reference: &Framebuffer) -> image::ImageResult<Vec<u8>> {
     let (a, b) = (test.to_rgb8(), reference.to_rgb8());
     let mut img = image::RgbImage::new(test.width, test.height);
     for (i, px) in img.pixels_mut().enumerate() {
@@ -145,7 +142,20 @@ pub fn write_diff_png(
             image::Rgb(ramp(d as f64 / 64.0))
         };
     }
-    img.save(path)
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::Png)?;
+    Ok(bytes.into_inner())
+}
+
+/// Publishes PNG bytes as a new file at `path` ([`marchmesh_safeio::publish_new`]): nothing
+/// existing is overwritten (a symlink neither) and a failed write (a full disk) leaves no
+/// partial file behind. Errors name the file.
+pub fn publish_png(
+    bytes: Result<Vec<u8>, impl std::fmt::Display>,
+    path: &Path,
+) -> Result<(), String> {
+    let bytes = bytes.map_err(|e| format!("cannot encode: {e}"))?;
+    marchmesh_safeio::publish_new(path, &bytes).map_err(|e| e.to_string())
 }
 
 /// The mean colour, for quick sanity checks.

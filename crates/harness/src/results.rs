@@ -338,9 +338,16 @@ pub struct MergedShard {
     pub rows: usize,
 }
 
+/// Largest magnitude of a number [`Results::check_values`] accepts (1e15: a millisecond
+/// count of 30,000 years, a PSNR, error or ray rate far beyond any measurement).
+pub const MAX_RESULT_VALUE: f64 = 1e15;
+
 /// Why results could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ResultsError {
+    /// The file is not a regular file within the read cap, or cannot be read.
+    #[error(transparent)]
+    Read(#[from] marchmesh_safeio::SafeIoError),
     /// File I/O.
     #[error("{file}: {source}")]
     Io {
@@ -377,13 +384,6 @@ pub enum ResultsError {
     },
 }
 
-fn io_err(p: &Path) -> impl Fn(std::io::Error) -> ResultsError + '_ {
-    move |source| ResultsError::Io {
-        file: p.display().to_string(),
-        source,
-    }
-}
-
 impl Results {
     /// Writes `results.json` (pretty) to `path`.
     pub fn write_json(&self, path: &Path) -> Result<(), ResultsError> {
@@ -402,15 +402,150 @@ impl Results {
         })
     }
 
-    /// Reads a `results.json`; errors name the file and the JSON path.
+    /// Reads a `results.json` (a regular file within the `MARCHMESH_MAX_READ_MIB` read cap)
+    /// and checks its numbers ([`Self::check_values`]); errors name the file and the JSON path (the
+    /// row's configuration id for a bad value).
     pub fn read_json(path: &Path) -> Result<Self, ResultsError> {
-        let text = std::fs::read_to_string(path).map_err(io_err(path))?;
-        let de = &mut serde_json::Deserializer::from_str(&text);
-        serde_path_to_error::deserialize(de).map_err(|e| ResultsError::Json {
-            file: path.display().to_string(),
-            path: e.path().to_string(),
-            reason: e.into_inner().to_string(),
-        })
+        let bytes = marchmesh_safeio::read_regular(path)?;
+        let de = &mut serde_json::Deserializer::from_slice(&bytes);
+        let results: Self =
+            serde_path_to_error::deserialize(de).map_err(|e| ResultsError::Json {
+                file: path.display().to_string(),
+                path: e.path().to_string(),
+                reason: e.into_inner().to_string(),
+            })?;
+        results
+            .check_values()
+            .map_err(|(at, reason)| ResultsError::Json {
+                file: path.display().to_string(),
+                path: at,
+                reason,
+            })?;
+        Ok(results)
+    }
+
+    /// A copy whose free text (names, ids, options, notes, errors, provenance, anchors) is
+    /// escaped for Markdown ([`crate::report::md_escape`]), timings re-keyed to the escaped
+    /// ids: what `summary.md` and the findings are written from, so a name cannot add a
+    /// table column, a heading or HTML. Plain names are unchanged.
+    pub fn markdown_safe(&self) -> Results {
+        use crate::report::md_escape;
+        let esc = |s: &mut String| *s = md_escape(s);
+        let mut r = self.clone();
+        for x in [
+            &mut r.run_id,
+            &mut r.suite,
+            &mut r.suite_file,
+            &mut r.description,
+        ] {
+            esc(x);
+        }
+        let p = &mut r.provenance;
+        for x in [
+            &mut p.date_utc,
+            &mut p.cpu_model,
+            &mut p.rustc,
+            &mut p.target,
+            &mut p.profile,
+            &mut p.git_commit,
+            &mut p.version,
+            &mut p.command,
+            &mut p.machine,
+        ] {
+            esc(x);
+        }
+        for row in &mut r.rows {
+            row.map_text_cells(esc);
+        }
+        for f in &mut r.failures {
+            esc(&mut f.config_id);
+            esc(&mut f.error);
+        }
+        for x in r
+            .skipped
+            .iter_mut()
+            .chain(r.missing.iter_mut())
+            .chain(r.write_errors.iter_mut())
+        {
+            esc(x);
+        }
+        for x in &mut r.references {
+            esc(&mut x.scene);
+            if let Some(e) = &mut x.error {
+                esc(e);
+            }
+        }
+        r.timings = std::mem::take(&mut r.timings)
+            .into_iter()
+            .map(|(k, v)| (md_escape(&k), v))
+            .collect();
+        r.steps_histograms = std::mem::take(&mut r.steps_histograms)
+            .into_iter()
+            .map(|(k, v)| (md_escape(&k), v))
+            .collect();
+        for a in &mut r.anchors {
+            for x in [
+                &mut a.tool,
+                &mut a.version,
+                &mut a.backend,
+                &mut a.file,
+                &mut a.date_utc,
+                &mut a.load_average_start,
+                &mut a.load_average_end,
+            ] {
+                esc(x);
+            }
+            for e in &mut a.entries {
+                esc(&mut e.subject);
+                esc(&mut e.tracer);
+                esc(&mut e.unit);
+            }
+        }
+        r
+    }
+
+    /// Whether the run did not finish: interrupted, killed (its last checkpoint says
+    /// interrupted) or with configurations missing.
+    pub fn is_incomplete(&self) -> bool {
+        self.interrupted || !self.missing.is_empty()
+    }
+
+    /// Refuses numbers no measurement produces, which would otherwise make reports hang on a
+    /// plot axis of 300 decades or print `NaNx`: every float must be finite with a magnitude of
+    /// at most [`MAX_RESULT_VALUE`], and times (ms) must not be negative. Returns the JSON
+    /// path (naming the row's configuration id) and the reason.
+    pub fn check_values(&self) -> Result<(), (String, String)> {
+        let bad =
+            |x: f64, time: bool| !x.is_finite() || x.abs() > MAX_RESULT_VALUE || (time && x < 0.0);
+        let reason = |what: &str, x: f64| {
+            format!(
+                "{what} = {x} is not a measurement (finite, at most {MAX_RESULT_VALUE:e} in magnitude, times not negative)"
+            )
+        };
+        for (i, r) in self.rows.iter().enumerate() {
+            let at = |field: &str| format!("rows[{i}] ({}).{field}", r.config_id);
+            let value = serde_json::to_value(r).map_err(|e| (at(""), e.to_string()))?;
+            if let serde_json::Value::Object(map) = value {
+                for (k, v) in &map {
+                    if let Some(x) = v.as_f64() {
+                        let time = k.contains("_ms");
+                        if bad(x, time) {
+                            return Err((at(k), reason(k, x)));
+                        }
+                    }
+                }
+            }
+        }
+        for (id, samples) in &self.timings {
+            for (j, t) in samples.iter().enumerate() {
+                for (name, x) in [("wall_ms", Some(t.wall_ms)), ("cpu_ms", t.cpu_ms)] {
+                    if let Some(x) = x.filter(|&x| bad(x, true)) {
+                        return Err((format!("timings.{id}[{j}].{name}"), reason(name, x)));
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Writes the rows as `results.csv` (header = [`Row`] field names).
@@ -424,7 +559,13 @@ impl Results {
             w.write_record(csv_header()).map_err(err)?;
         }
         for r in &self.rows {
-            w.serialize(r).map_err(err)?;
+            let mut r = r.clone();
+            r.map_text_cells(|cell| {
+                if cell.starts_with(CSV_FORMULA_STARTS) {
+                    cell.insert(0, '\'');
+                }
+            });
+            w.serialize(&r).map_err(err)?;
         }
         let bytes = w.into_inner().map_err(|e| ResultsError::Csv {
             file: path.display().to_string(),
@@ -453,14 +594,51 @@ pub fn csv_header() -> Vec<String> {
         .collect()
 }
 
-/// Reads the rows of a `results.csv` back.
+/// First characters that make a spreadsheet read a cell as a formula (`=`, `+`, `-`, `@`,
+/// tab, carriage return): [`Results::write_csv`] writes such text cells with a leading `'`,
+/// which [`read_csv`] removes again.
+pub const CSV_FORMULA_STARTS: [char; 6] = ['=', '+', '-', '@', '\t', '\r'];
+
+impl Row {
+    /// Applies `f` to every text cell (ids, names, options, notes).
+    fn map_text_cells(&mut self, mut f: impl FnMut(&mut String)) {
+        for cell in [
+            &mut self.config_id,
+            &mut self.group,
+            &mut self.scene,
+            &mut self.scene_file,
+            &mut self.backend,
+            &mut self.quality,
+            &mut self.options,
+            &mut self.machine,
+            &mut self.build_phases_ms,
+            &mut self.notes,
+        ] {
+            f(cell);
+        }
+    }
+}
+
+/// Reads the rows of a `results.csv` back (a regular file within the read cap; text cells
+/// neutralised by [`Results::write_csv`] come back as they were).
 pub fn read_csv(path: &Path) -> Result<Vec<Row>, ResultsError> {
     let err = |e: csv::Error| ResultsError::Csv {
         file: path.display().to_string(),
         reason: e.to_string(),
     };
-    let mut r = csv::Reader::from_path(path).map_err(err)?;
-    r.deserialize().map(|row| row.map_err(err)).collect()
+    let bytes = marchmesh_safeio::read_regular(path)?;
+    let mut r = csv::Reader::from_reader(&bytes[..]);
+    r.deserialize::<Row>()
+        .map(|row| {
+            let mut row = row.map_err(err)?;
+            row.map_text_cells(|cell| {
+                if cell.starts_with('\'') && cell[1..].starts_with(CSV_FORMULA_STARTS) {
+                    cell.remove(0);
+                }
+            });
+            Ok(row)
+        })
+        .collect()
 }
 
 /// Date `days` after 1970-01-01 as (year, month, day) (Howard Hinnant's civil_from_days).

@@ -222,6 +222,9 @@ pub enum SuiteError {
         /// The I/O error.
         source: std::io::Error,
     },
+    /// The file is not a regular file within the read cap.
+    #[error(transparent)]
+    Read(#[from] marchmesh_safeio::SafeIoError),
     /// The JSON does not match the format.
     #[error("{file}: at {path}: {reason}")]
     Format {
@@ -232,6 +235,146 @@ pub enum SuiteError {
         /// What is wrong.
         reason: String,
     },
+}
+
+/// Largest suite file [`load`] reads: 16 MiB (the shipped suites are a few KiB).
+pub const MAX_SUITE_FILE_BYTES: u64 = 16 << 20;
+
+/// Most configurations a suite may expand to (scenes x resolutions x backends x threads over
+/// all groups): 100,000, a month of benchmarking at the shipped suites' pace. A suite over it
+/// is refused at load, before anything is expanded.
+pub const MAX_CONFIGURATIONS: u64 = 100_000;
+
+/// The JSON paths of values the suite format reads as objects that are arrays instead
+/// (serde would read an array as the object's fields in order): the top level, each group,
+/// its backends, resolutions, scene entries, repeat policies and render settings.
+fn arrays_for_objects(v: &serde_json::Value) -> Option<String> {
+    use serde_json::Value;
+    let is_array = |v: Option<&Value>| matches!(v, Some(Value::Array(_)));
+    let Value::Object(top) = v else {
+        return Some(".".into());
+    };
+    for key in ["repeats", "quick_repeats"] {
+        if is_array(top.get(key)) {
+            return Some(key.into());
+        }
+    }
+    let Some(Value::Array(groups)) = top.get("groups") else {
+        return None;
+    };
+    for (gi, g) in groups.iter().enumerate() {
+        let Value::Object(g) = g else {
+            return Some(format!("groups[{gi}]"));
+        };
+        for key in ["repeats", "truth"] {
+            if is_array(g.get(key)) {
+                return Some(format!("groups[{gi}].{key}"));
+            }
+        }
+        for list in ["backends", "resolutions"] {
+            if let Some(Value::Array(items)) = g.get(list) {
+                for (i, item) in items.iter().enumerate() {
+                    if !item.is_object() {
+                        return Some(format!("groups[{gi}].{list}[{i}]"));
+                    }
+                    if is_array(item.get("render")) {
+                        return Some(format!("groups[{gi}].{list}[{i}].render"));
+                    }
+                }
+            }
+        }
+        if let Some(Value::Array(items)) = g.get("scenes") {
+            for (i, item) in items.iter().enumerate() {
+                if item.is_array() {
+                    return Some(format!("groups[{gi}].scenes[{i}]"));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Refuses what would make two configurations, plots or images share a name: a scene name
+/// standing for two files, two backends of a group with one `backend:label`, and distinct
+/// ids, plot names or reference image names whose file-name forms
+/// ([`crate::bench::slug`]) are equal (labels `q a` and `q_a`). Returns the JSON path and
+/// the reason.
+fn check_unique_names(groups: &[ResolvedGroup]) -> Result<(), (String, String)> {
+    use crate::bench::slug;
+    use std::collections::HashMap;
+    let mut scene_files: HashMap<&str, &Path> = HashMap::new();
+    let mut scene_slugs: HashMap<String, &str> = HashMap::new();
+    let mut plot_slugs: HashMap<String, (&str, &str)> = HashMap::new();
+    let mut id_slugs: HashMap<String, String> = HashMap::new();
+    for (gi, g) in groups.iter().enumerate() {
+        let gp = format!("groups[{gi}]");
+        for (name, path) in &g.scenes {
+            if let Some(other) = scene_files.insert(name, path)
+                && other != path
+            {
+                return Err((
+                    format!("{gp}.scenes"),
+                    format!(
+                        "the scene name `{name}` stands for both {} and {}: give one a distinct `name`",
+                        other.display(),
+                        path.display()
+                    ),
+                ));
+            }
+            if let Some(other) = scene_slugs.insert(slug(name), name)
+                && other != name
+            {
+                return Err((
+                    format!("{gp}.scenes"),
+                    format!(
+                        "the scene names `{other}` and `{name}` share the image file name `{}`: rename one",
+                        slug(name)
+                    ),
+                ));
+            }
+            if let Some(&(og, os)) = plot_slugs.get(&format!("{}_{}", slug(&g.name), slug(name)))
+                && (og, os) != (g.name.as_str(), name.as_str())
+            {
+                return Err((
+                    format!("{gp}.scenes"),
+                    format!(
+                        "`{og}/{os}` and `{}/{name}` share a plot file name: rename a group or scene",
+                        g.name
+                    ),
+                ));
+            }
+            plot_slugs.insert(format!("{}_{}", slug(&g.name), slug(name)), (&g.name, name));
+        }
+        let mut labels: HashMap<String, usize> = HashMap::new();
+        for (bi, b) in g.backends.iter().enumerate() {
+            let id = format!("{}:{}", b.spec.kind.name(), b.label);
+            if let Some(first) = labels.insert(id.clone(), bi) {
+                return Err((
+                    format!("{gp}.backends[{bi}].label"),
+                    format!("`{id}` is also backends[{first}]: give each a distinct `label`"),
+                ));
+            }
+        }
+        for (name, _) in &g.scenes {
+            for b in &g.backends {
+                // Thread counts are numbers and resolution tags are made of safe characters:
+                // the ids without them decide whether two file names collide.
+                let id = format!("{}/{name}/{}:{}", g.name, b.spec.kind.name(), b.label);
+                if let Some(other) = id_slugs.insert(slug(&id), id.clone())
+                    && other != id
+                {
+                    return Err((
+                        format!("{gp}.backends"),
+                        format!(
+                            "configurations `{other}` and `{id}` share the image file name `{}`: rename a label, scene or group",
+                            slug(&id)
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The label of a backend entry: its own, else its options joined with `,`, else `default`.
@@ -298,6 +441,11 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
         path,
         reason,
     };
+    if let Ok(value) = serde_json::from_str::<serde_json::Value>(text)
+        && let Some(at) = arrays_for_objects(&value)
+    {
+        return Err(fmt_err(at, "expected a JSON object, found an array".into()));
+    }
     let de = &mut serde_json::Deserializer::from_str(text);
     let raw: SuiteFile = serde_path_to_error::deserialize(de).map_err(|e| {
         let path = e.path().to_string();
@@ -371,6 +519,21 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                     .unwrap_or_default();
                 let display = name.clone().unwrap_or(stem);
                 if !path.is_file() {
+                    if path.is_dir() {
+                        return Err(fmt_err(
+                            sp.clone(),
+                            format!("{} is a folder, not a scene file", path.display()),
+                        ));
+                    }
+                    if path.exists() {
+                        return Err(fmt_err(
+                            sp.clone(),
+                            format!(
+                                "{} is not a regular file (a device, FIFO or socket)",
+                                path.display()
+                            ),
+                        ));
+                    }
                     if optional {
                         skipped.push(format!(
                             "{}/{display}: {} is absent (optional scene; skipped)",
@@ -385,8 +548,8 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
                     ));
                 }
                 if optional
-                    && let Ok(text) = std::fs::read_to_string(&path)
-                    && let Some(missing) = missing_mesh(&text, &path)
+                    && let Ok(bytes) = marchmesh_safeio::read_regular(&path)
+                    && let Some(missing) = missing_mesh(&String::from_utf8_lossy(&bytes), &path)
                 {
                     skipped.push(format!(
                         "{}/{display}: mesh {} is absent (optional scene; skipped; scripts/fetch_dragon.sh fetches the full dragon)",
@@ -476,6 +639,27 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
             repeats: g.repeats,
         });
     }
+    let mut total: u64 = 0;
+    for (gi, g) in groups.iter().enumerate() {
+        let n = [
+            g.scenes.len(),
+            g.resolutions.len(),
+            g.backends.len(),
+            g.threads.len(),
+        ]
+        .iter()
+        .try_fold(1u64, |acc, &k| acc.checked_mul(k as u64));
+        total = n.and_then(|n| total.checked_add(n)).unwrap_or(u64::MAX);
+        if total > MAX_CONFIGURATIONS {
+            return Err(fmt_err(
+                format!("groups[{gi}]"),
+                format!(
+                    "the suite expands to more than {MAX_CONFIGURATIONS} configurations (scenes x resolutions x backends x threads); split it"
+                ),
+            ));
+        }
+    }
+    check_unique_names(&groups).map_err(|(at, reason)| fmt_err(at, reason))?;
     Ok(Suite {
         name,
         path: file.to_path_buf(),
@@ -513,23 +697,33 @@ fn missing_mesh(text: &str, scene_path: &Path) -> Option<PathBuf> {
     walk(&v, base)
 }
 
-/// Loads and validates a suite file.
+/// Loads and validates a suite file: a regular file within the `MARCHMESH_MAX_READ_MIB` read
+/// cap (a FIFO or device is refused without blocking), at most [`MAX_SUITE_FILE_BYTES`].
 pub fn load(path: &Path) -> Result<Suite, SuiteError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SuiteError::Io {
+    let bytes = marchmesh_safeio::read_regular_within(path, MAX_SUITE_FILE_BYTES)?;
+    let text = String::from_utf8(bytes).map_err(|e| SuiteError::Format {
         file: path.to_path_buf(),
-        source,
+        path: ".".into(),
+        reason: format!("not UTF-8 text: {e}"),
     })?;
     parse(&text, path)
 }
 
-/// Finds a suite by name (`scenes/suites/NAME.json` under `root`) or takes it as a path.
-pub fn locate(name_or_path: &str, root: &Path) -> PathBuf {
+/// Finds a suite by name (`scenes/suites/NAME.json` under the folder `root` returns, called
+/// only for a name) or takes it as a path (it has an extension or a folder part).
+///
+/// Errors: those of `root`.
+pub fn locate<E>(
+    name_or_path: &str,
+    root: impl FnOnce() -> Result<PathBuf, E>,
+) -> Result<PathBuf, E> {
     let p = PathBuf::from(name_or_path);
     if p.extension().is_some() || p.components().count() > 1 {
-        p
+        Ok(p)
     } else {
-        root.join("scenes/suites")
-            .join(format!("{name_or_path}.json"))
+        Ok(root()?
+            .join("scenes/suites")
+            .join(format!("{name_or_path}.json")))
     }
 }
 

@@ -236,13 +236,24 @@ pub fn setting(r: &Row) -> SettingKey {
     )
 }
 
-/// The distinct settings of `rows` in first-appearance order.
+/// The distinct settings of `rows` in first-appearance order (linear time).
 pub fn settings<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Vec<SettingKey> {
-    let mut out: Vec<SettingKey> = Vec::new();
+    by_setting(rows).into_iter().map(|(k, _)| k).collect()
+}
+
+/// The rows of each distinct setting, settings in first-appearance order and rows in their
+/// order (linear time: one hash lookup per row).
+pub fn by_setting<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Vec<(SettingKey, Vec<&'a Row>)> {
+    let mut index: std::collections::HashMap<SettingKey, usize> = Default::default();
+    let mut out: Vec<(SettingKey, Vec<&'a Row>)> = Vec::new();
     for r in rows {
         let k = setting(r);
-        if !out.contains(&k) {
-            out.push(k);
+        match index.get(&k) {
+            Some(&i) => out[i].1.push(r),
+            None => {
+                index.insert(k.clone(), out.len());
+                out.push((k, vec![r]));
+            }
         }
     }
     out
@@ -260,9 +271,10 @@ pub fn setting_name(k: &SettingKey, with_machine: bool) -> String {
 
 /// The backends of `rows` in first-appearance order.
 pub fn backends<'a>(rows: impl IntoIterator<Item = &'a Row>) -> Vec<String> {
+    let mut seen: std::collections::HashSet<&'a str> = Default::default();
     let mut out: Vec<String> = Vec::new();
     for r in rows {
-        if !out.contains(&r.backend) {
+        if seen.insert(r.backend.as_str()) {
             out.push(r.backend.clone());
         }
     }
@@ -351,8 +363,7 @@ pub fn headlines(rows: &[Row], min_psnr: f64, timing: Timing<'_>) -> Vec<Headlin
     let machines: std::collections::BTreeSet<&str> =
         rows.iter().map(|r| r.machine.as_str()).collect();
     let mut out = Vec::new();
-    for k in settings(rows) {
-        let set: Vec<&Row> = rows.iter().filter(|r| setting(r) == k).collect();
+    for (k, set) in by_setting(rows) {
         if set.iter().all(|r| r.psnr_db.is_none()) {
             continue;
         }
@@ -404,11 +415,52 @@ pub fn matched_accuracy(rows: &[&Row], timing: Timing<'_>) -> Vec<(f64, Result<C
         .collect();
     targets.sort_by(f64::total_cmp);
     targets.dedup_by(|a, b| (*a - *b).abs() < PSNR_TARGET_STEP_DB / 2.0);
+    // Per backend, its rows by PSNR from the highest down with the fastest row so far: the
+    // fastest row reaching a target is the entry of the last row still reaching it, found
+    // by binary search (n log n over all targets instead of n per target).
+    let time = |r: &Row| timing.clock.median_ms(r);
+    let ladders: Vec<(String, Vec<(f64, &Row)>)> = backends(rows.iter().copied())
+        .into_iter()
+        .map(|b| {
+            let mut own: Vec<(usize, &Row)> = rows
+                .iter()
+                .copied()
+                .enumerate()
+                .filter(|(_, r)| r.backend == b && r.psnr_db.is_some())
+                .collect();
+            own.sort_by(|x, y| {
+                let p = |r: &Row| r.psnr_db.unwrap_or(0.0);
+                p(y.1).total_cmp(&p(x.1))
+            });
+            // Ties in time go to the earlier row, as `fastest_per_backend` does.
+            let mut ladder: Vec<(f64, &Row)> = Vec::with_capacity(own.len());
+            let mut fastest: Option<(usize, &Row)> = None;
+            for (i, r) in own {
+                fastest = match fastest {
+                    Some((j, f)) if time(f).total_cmp(&time(r)).then(j.cmp(&i)).is_le() => {
+                        Some((j, f))
+                    }
+                    _ => Some((i, r)),
+                };
+                if let Some((_, f)) = fastest {
+                    ladder.push((r.psnr_db.unwrap_or(0.0), f));
+                }
+            }
+            (b, ladder)
+        })
+        .collect();
     targets
         .into_iter()
         .filter_map(|q| {
-            // A row reaches `q` when its PSNR rounds to `q` or above.
-            let best = fastest_per_backend(rows, q - PSNR_TARGET_STEP_DB / 2.0, timing);
+            let best: Vec<(String, Option<&Row>)> = ladders
+                .iter()
+                .map(|(b, ladder)| {
+                    // A row reaches `q` when its PSNR rounds to `q` or above.
+                    let reaching =
+                        ladder.partition_point(|(p, _)| *p >= q - PSNR_TARGET_STEP_DB / 2.0);
+                    (b.clone(), reaching.checked_sub(1).map(|i| ladder[i].1))
+                })
+                .collect();
             match winner_and_runner_up(&best, timing) {
                 Some(c) => Some((q, Ok(c))),
                 None => best
@@ -464,8 +516,12 @@ pub fn compare_runs(a: &Results, b: &Results, min_psnr: f64) -> Vec<VerdictAgree
     let strip = |k: &SettingKey| (k.0.clone(), k.1.clone(), k.2, k.3, k.4);
     let mut out = Vec::new();
     let hb = headlines(&b.rows, min_psnr, tb);
+    let mut hb_index: std::collections::HashMap<_, usize> = Default::default();
+    for (i, y) in hb.iter().enumerate() {
+        hb_index.entry(strip(&y.setting)).or_insert(i);
+    }
     for x in headlines(&a.rows, min_psnr, ta) {
-        let Some(y) = hb.iter().find(|y| strip(&y.setting) == strip(&x.setting)) else {
+        let Some(y) = hb_index.get(&strip(&x.setting)).map(|&i| &hb[i]) else {
             continue;
         };
         if let (Some(ca), Some(cb)) = (&x.contest, &y.contest) {
@@ -476,25 +532,21 @@ pub fn compare_runs(a: &Results, b: &Results, min_psnr: f64) -> Vec<VerdictAgree
             ));
         }
     }
-    for ka in settings(&a.rows) {
-        let Some(kb) = settings(&b.rows)
-            .into_iter()
-            .find(|k| strip(k) == strip(&ka))
-        else {
+    let sets_b = by_setting(&b.rows);
+    let mut first_b: std::collections::HashMap<_, usize> = Default::default();
+    for (i, (k, _)) in sets_b.iter().enumerate() {
+        first_b.entry(strip(k)).or_insert(i);
+    }
+    for (ka, sa) in by_setting(&a.rows) {
+        let Some(&ib) = first_b.get(&strip(&ka)) else {
             continue;
         };
-        let set = |res: &'_ Results, k: &SettingKey| -> Vec<Row> {
-            res.rows
-                .iter()
-                .filter(|r| &setting(r) == k)
-                .cloned()
-                .collect()
-        };
-        let (sa, sb) = (set(a, &ka), set(b, &kb));
-        let ma = matched_accuracy(&sa.iter().collect::<Vec<_>>(), ta);
-        let mb = matched_accuracy(&sb.iter().collect::<Vec<_>>(), tb);
+        let ma = matched_accuracy(&sa, ta);
+        let mb = matched_accuracy(&sets_b[ib].1, tb);
         for (q, ca) in &ma {
-            let Some((_, cb)) = mb.iter().find(|(p, _)| (p - q).abs() < 1e-9) else {
+            // mb is sorted by target: the nearest target by binary search.
+            let at = mb.partition_point(|(p, _)| *p < q - 1e-9);
+            let Some((_, cb)) = mb.get(at).filter(|(p, _)| (p - q).abs() < 1e-9) else {
                 continue;
             };
             if let (Ok(ca), Ok(cb)) = (ca, cb) {

@@ -49,6 +49,7 @@ pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
     let scene = document
         .default_scene()
         .or_else(|| document.scenes().next());
+    check_node_tree(path, &document, scene.as_ref())?;
     let read = catch_unwind(AssertUnwindSafe(|| -> Result<(), MeshLoadError> {
         match scene {
             Some(scene) => {
@@ -104,7 +105,10 @@ fn load_buffers(
     document: &gltf::Document,
     mut blob: Option<Vec<u8>>,
 ) -> Result<Vec<Vec<u8>>, MeshLoadError> {
-    let cap = marchmesh_safeio::read_cap_bytes();
+    let cap = marchmesh_safeio::read_cap_bytes().map_err(|e| MeshLoadError::Unreadable {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
     let folder = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -221,10 +225,39 @@ fn check_accessors(
         }
     }
     for accessor in document.accessors() {
+        if accessor.sparse().is_some() {
+            return Err(malformed(
+                path,
+                format!(
+                    "accessor {} is sparse ({} elements): sparse accessors are not supported",
+                    accessor.index(),
+                    accessor.count()
+                ),
+            ));
+        }
         let Some(view) = accessor.view() else {
-            continue;
+            return Err(malformed(
+                path,
+                format!(
+                    "accessor {} has no buffer view ({} elements): not supported",
+                    accessor.index(),
+                    accessor.count()
+                ),
+            ));
         };
         let element = accessor.size();
+        if let Some(stride) = view.stride()
+            && stride < element
+        {
+            return Err(malformed(
+                path,
+                format!(
+                    "buffer view {} has byteStride {stride}, smaller than the {element}-byte elements of accessor {}",
+                    view.index(),
+                    accessor.index()
+                ),
+            ));
+        }
         let stride = view.stride().unwrap_or(element);
         let span = accessor
             .count()
@@ -279,6 +312,52 @@ fn check_accessors(
                     ));
                 }
             }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that the node graph is a tree (glTF 2.0, section 3.5.3): no node is the child of two
+/// parents or twice of one, and the scene lists each root once and no child as a root. Each
+/// node is then visited at most once, so a 1 KB file cannot expand to 2^N instances.
+fn check_node_tree(
+    path: &Path,
+    document: &gltf::Document,
+    scene: Option<&gltf::Scene>,
+) -> Result<(), MeshLoadError> {
+    let mut has_parent = vec![false; document.nodes().len()];
+    for node in document.nodes() {
+        for child in node.children() {
+            let seen = has_parent.get_mut(child.index()).ok_or_else(|| {
+                malformed(path, format!("node {} has a missing child", node.index()))
+            })?;
+            if *seen {
+                return Err(malformed(
+                    path,
+                    format!(
+                        "node {} is listed as a child more than once (node {} lists it): glTF node graphs must be trees",
+                        child.index(),
+                        node.index()
+                    ),
+                ));
+            }
+            *seen = true;
+        }
+    }
+    if let Some(scene) = scene {
+        let mut is_root = vec![false; has_parent.len()];
+        for root in scene.nodes() {
+            let i = root.index();
+            if has_parent.get(i).copied().unwrap_or(true) || is_root[i] {
+                return Err(malformed(
+                    path,
+                    format!(
+                        "scene {} lists node {i} more than once or also as a child: glTF node graphs must be trees",
+                        scene.index()
+                    ),
+                ));
+            }
+            is_root[i] = true;
         }
     }
     Ok(())

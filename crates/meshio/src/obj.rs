@@ -7,9 +7,54 @@ use glam::Vec3;
 
 use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh};
 
+/// Most vertices one OBJ face may have. A polygon becomes a fan of `n - 2` triangles sharing
+/// one vertex; a fan of 100,000 slivers makes every backend's build crawl, and real meshes'
+/// polygons have a handful of vertices (a cylinder cap a few hundred).
+pub const MAX_OBJ_FACE_VERTICES: usize = 4096;
+
+/// Refuses a face (`f` line, with `\` continuations) of more than [`MAX_OBJ_FACE_VERTICES`]
+/// vertices, in one linear pass before parsing.
+fn check_face_sizes(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
+    let mut line_no = 0usize;
+    let mut in_face = false;
+    let mut vertices = 0usize;
+    for line in bytes.split(|&b| b == b'\n') {
+        line_no += 1;
+        let mut tokens = line
+            .split(|b| b.is_ascii_whitespace())
+            .filter(|t| !t.is_empty());
+        if !in_face {
+            if tokens.next() != Some(b"f".as_slice()) {
+                continue;
+            }
+            vertices = 0;
+        }
+        let mut continued = false;
+        for t in tokens {
+            if t == b"\\" {
+                continued = true;
+            } else {
+                vertices += 1;
+            }
+        }
+        in_face = continued;
+        if vertices > MAX_OBJ_FACE_VERTICES {
+            return Err(MeshLoadError::Malformed {
+                path: path.to_path_buf(),
+                format: "OBJ",
+                reason: format!(
+                    "line {line_no}: a face of more than {MAX_OBJ_FACE_VERTICES} vertices"
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Reads every model of an OBJ file (materials ignored) into one raw mesh.
 pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
     let bytes = crate::read_file(path)?;
+    check_face_sizes(path, &bytes)?;
     let mut reader = BufReader::new(&bytes[..]);
     let options = tobj::LoadOptions {
         single_index: true,

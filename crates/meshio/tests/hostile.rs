@@ -185,3 +185,109 @@ fn item15_buffers_shorter_than_their_views_are_refused() {
         .to_string();
     assert!(msg.contains("buffer view 0 ends at byte 36"), "{msg}");
 }
+
+/// A glTF of `n` nodes where every node lists the next one as a child twice (before the fix
+/// this expanded to 2^n instances).
+fn doubled_children_gltf(n: usize) -> String {
+    let nodes: Vec<String> = (0..n)
+        .map(|i| {
+            if i + 1 < n {
+                format!(r#"{{"children": [{0}, {0}]}}"#, i + 1)
+            } else {
+                r#"{"mesh": 0}"#.to_string()
+            }
+        })
+        .collect();
+    format!(
+        r#"{{
+      "asset": {{"version": "2.0"}},
+      "scene": 0,
+      "scenes": [{{"nodes": [0]}}],
+      "nodes": [{}],
+      "meshes": [{{"primitives": [{{"attributes": {{"POSITION": 0}}}}]}}],
+      "accessors": [{{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                     "min": [0, 0, 0], "max": [1, 1, 0]}}],
+      "bufferViews": [{{"buffer": 0, "byteLength": 36}}],
+      "buffers": [{{"byteLength": 36, "uri": {:?}}}]
+    }}"#,
+        nodes.join(","),
+        data_uri(&triangle_bytes())
+    )
+}
+
+#[test]
+fn gltf_node_graphs_must_be_trees() {
+    let dir = scratch();
+    let msg = load_mesh(&write_gltf(&dir, &doubled_children_gltf(40)))
+        .expect_err("a node listed twice as a child")
+        .to_string();
+    assert!(
+        msg.contains("model.gltf") && msg.contains("more than once") && msg.contains("trees"),
+        "{msg}"
+    );
+    // A root listed many times in the scene is refused the same way.
+    let json = doubled_children_gltf(1).replace(
+        r#""scenes": [{"nodes": [0]}]"#,
+        &format!(
+            r#""scenes": [{{"nodes": [{}]}}]"#,
+            vec!["0"; 100_000].join(",")
+        ),
+    );
+    let msg = load_mesh(&write_gltf(&dir, &json))
+        .expect_err("a root listed 100000 times")
+        .to_string();
+    assert!(msg.contains("more than once"), "{msg}");
+    // The plain tree still loads.
+    let mesh = load_mesh(&write_gltf(&dir, &doubled_children_gltf(1))).expect("one node");
+    assert_eq!(mesh.triangles.len(), 1);
+}
+
+#[test]
+fn gltf_strides_smaller_than_an_element_and_sparse_accessors_are_clear_errors() {
+    let dir = scratch();
+    let stride = gltf_json(&data_uri(&triangle_bytes()), 36, "VEC3", 5126).replace(
+        r#""byteLength": 36}],"#,
+        r#""byteLength": 36, "byteStride": 4}],"#,
+    );
+    assert!(stride.contains("byteStride"));
+    let msg = load_mesh(&write_gltf(&dir, &stride))
+        .expect_err("stride 4")
+        .to_string();
+    assert!(msg.contains("byteStride 4"), "{msg}");
+    let sparse = gltf_json(&data_uri(&triangle_bytes()), 36, "VEC3", 5126).replace(
+        r#""count": 3,"#,
+        r#""count": 1000000000, "sparse": {"count": 1, "indices": {"bufferView": 0, "componentType": 5125}, "values": {"bufferView": 0}},"#,
+    );
+    let sparse = sparse.replace(
+        r#""bufferView": 0, "componentType": 5126"#,
+        r#""componentType": 5126"#,
+    );
+    let msg = load_mesh(&write_gltf(&dir, &sparse))
+        .expect_err("sparse")
+        .to_string();
+    assert!(msg.contains("sparse"), "{msg}");
+    assert!(!msg.contains("no POSITION"), "{msg}");
+}
+
+#[test]
+fn obj_faces_beyond_the_vertex_cap_are_refused_in_linear_time() {
+    let dir = scratch();
+    let n = 100_000;
+    let mut obj = String::new();
+    for i in 0..n {
+        let a = i as f64 / n as f64 * std::f64::consts::TAU;
+        obj.push_str(&format!("v {} {} 0\n", a.cos(), a.sin()));
+    }
+    obj.push('f');
+    for i in 1..=n {
+        obj.push_str(&format!(" {i}"));
+    }
+    obj.push('\n');
+    let p = dir.join("big.obj");
+    std::fs::write(&p, obj).expect("write obj");
+    let msg = load_mesh(&p).expect_err("huge face").to_string();
+    assert!(
+        msg.contains("big.obj") && msg.contains("line 100001") && msg.contains("4096"),
+        "{msg}"
+    );
+}

@@ -51,6 +51,12 @@ pub enum SafeIoError {
         /// The cap in bytes.
         cap_bytes: u64,
     },
+    /// [`READ_CAP_ENV`] is set but is not a positive integer.
+    #[error("{READ_CAP_ENV}={value:?}: must be a positive whole number of MiB")]
+    BadReadCap {
+        /// The value found.
+        value: String,
+    },
     /// The target already exists (or was created by a concurrent writer) and overwriting
     /// was not allowed.
     #[error("{}: already exists (nothing was overwritten)", path.display())]
@@ -60,14 +66,80 @@ pub enum SafeIoError {
     },
 }
 
-/// The read cap in bytes: [`READ_CAP_ENV`] in MiB if set to a positive integer, else
-/// [`DEFAULT_READ_CAP_BYTES`].
-pub fn read_cap_bytes() -> u64 {
-    std::env::var(READ_CAP_ENV)
-        .ok()
-        .and_then(|v| v.trim().parse::<u64>().ok())
-        .filter(|&mib| mib > 0)
-        .map_or(DEFAULT_READ_CAP_BYTES, |mib| mib.saturating_mul(1 << 20))
+/// The read cap in bytes: [`READ_CAP_ENV`] in MiB if set, else [`DEFAULT_READ_CAP_BYTES`].
+///
+/// Errors: [`SafeIoError::BadReadCap`] when the variable is set but is not a positive
+/// integer (`0`, `-5`, `abc`): a mistyped limit is an error, never silently the default.
+pub fn read_cap_bytes() -> Result<u64, SafeIoError> {
+    match std::env::var(READ_CAP_ENV) {
+        Err(std::env::VarError::NotPresent) => Ok(DEFAULT_READ_CAP_BYTES),
+        Err(std::env::VarError::NotUnicode(v)) => Err(SafeIoError::BadReadCap {
+            value: v.to_string_lossy().into_owned(),
+        }),
+        Ok(v) => match v.trim().parse::<u64>() {
+            Ok(mib) if mib > 0 => Ok(mib.saturating_mul(1 << 20)),
+            _ => Err(SafeIoError::BadReadCap { value: v }),
+        },
+    }
+}
+
+/// `O_NONBLOCK`: opening a FIFO for reading does not wait for a writer (the type check
+/// after the open then refuses it).
+#[cfg(any(target_os = "linux", target_os = "android"))]
+const O_NONBLOCK: i32 = 0o4000;
+#[cfg(all(unix, not(any(target_os = "linux", target_os = "android"))))]
+const O_NONBLOCK: i32 = 0x0004;
+
+fn not_regular(path: &Path, meta: &std::fs::Metadata) -> SafeIoError {
+    SafeIoError::NotRegularFile {
+        path: path.to_path_buf(),
+        kind: if meta.is_dir() {
+            "folder"
+        } else {
+            "device, FIFO or socket"
+        },
+    }
+}
+
+/// Opens a regular file of at most `cap_bytes` bytes for reading (symlinks are followed)
+/// without ever blocking: the type is checked on the path before the open, the open does not
+/// wait (a FIFO swapped in meanwhile opens at once), and the type and size are checked again
+/// on the open handle. Returns the handle and its length in bytes.
+///
+/// Errors: [`SafeIoError::NotRegularFile`] for a folder, device, FIFO or socket,
+/// [`SafeIoError::TooLarge`] over the cap, or the OS error naming the file.
+pub fn open_regular(path: &Path, cap_bytes: u64) -> Result<(File, u64), SafeIoError> {
+    let io = |action| {
+        let path = path.to_path_buf();
+        move |source| SafeIoError::Io {
+            path,
+            action,
+            source,
+        }
+    };
+    let meta = std::fs::metadata(path).map_err(io("cannot open"))?;
+    if !meta.is_file() {
+        return Err(not_regular(path, &meta));
+    }
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(O_NONBLOCK);
+    }
+    let file = options.open(path).map_err(io("cannot open"))?;
+    let meta = file.metadata().map_err(io("cannot stat"))?;
+    if !meta.is_file() {
+        return Err(not_regular(path, &meta));
+    }
+    if meta.len() > cap_bytes {
+        return Err(SafeIoError::TooLarge {
+            path: path.to_path_buf(),
+            cap_bytes,
+        });
+    }
+    Ok((file, meta.len()))
 }
 
 /// Reads the whole of a regular file of at most `cap_bytes` bytes (symlinks are followed).
@@ -83,30 +155,14 @@ pub fn read_capped(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> 
             source,
         }
     };
-    let file = File::open(path).map_err(io("cannot open"))?;
-    let meta = file.metadata().map_err(io("cannot stat"))?;
-    if meta.is_dir() {
-        return Err(SafeIoError::NotRegularFile {
-            path: path.to_path_buf(),
-            kind: "folder",
-        });
-    }
-    if !meta.is_file() {
-        return Err(SafeIoError::NotRegularFile {
-            path: path.to_path_buf(),
-            kind: "device, FIFO or socket",
-        });
-    }
+    let (file, len) = open_regular(path, cap_bytes)?;
     let too_large = || SafeIoError::TooLarge {
         path: path.to_path_buf(),
         cap_bytes,
     };
-    if meta.len() > cap_bytes {
-        return Err(too_large());
-    }
     let mut bytes = Vec::new();
     bytes
-        .try_reserve_exact(usize::try_from(meta.len()).map_err(|_| too_large())?)
+        .try_reserve_exact(usize::try_from(len).map_err(|_| too_large())?)
         .map_err(|_| too_large())?;
     file.take(cap_bytes.saturating_add(1))
         .read_to_end(&mut bytes)
@@ -118,8 +174,18 @@ pub fn read_capped(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> 
 }
 
 /// [`read_capped`] with the [`read_cap_bytes`] cap.
+///
+/// Errors: those of [`read_capped`], or [`SafeIoError::BadReadCap`].
 pub fn read_regular(path: &Path) -> Result<Vec<u8>, SafeIoError> {
-    read_capped(path, read_cap_bytes())
+    read_capped(path, read_cap_bytes()?)
+}
+
+/// [`read_capped`] with the smaller of `cap_bytes` (a limit of the file kind, e.g. an
+/// anchor file) and the [`read_cap_bytes`] cap.
+///
+/// Errors: those of [`read_capped`], or [`SafeIoError::BadReadCap`].
+pub fn read_regular_within(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> {
+    read_capped(path, cap_bytes.min(read_cap_bytes()?))
 }
 
 /// A temporary file name unique to this process and call, beside `target`.
@@ -235,6 +301,21 @@ mod tests {
     fn dev_zero_is_refused_not_read() {
         let e = read_capped(Path::new("/dev/zero"), 1 << 20).unwrap_err();
         assert!(matches!(e, SafeIoError::NotRegularFile { .. }), "{e}");
+    }
+
+    #[test]
+    fn fifos_are_refused_without_blocking_even_behind_a_symlink() {
+        let dir = scratch("fifo");
+        let fifo = dir.join("pipe.json");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+        assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+        let link = dir.join("link.json");
+        std::os::unix::fs::symlink(&fifo, &link).unwrap();
+        for p in [&fifo, &link] {
+            // Opening a FIFO for reading without O_NONBLOCK would wait here for a writer.
+            let e = read_capped(p, 1 << 20).unwrap_err();
+            assert!(matches!(e, SafeIoError::NotRegularFile { .. }), "{e}");
+        }
     }
 
     #[test]

@@ -112,18 +112,25 @@ pub fn parse_scene(text: &str, source_name: &str, base_dir: &Path) -> Result<Sce
     })
 }
 
-/// Reads, parses and validates a scene file.
+/// Largest scene file [`load`] reads: 64 MiB, room for [`validate::MAX_NODES`] objects of
+/// several hundred bytes each; a larger file is refused before it is parsed.
+pub const MAX_SCENE_FILE_BYTES: u64 = 64 << 20;
+
+/// Reads, parses and validates a scene file (a regular file of at most
+/// [`MAX_SCENE_FILE_BYTES`] and the `MARCHMESH_MAX_READ_MIB` cap).
 pub fn load(path: &Path) -> Result<Scene, SceneError> {
-    let bytes = marchmesh_safeio::read_regular(path).map_err(|e| SceneError::Unreadable {
-        path: path.to_path_buf(),
-        reason: match e {
-            marchmesh_safeio::SafeIoError::Io { source, .. } => source.to_string(),
-            other => {
-                let text = other.to_string();
-                let prefix = format!("{}: ", path.display());
-                text.strip_prefix(&prefix).unwrap_or(&text).to_string()
-            }
-        },
+    let bytes = marchmesh_safeio::read_regular_within(path, MAX_SCENE_FILE_BYTES).map_err(|e| {
+        SceneError::Unreadable {
+            path: path.to_path_buf(),
+            reason: match e {
+                marchmesh_safeio::SafeIoError::Io { source, .. } => source.to_string(),
+                other => {
+                    let text = other.to_string();
+                    let prefix = format!("{}: ", path.display());
+                    text.strip_prefix(&prefix).unwrap_or(&text).to_string()
+                }
+            },
+        }
     })?;
     let source_name = path.display().to_string();
     let text = decode_text(&bytes, &source_name)?;

@@ -200,7 +200,14 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
     s
 }
 
-/// Writes `stability.csv`, `stability.json` and `summary.md` into `dir` (which must exist).
+/// Publishes `bytes` as a new file `dir/name` (never overwriting, never through a symlink; a
+/// failed write leaves no partial file).
+fn publish(dir: &Path, name: &str, bytes: &[u8]) -> std::io::Result<()> {
+    marchmesh_safeio::publish_new(&dir.join(name), bytes).map_err(std::io::Error::other)
+}
+
+/// Writes `stability.csv`, `stability.json` and `summary.md` into `dir` (which must exist),
+/// each as a new file: an existing file of those names is an error, not overwritten.
 pub fn write(
     dir: &Path,
     rows: &[Row],
@@ -208,7 +215,7 @@ pub fn write(
     side: u32,
     command: &str,
 ) -> std::io::Result<()> {
-    std::fs::write(dir.join("stability.csv"), to_csv(rows))?;
+    publish(dir, "stability.csv", to_csv(rows).as_bytes())?;
     let report = StabilityReport {
         command,
         side,
@@ -216,8 +223,12 @@ pub fn write(
         case_errors: errors.iter().map(|e| e.to_string()).collect(),
     };
     let json = serde_json::to_string_pretty(&report).map_err(std::io::Error::other)?;
-    std::fs::write(dir.join("stability.json"), json)?;
-    std::fs::write(dir.join("summary.md"), to_markdown(rows, errors, side))?;
+    publish(dir, "stability.json", json.as_bytes())?;
+    publish(
+        dir,
+        "summary.md",
+        to_markdown(rows, errors, side).as_bytes(),
+    )?;
     Ok(())
 }
 

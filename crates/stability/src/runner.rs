@@ -20,6 +20,8 @@ pub struct RunOptions {
     pub side: u32,
     /// Render threads (0 = all cores).
     pub threads: usize,
+    /// Each build and render is refused before allocating more than this many bytes.
+    pub memory_limit_bytes: u64,
 }
 
 impl Default for RunOptions {
@@ -27,6 +29,7 @@ impl Default for RunOptions {
         Self {
             side: 96,
             threads: 0,
+            memory_limit_bytes: marchmesh_core::DEFAULT_MEMORY_LIMIT_BYTES,
         }
     }
 }
@@ -244,11 +247,14 @@ fn build_and_render(
         options: variant.options.clone(),
     };
     let t0 = Instant::now();
-    let geometry = backend::build(scene, &spec).map_err(|e| e.to_string())?;
+    let geometry = backend::build_within(scene, &spec, options.memory_limit_bytes)
+        .map_err(|e| e.to_string())?;
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let background = BackgroundSampler::load(&scene.background).map_err(|e| e.to_string())?;
+    let background = BackgroundSampler::load_within(&scene.background, options.memory_limit_bytes)
+        .map_err(|e| e.to_string())?;
     let render_options = RenderOptions {
         threads: options.threads,
+        memory_limit_bytes: options.memory_limit_bytes,
         ..Default::default()
     };
     let output = render(
@@ -366,7 +372,8 @@ pub fn write_scenes(cases: &[&StabilityCase], dir: &Path) -> std::io::Result<Vec
             rewrite_mesh_paths(&mut v, &base, &dir_abs);
             let name = format!("{stem}{suffix}.json");
             let text = serde_json::to_string_pretty(&v).map_err(std::io::Error::other)?;
-            std::fs::write(dir.join(&name), text + "\n")?;
+            marchmesh_safeio::publish_new(&dir.join(&name), (text + "\n").as_bytes())
+                .map_err(std::io::Error::other)?;
             written.push(name);
         }
     }

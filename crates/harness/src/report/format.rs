@@ -64,3 +64,24 @@ pub(crate) fn short_num(v: f64) -> String {
     };
     format!("{t}{suffix}")
 }
+
+/// `text` safe inside a Markdown table cell or line: `\\`, `|`, `[`, `]`, `` ` ``, `*` and `#`
+/// are backslash-escaped, `<` and `>` become `&lt;` and `&gt;` (no HTML such as
+/// `<img onerror=...>`), and control characters (a newline would start a heading) become
+/// spaces. Plain names (letters, digits, `_-.:/=,`) come out unchanged.
+pub fn md_escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '\\' | '|' | '[' | ']' | '`' | '*' | '#' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            c if c.is_control() => out.push(' '),
+            c => out.push(c),
+        }
+    }
+    out
+}

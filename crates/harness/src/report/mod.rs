@@ -9,7 +9,7 @@ mod summary;
 
 pub(crate) use analysis::label;
 pub use analysis::{pareto_front, verdict};
-pub use format::bytes;
+pub use format::{bytes, md_escape};
 pub(crate) use format::{opt, opt_bytes, short_num, tail_px};
 pub(crate) use plots::line_plot;
 pub use plots::write_plots;
@@ -25,7 +25,7 @@ use crate::results::Results;
 /// names.
 pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let summary = dir.join("summary.md");
-    marchmesh_safeio::replace_regular(&summary, summary_markdown(res).as_bytes())
+    marchmesh_safeio::replace_regular(&summary, summary_markdown(&res.markdown_safe()).as_bytes())
         .map_err(|e| e.to_string())?;
     let plots = write_plots(res, &dir.join("plots"))?;
     let html = dir.join("report.html");

@@ -60,6 +60,12 @@ pub(crate) fn lin_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// Writes a drawn plot to `path` through [`marchmesh_safeio::replace_regular`], so a symlink,
+/// folder or device at the plot's name is refused instead of written through.
+fn publish_svg(path: &Path, svg: &str) -> Result<(), String> {
+    marchmesh_safeio::replace_regular(path, svg.as_bytes()).map_err(|e| e.to_string())
+}
+
 pub(crate) fn scatter_by_backend(
     path: &Path,
     title: &str,
@@ -68,7 +74,8 @@ pub(crate) fn scatter_by_backend(
     points: &[(String, f64, f64)],
     y_log: bool,
 ) -> Result<(), String> {
-    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    let mut svg = String::new();
+    let root = SVGBackend::with_string(&mut svg, (720, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
     let (x0, x1) = log_range(points.iter().map(|p| p.1));
     let mut backends: Vec<&str> = points.iter().map(|p| p.0.as_str()).collect();
@@ -127,7 +134,9 @@ pub(crate) fn scatter_by_backend(
                 .map_err(plot_err)?
         );
     }
-    root.present().map_err(plot_err)
+    root.present().map_err(plot_err)?;
+    drop(root);
+    publish_svg(path, &svg)
 }
 
 pub(crate) fn lines(
@@ -152,7 +161,8 @@ pub(crate) fn line_plot(
     series: &[(String, Vec<(f64, f64)>)],
     log_x: bool,
 ) -> Result<(), String> {
-    let root = SVGBackend::new(path, (720, 480)).into_drawing_area();
+    let mut svg = String::new();
+    let root = SVGBackend::with_string(&mut svg, (720, 480)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
     let y1 = series
         .iter()
@@ -220,7 +230,9 @@ pub(crate) fn line_plot(
             |_: f64| true
         );
     }
-    root.present().map_err(plot_err)
+    root.present().map_err(plot_err)?;
+    drop(root);
+    publish_svg(path, &svg)
 }
 
 /// Writes the plots into `dir` (created), returning the file names. A plot without data is
@@ -231,11 +243,9 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let slug = crate::bench::slug;
     // Time vs error per (group, scene).
     let scenes = group_scenes(res);
-    for (g, sc) in &scenes {
-        let pts: Vec<(String, f64, f64)> = res
-            .rows
+    for ((g, sc), rows) in &scenes {
+        let pts: Vec<(String, f64, f64)> = rows
             .iter()
-            .filter(|r| &r.group == g && &r.scene == sc)
             .filter_map(|r| {
                 r.psnr_db
                     .map(|p| (r.backend.clone(), r.render_ms_median, p))
@@ -254,10 +264,9 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
             written.push(name);
         }
         // Steps histogram of every sdf configuration of the scene.
-        let series: Vec<(String, Vec<(f64, f64)>)> = res
-            .rows
+        let series: Vec<(String, Vec<(f64, f64)>)> = rows
             .iter()
-            .filter(|r| &r.group == g && &r.scene == sc && r.backend == "sdf")
+            .filter(|r| r.backend == "sdf")
             .filter_map(|r| {
                 let h = res.steps_histograms.get(&r.config_id)?;
                 let total: u64 = h.iter().sum();

@@ -3,7 +3,7 @@
 
 use super::{bytes, label, opt, opt_bytes, pareto_front, tail_px, verdict};
 use crate::results::{Results, Row};
-use crate::verdicts::{Clock, HEADLINE_MIN_PSNR_DB, Timing, headlines, setting, settings};
+use crate::verdicts::{Clock, HEADLINE_MIN_PSNR_DB, Timing, by_setting, headlines};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -174,12 +174,13 @@ pub fn summary_markdown(res: &Results) -> String {
     }
     // Tables per group and scene, in first-appearance order.
     let order = group_scenes(res);
-    for (group, scene) in &order {
-        let rows: Vec<&Row> = res
-            .rows
+    let references: std::collections::HashMap<(&str, u32, u32), &crate::results::ReferenceInfo> =
+        res.references
             .iter()
-            .filter(|r| &r.group == group && &r.scene == scene)
+            .rev()
+            .map(|r| ((r.scene.as_str(), r.width, r.height), r))
             .collect();
+    for ((group, scene), rows) in &order {
         let _ = writeln!(s, "## {group} / {scene}\n");
         let _ = writeln!(
             s,
@@ -191,21 +192,17 @@ pub fn summary_markdown(res: &Results) -> String {
                 .join(" | "),
             "---|".repeat(SUMMARY_COLUMNS.len())
         );
-        for r in &rows {
+        for r in rows {
             let cells: Vec<String> = SUMMARY_COLUMNS.iter().map(|c| (c.1)(r)).collect();
             let _ = writeln!(s, "| {} |", cells.join(" | "));
         }
         s.push('\n');
-        for k in settings(rows.iter().copied()) {
-            let set: Vec<&Row> = rows.iter().copied().filter(|r| setting(r) == k).collect();
+        for (k, set) in by_setting(rows.iter().copied()) {
             let _ = writeln!(s, "### {}x{}, {} threads\n", k.2, k.3, k.4);
             if res.merged_from.len() > 1 && !k.5.is_empty() {
                 let _ = writeln!(s, "Measured on {}.\n", k.5);
             }
-            if let Some(r) = res
-                .references
-                .iter()
-                .find(|r| r.scene == k.1 && (r.width, r.height) == (k.2, k.3))
+            if let Some(r) = references.get(&(k.1.as_str(), k.2, k.3))
                 && let (Some(b), Some(t)) = (r.build_ms, r.render_ms)
             {
                 let _ = writeln!(
@@ -255,14 +252,19 @@ pub fn summary_markdown(res: &Results) -> String {
     s
 }
 
-/// The distinct `(group, scene)` pairs of a run, in first-appearance order.
-pub(crate) fn group_scenes(res: &Results) -> Vec<(String, String)> {
-    let mut order: Vec<(String, String)> = Vec::new();
+/// The rows of each distinct `(group, scene)` pair of a run, pairs in first-appearance order
+/// and rows in their order (linear time: one hash lookup per row).
+pub(crate) fn group_scenes(res: &Results) -> Vec<((String, String), Vec<&Row>)> {
+    let mut index: std::collections::HashMap<(&str, &str), usize> = Default::default();
+    let mut out: Vec<((String, String), Vec<&Row>)> = Vec::new();
     for r in &res.rows {
-        let k = (r.group.clone(), r.scene.clone());
-        if !order.contains(&k) {
-            order.push(k);
+        match index.get(&(r.group.as_str(), r.scene.as_str())) {
+            Some(&i) => out[i].1.push(r),
+            None => {
+                index.insert((r.group.as_str(), r.scene.as_str()), out.len());
+                out.push(((r.group.clone(), r.scene.clone()), vec![r]));
+            }
         }
     }
-    order
+    out
 }

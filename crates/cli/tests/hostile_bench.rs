@@ -1,0 +1,472 @@
+//! Hostile input to `bench` and `stability`: suite files that collide ids, expand without
+//! bound, are special files or the wrong JSON shape are refused at load naming the file and
+//! field; shard counts are checked before use; a full disk leaves no partial image or
+//! generated folder; the built-in scenes come from a private, verified cache.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::time::{Duration, Instant};
+
+fn tmp(name: &str) -> PathBuf {
+    marchmesh_testkit::temp_dir(&format!("hostile-bench-{name}"))
+}
+
+fn repo() -> PathBuf {
+    marchmesh_testkit::repo_root()
+        .canonicalize()
+        .expect("repository root")
+}
+
+fn marchmesh(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .env_remove("MARCHMESH_ROOT")
+        .output()
+        .expect("run marchmesh")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A suite file `dir/name` with one group made of `group_body` (JSON members).
+fn suite(dir: &Path, name: &str, group_body: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(
+        &p,
+        format!(
+            r#"{{"repeats": {{"min_count": 1, "min_time_s": 0, "max_count": 1}},
+                "groups": [{{"name": "g", {group_body}}}]}}"#
+        ),
+    )
+    .unwrap();
+    p
+}
+
+fn csg() -> String {
+    repo().join("scenes/csg.json").display().to_string()
+}
+
+#[test]
+fn labels_whose_file_names_collide_are_refused_at_load() {
+    let dir = tmp("labels");
+    let s = suite(
+        &dir,
+        "s.json",
+        &format!(
+            r#""scenes": ["{}"], "threads": [1], "backends": [
+                {{"backend": "sdf", "label": "q a"}}, {{"backend": "sdf", "label": "q_a"}}]"#,
+            csg()
+        ),
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(
+        !o.status.success(),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let e = stderr(&o);
+    assert!(
+        e.contains("s.json") && e.contains("q a") && e.contains("q_a") && e.contains("groups[0]"),
+        "{e}"
+    );
+    // The same label twice is a collision too.
+    let s = suite(
+        &dir,
+        "t.json",
+        &format!(
+            r#""scenes": ["{}"], "threads": [1], "backends": [
+                {{"backend": "sdf", "label": "q"}}, {{"backend": "sdf", "label": "q", "options": ["eps_px=2"]}}]"#,
+            csg()
+        ),
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("distinct `label`"), "{}", stderr(&o));
+}
+
+#[test]
+fn two_scenes_of_one_file_name_in_different_folders_are_refused_at_load() {
+    let dir = tmp("scenes");
+    for sub in ["a", "b"] {
+        std::fs::create_dir_all(dir.join(sub)).unwrap();
+        std::fs::copy(repo().join("scenes/csg.json"), dir.join(sub).join("x.json")).unwrap();
+    }
+    let s = suite(
+        &dir,
+        "s.json",
+        r#""scenes": ["a/x.json", "b/x.json"], "threads": [1], "backends": [{"backend": "sdf"}]"#,
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("stands for both") && e.contains("`name`"), "{e}");
+}
+
+#[test]
+fn shard_counts_beyond_the_configurations_are_refused_not_allocated() {
+    let dir = tmp("shard");
+    for shard in ["1/1000000000000", "1/18446744073709551615", "1/3"] {
+        let o = marchmesh(
+            &[
+                "bench", "--suite", "smoke", "--filter", "csg/sdf", "--shard", shard, "--list",
+            ],
+            &repo(),
+        );
+        assert!(!o.status.success(), "{shard}");
+        let e = stderr(&o);
+        assert!(
+            e.contains("configurations") && !e.contains("panicked"),
+            "{shard}: {e}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn suites_expanding_beyond_the_maximum_are_refused_at_load() {
+    let dir = tmp("expand");
+    let resolutions: Vec<String> = (1..=400)
+        .map(|k| format!(r#"{{"width": {k}, "height": {k}}}"#))
+        .collect();
+    let backends: Vec<String> = (0..300)
+        .map(|k| format!(r#"{{"backend": "sdf", "label": "l{k}"}}"#))
+        .collect();
+    let s = suite(
+        &dir,
+        "big.json",
+        &format!(
+            r#""scenes": ["{}"], "threads": [1], "resolutions": [{}], "backends": [{}]"#,
+            csg(),
+            resolutions.join(","),
+            backends.join(",")
+        ),
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("more than 100000 configurations"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(o.stdout.is_empty());
+}
+
+/// Runs marchmesh with `args` and fails the test if it has not exited within 20 s (a read
+/// that blocks on a FIFO would hang forever).
+fn within_seconds(args: &[&str], cwd: &Path) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > Duration::from_secs(20) {
+            child.kill().ok();
+            panic!("marchmesh {args:?} blocked");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    child.wait_with_output().unwrap()
+}
+
+#[test]
+fn fifos_and_devices_as_suites_scenes_and_anchors_are_refused_without_blocking() {
+    let dir = tmp("fifo");
+    let fifo = dir.join("f.json");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let f = fifo.to_str().unwrap();
+    for args in [
+        vec!["bench", "--suite", f, "--list"],
+        vec!["bench", "--suite", "/dev/zero", "--list"],
+        vec!["validate", f],
+        vec!["render", f, "--out", "x.png"],
+        vec![
+            "bench",
+            "--suite",
+            "smoke",
+            "--filter",
+            "csg/sdf",
+            "--anchor",
+            f,
+            "--out",
+            dir.to_str().unwrap(),
+        ],
+    ] {
+        let cwd = if args.contains(&"smoke") {
+            repo()
+        } else {
+            dir.clone()
+        };
+        let o = within_seconds(&args, &cwd);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            stderr(&o).contains("not a regular file"),
+            "{args:?}: {}",
+            stderr(&o)
+        );
+    }
+    // A suite whose scene is a folder says so.
+    std::fs::create_dir_all(dir.join("folder.json")).unwrap();
+    let s = suite(
+        &dir,
+        "s.json",
+        r#""scenes": ["folder.json"], "backends": [{"backend": "sdf"}]"#,
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(stderr(&o).contains("is a folder"), "{}", stderr(&o));
+}
+
+#[test]
+fn suite_files_must_use_objects_where_the_format_has_objects() {
+    let dir = tmp("arrays");
+    let s = dir.join("a.json");
+    std::fs::write(&s, r#"["x", "", {}, false, [{"name": "g"}]]"#).unwrap();
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("expected a JSON object, found an array"),
+        "{}",
+        stderr(&o)
+    );
+    let s = suite(
+        &dir,
+        "b.json",
+        &format!(
+            r#""scenes": ["{}"], "resolutions": [[8, 8]], "backends": [{{"backend": "sdf"}}]"#,
+            csg()
+        ),
+    );
+    let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("groups[0].resolutions[0]"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_full_disk_leaves_no_partial_image_and_lists_the_failed_writes() {
+    let dir = tmp("full");
+    let s = suite(
+        &dir,
+        "s.json",
+        &format!(
+            r#""scenes": ["{}"], "threads": [1], "resolutions": [{{"width": 256, "height": 256}}],
+               "backends": [{{"backend": "sdf"}}]"#,
+            repo().join("scenes/seed-spheres.json").display()
+        ),
+    );
+    // Files over 24 KiB cannot be written (as on a full disk): results.json fits, the
+    // 256x256 images do not.
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f 24; exec '{}' bench --suite '{}' --out '{}'",
+            env!("CARGO_BIN_EXE_marchmesh"),
+            s.display(),
+            dir.join("out").display()
+        ))
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "{}", stderr(&o));
+    let run = std::fs::read_dir(dir.join("out"))
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let mut leftovers = Vec::new();
+    for e in std::fs::read_dir(run.join("images")).unwrap() {
+        let p = e.unwrap().path();
+        let bytes = std::fs::read(&p).unwrap();
+        // Every image present is complete (a PNG ends with its IEND chunk).
+        if !bytes.ends_with(&[0xAE, 0x42, 0x60, 0x82]) {
+            leftovers.push(p);
+        }
+    }
+    assert!(leftovers.is_empty(), "partial files: {leftovers:?}");
+    let res = marchmesh_harness::results::Results::read_json(&run.join("results.json")).unwrap();
+    assert!(
+        res.write_errors.iter().any(|e| e.contains(".png")),
+        "{:?}",
+        res.write_errors
+    );
+    assert!(
+        stderr(&o).contains("could not be written"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn stability_leaves_no_partial_generated_folder_and_bounds_its_images() {
+    let dir = tmp("stability");
+    let out = dir.join("st");
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg(format!(
+            "trap '' XFSZ; ulimit -f 4; exec '{}' stability --out '{}' --filter none",
+            env!("CARGO_BIN_EXE_marchmesh"),
+            out.display()
+        ))
+        .current_dir(repo())
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(!out.join("generated").exists(), "{}", stderr(&o));
+    let o = marchmesh(
+        &[
+            "stability",
+            "--side",
+            "8192",
+            "--memory-limit-mib",
+            "1024",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &repo(),
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--memory-limit-mib"), "{}", stderr(&o));
+}
+
+/// `bench --suite NAME --list` from `cwd` (no checkout there) with the cache environment
+/// `env`, HOME removed.
+fn list_builtin(cwd: &Path, env: &[(&str, &str)]) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_marchmesh"));
+    c.args(["bench", "--suite", "smoke", "--list"])
+        .current_dir(cwd)
+        .env_remove("MARCHMESH_ROOT")
+        .env_remove("HOME")
+        .env_remove("XDG_CACHE_HOME");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().unwrap()
+}
+
+#[test]
+fn the_built_in_scene_cache_is_private_and_verified() {
+    let dir = tmp("cache");
+    let cache = dir.join("cache");
+    let env = [("XDG_CACHE_HOME", cache.to_str().unwrap())];
+    let o = list_builtin(&dir, &env);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let listed = o.stdout.clone();
+    let base = cache.join("marchmesh");
+    use std::os::unix::fs::PermissionsExt;
+    assert_eq!(
+        std::fs::metadata(&base).unwrap().permissions().mode() & 0o777,
+        0o700
+    );
+    // Replace the extracted smoke suite by one listing other files: it is detected and
+    // extracted afresh.
+    let copy = std::fs::read_dir(&base)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.join("scenes/suites/smoke.json").exists())
+        .unwrap();
+    std::fs::write(
+        copy.join("scenes/suites/smoke.json"),
+        r#"{"groups": [{"name": "etc", "scenes": ["/etc/*"], "backends": [{"backend": "sdf"}]}]}"#,
+    )
+    .unwrap();
+    let o = list_builtin(&dir, &env);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.stdout, listed, "the altered copy was trusted");
+    // A cache folder others can write into is not used; the private fallback is.
+    std::fs::set_permissions(&base, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let o = list_builtin(&dir, &env);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(o.stdout, listed);
+    // With no usable cache at all, a suite given as a path still works.
+    let own = suite(
+        &dir,
+        "own.json",
+        &format!(
+            r#""scenes": ["{}"], "backends": [{{"backend": "sdf"}}]"#,
+            csg()
+        ),
+    );
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["bench", "--suite", own.to_str().unwrap(), "--list"])
+        .current_dir(&dir)
+        .env_remove("MARCHMESH_ROOT")
+        .env_remove("HOME")
+        .env("XDG_CACHE_HOME", "/proc/no-such-cache")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
+    let dir = tmp("resume");
+    let out = dir.join("runs");
+    let args = [
+        "bench",
+        "--suite",
+        "smoke",
+        "--filter",
+        "smoke/csg/",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(repo())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it as soon as the run folder holds its first results.json.
+    let start = Instant::now();
+    let json = loop {
+        let found = std::fs::read_dir(&out).ok().and_then(|d| {
+            d.flatten()
+                .map(|e| e.path().join("results.json"))
+                .find(|p| p.exists())
+        });
+        if let Some(p) = found {
+            break p;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "no results.json");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let res = marchmesh_harness::results::Results::read_json(&json).unwrap();
+    assert!(
+        res.interrupted || res.missing.is_empty(),
+        "a killed run with {} missing says interrupted: false",
+        res.missing.len()
+    );
+    let run = json.parent().unwrap();
+    let mut resume_args = args.to_vec();
+    resume_args.truncate(5);
+    resume_args.extend(["--resume", run.to_str().unwrap()]);
+    let o = marchmesh(&resume_args, &repo());
+    if res.missing.is_empty() {
+        // The run finished before the kill: nothing to resume, said so.
+        assert!(stderr(&o).contains("nothing to resume"), "{}", stderr(&o));
+        return;
+    }
+    assert!(o.status.success(), "{}", stderr(&o));
+    let done = marchmesh_harness::results::Results::read_json(&json).unwrap();
+    assert!(!done.interrupted && done.missing.is_empty());
+    assert_eq!(done.rows.len(), 2, "{:?}", done.rows.len());
+    assert!(run.join("summary.md").exists());
+}

@@ -1,0 +1,237 @@
+//! Hostile input to `render`, `validate` and `view`: environment maps are budgeted from their
+//! header before decoding (and `validate` says so), errors print each OS error once, and
+//! nonsense view steps are refused up front; a closed stdout never panics `render`, `bench`
+//! or `stability`.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn tmp(name: &str) -> PathBuf {
+    marchmesh_testkit::temp_dir(&format!("hostile-render-{name}"))
+}
+
+fn marchmesh(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run marchmesh")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// CRC-32 (IEEE) of `bytes`, as PNG chunks carry it.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 == 1 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// A PNG whose header declares `width` x `height` RGB pixels and which holds no image data:
+/// a few dozen bytes standing for a huge decode.
+fn png_declaring(width: u32, height: u32) -> Vec<u8> {
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut chunk = |kind: &[u8], data: &[u8]| {
+        png.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend(data);
+        png.extend(&body);
+        png.extend(crc32(&body).to_be_bytes());
+    };
+    let mut ihdr = Vec::new();
+    ihdr.extend(width.to_be_bytes());
+    ihdr.extend(height.to_be_bytes());
+    ihdr.extend([8, 2, 0, 0, 0]);
+    chunk(b"IHDR", &ihdr);
+    chunk(b"IEND", &[]);
+    png
+}
+
+fn env_scene(dir: &Path) -> PathBuf {
+    std::fs::write(dir.join("env.png"), png_declaring(16384, 16384)).unwrap();
+    let p = dir.join("s.json");
+    std::fs::write(
+        &p,
+        r#"{"camera": {"width": 8, "height": 8}, "background": {"environment": {"path": "env.png"}},
+            "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    p
+}
+
+#[test]
+fn environment_maps_over_the_memory_limit_are_refused_from_their_header() {
+    let dir = tmp("env");
+    let scene = env_scene(&dir);
+    let s = scene.to_str().unwrap();
+    let o = marchmesh(&["validate", s], &dir);
+    assert!(!o.status.success(), "validate said ok");
+    assert!(
+        stderr(&o).contains("env.png") && stderr(&o).contains("16384x16384"),
+        "{}",
+        stderr(&o)
+    );
+    let o = marchmesh(&["render", s, "--out", "a.png"], &dir);
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(
+        e.contains("16384x16384") && e.contains("memory limit"),
+        "{e}"
+    );
+    assert!(!dir.join("a.png").exists());
+}
+
+#[test]
+fn os_errors_are_printed_once() {
+    let dir = tmp("twice");
+    for args in [
+        vec!["render", "missing.json", "--out", "a.png"],
+        vec!["bench", "--suite", "./missing.json", "--list"],
+        vec!["report", "missing-run"],
+    ] {
+        let o = marchmesh(&args, &dir);
+        assert!(!o.status.success());
+        let e = stderr(&o);
+        assert_eq!(
+            e.matches("No such file or directory").count(),
+            1,
+            "{args:?}: {e}"
+        );
+    }
+}
+
+#[test]
+fn view_refuses_a_nonsense_step_before_opening_anything() {
+    let dir = tmp("step");
+    let scene = dir.join("s.json");
+    std::fs::write(
+        &scene,
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    let script = dir.join("walk.json");
+    std::fs::write(&script, r#"[{"key": "W", "frames": 2}]"#).unwrap();
+    for step in ["1e308", "-1", "NaN", "0"] {
+        let o = marchmesh(
+            &[
+                "view",
+                scene.to_str().unwrap(),
+                "--headless",
+                "--script",
+                script.to_str().unwrap(),
+                "--frames",
+                "frames",
+                "--step",
+                step,
+            ],
+            &dir,
+        );
+        assert!(!o.status.success(), "{step}");
+        let e = stderr(&o);
+        assert!(e.contains("--step") && !e.contains("{ "), "{step}: {e}");
+    }
+}
+
+#[test]
+fn a_closed_stdout_ends_render_bench_and_stability_quietly() {
+    let dir = tmp("pipe");
+    let scene = dir.join("s.json");
+    std::fs::write(
+        &scene,
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    let repo = marchmesh_testkit::repo_root();
+    let out = dir.join("runs");
+    let st = dir.join("st");
+    let cases: Vec<(Vec<&str>, &Path)> = vec![
+        (
+            vec!["render", scene.to_str().unwrap(), "--out", "a.png"],
+            &dir,
+        ),
+        (
+            vec![
+                "bench",
+                "--suite",
+                "smoke",
+                "--filter",
+                "csg/sdf",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+            &repo,
+        ),
+        (
+            vec![
+                "stability",
+                "--filter",
+                "far_origin/offset=",
+                "--side",
+                "8",
+                "--out",
+                st.to_str().unwrap(),
+            ],
+            &repo,
+        ),
+    ];
+    for (args, cwd) in cases {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+            .args(&args)
+            .current_dir(cwd)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let e = stderr(&o);
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+        assert_ne!(o.status.code(), Some(101), "{args:?}: {e}");
+    }
+}
+
+#[test]
+fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
+    let dir = tmp("long");
+    let scene = dir.join("s.json");
+    std::fs::write(
+        &scene,
+        r#"{"camera": {"width": 32, "height": 32},
+            "lights": [{"sphere_light": {"position": [0, 3, -2], "radius": 0.5, "intensity": 4}}],
+            "objects": [{"shape": {"sphere": {}}}],
+            "render": {"integrator": "path", "samples_per_pixel": 65536, "max_bounces": 64}}"#,
+    )
+    .unwrap();
+    let start = std::time::Instant::now();
+    let o = marchmesh(
+        &[
+            "render",
+            scene.to_str().unwrap(),
+            "--out",
+            "a.png",
+            "--max-seconds",
+            "2",
+        ],
+        &dir,
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("up to") && e.contains("rays"), "{e}");
+    assert!(
+        e.contains("--max-seconds 2") && e.contains("nothing was written"),
+        "{e}"
+    );
+    assert!(start.elapsed() < std::time::Duration::from_secs(60));
+    assert!(!dir.join("a.png").exists());
+}

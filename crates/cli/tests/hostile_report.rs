@@ -1,0 +1,383 @@
+//! Hostile input to the commands that read finished runs (`report`, `compare`, `merge`,
+//! `findings`): nothing is written through a link or into a folder given as a file, absurd
+//! numbers and oversized or special files are refused naming the file, incomplete runs make
+//! the commands fail instead of passing silently, names cannot inject Markdown or spreadsheet
+//! formulas, and a closed stdout ends them quietly.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+use marchmesh_harness::results::{Failure, Provenance, Results, Row};
+
+fn tmp(name: &str) -> PathBuf {
+    marchmesh_testkit::temp_dir(&format!("hostile-report-{name}"))
+}
+
+fn marchmesh(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run marchmesh")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn row(scene: &str, backend: &str, quality: &str, ms: f64, psnr: Option<f64>) -> Row {
+    Row {
+        config_id: format!("g/{scene}/{backend}:{quality}/x1/t1"),
+        group: "g".into(),
+        scene: scene.into(),
+        backend: backend.into(),
+        quality: quality.into(),
+        width: 8,
+        height: 8,
+        threads: 1,
+        render_repeats: 1,
+        render_ms_median: ms,
+        render_ms_min: ms,
+        render_ms_max: ms,
+        render_ms_ci_low: ms,
+        render_ms_ci_high: ms,
+        build_ms_total: 1.0,
+        psnr_db: psnr,
+        memory_bytes: 1024,
+        ..Row::default()
+    }
+}
+
+fn results(rows: Vec<Row>) -> Results {
+    let mut provenance = Provenance::collect("test".into());
+    provenance.load_average_1m = Some(0.0);
+    provenance.git_commit = "c0ffee".into();
+    provenance.git_dirty = false;
+    Results {
+        run_id: "run".into(),
+        suite: "suite".into(),
+        suite_file: String::new(),
+        description: String::new(),
+        provenance,
+        interrupted: false,
+        rows,
+        failures: Vec::new(),
+        skipped: Vec::new(),
+        references: Vec::new(),
+        steps_histograms: Default::default(),
+        timings: Default::default(),
+        rotation_seed: Some(1),
+        missing: Vec::new(),
+        shard: None,
+        merged_from: Vec::new(),
+        write_errors: Vec::new(),
+        anchors: Vec::new(),
+    }
+}
+
+/// A run folder `dir/name` holding `res` as results.json.
+fn run_dir(dir: &Path, name: &str, res: &Results) -> PathBuf {
+    let run = dir.join(name);
+    std::fs::create_dir_all(&run).unwrap();
+    res.write_json(&run.join("results.json")).unwrap();
+    run
+}
+
+fn small_run() -> Results {
+    results(vec![
+        row("s", "sdf", "a", 2.0, Some(40.0)),
+        row("s", "mesh", "b", 3.0, Some(45.0)),
+    ])
+}
+
+#[test]
+fn report_refuses_a_symlink_at_a_plot_and_leaves_its_target_alone() {
+    let dir = tmp("plot-link");
+    let run = run_dir(&dir, "run", &small_run());
+    // The plot report writes for the scene, planted as a link to a file of the user's.
+    std::fs::create_dir_all(run.join("plots")).unwrap();
+    let victim = dir.join("victim.txt");
+    std::fs::write(&victim, b"precious").unwrap();
+    let plot = run.join("plots/time_vs_error_g_s.svg");
+    std::os::unix::fs::symlink(&victim, &plot).unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("time_vs_error_g_s.svg") && stderr(&o).contains("symbolic link"),
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+    assert!(
+        std::fs::symlink_metadata(&plot)
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    std::fs::remove_file(&plot).unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read_to_string(&plot).unwrap().contains("<svg"));
+}
+
+#[test]
+fn absurd_numbers_in_results_are_refused_naming_the_row() {
+    let dir = tmp("absurd");
+    let good = run_dir(&dir, "good", &small_run());
+    for (name, value) in [("huge", 1e308), ("negative", -5.0)] {
+        let mut res = small_run();
+        res.rows[1].render_ms_median = value;
+        let run = run_dir(&dir, name, &res);
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+        ] {
+            let o = marchmesh(&args, &dir);
+            assert!(!o.status.success(), "{args:?}");
+            let e = stderr(&o);
+            assert!(
+                e.contains("g/s/mesh:b/x1/t1") && e.contains("render_ms_median"),
+                "{args:?}: {e}"
+            );
+        }
+    }
+    // A zero time has no ratio: compare says n/a instead of NaN or inf.
+    let mut zero = small_run();
+    zero.rows[0].render_ms_median = 0.0;
+    let zero = run_dir(&dir, "zero", &zero);
+    let o = marchmesh(
+        &["compare", good.to_str().unwrap(), zero.to_str().unwrap()],
+        &dir,
+    );
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.contains("NaN") && !out.contains("inf"), "{out}");
+    assert!(out.contains("n/a"), "{out}");
+}
+
+#[test]
+fn results_files_are_capped_and_special_files_refused_without_blocking() {
+    let dir = tmp("special");
+    let good = run_dir(&dir, "good", &small_run());
+    // A FIFO as results.json: refused at once (opening it for reading would block).
+    let fifo_run = dir.join("fifo");
+    std::fs::create_dir_all(&fifo_run).unwrap();
+    let fifo = fifo_run.join("results.json");
+    assert!(
+        Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success()
+    );
+    let o = marchmesh(&["report", fifo_run.to_str().unwrap()], &dir);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    // /dev/zero through a symlink: refused, not read.
+    let zero_run = dir.join("zero");
+    std::fs::create_dir_all(&zero_run).unwrap();
+    std::os::unix::fs::symlink("/dev/zero", zero_run.join("results.json")).unwrap();
+    let o = marchmesh(
+        &[
+            "compare",
+            good.to_str().unwrap(),
+            zero_run.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    // The read cap applies to results.json, and a mistyped cap is an error.
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["report", good.to_str().unwrap()])
+        .env("MARCHMESH_MAX_READ_MIB", "abc")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("MARCHMESH_MAX_READ_MIB"),
+        "{}",
+        stderr(&o)
+    );
+    let big = results(
+        (0..3000)
+            .map(|i| row(&format!("s{i}"), "sdf", "a", 1.0, None))
+            .collect(),
+    );
+    let big = run_dir(&dir, "big", &big);
+    assert!(std::fs::metadata(big.join("results.json")).unwrap().len() > 1 << 20);
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["compare", good.to_str().unwrap(), big.to_str().unwrap()])
+        .env("MARCHMESH_MAX_READ_MIB", "1")
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("larger than the read limit"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn merge_fails_on_missing_shards_and_incomplete_runs() {
+    let dir = tmp("merge");
+    let mut one = small_run();
+    one.shard = Some("1/2".into());
+    let one = run_dir(&dir, "one", &one);
+    let out = dir.join("merged");
+    let o = marchmesh(
+        &[
+            "merge",
+            one.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(!o.status.success(), "merging shard 1 of 2 alone succeeded");
+    assert!(stderr(&o).contains("2/2 not given"), "{}", stderr(&o));
+    // The merged folder is still written, and says what is missing.
+    assert!(out.join("summary.md").exists());
+
+    let mut killed = small_run();
+    killed.interrupted = true;
+    killed.missing = vec!["g/t/sdf:a/x1/t1".into()];
+    killed.rows.truncate(1);
+    killed.failures = vec![Failure {
+        config_id: "g/s/mesh:b/x1/t1".into(),
+        error: "boom".into(),
+    }];
+    let killed = run_dir(&dir, "killed", &killed);
+    let out = dir.join("merged2");
+    let o = marchmesh(
+        &[
+            "merge",
+            killed.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(!o.status.success());
+    let e = stderr(&o);
+    assert!(e.contains("missing: g/t/sdf:a/x1/t1"), "{e}");
+    assert!(
+        e.contains("interrupted") && e.contains("1 configurations failed"),
+        "{e}"
+    );
+}
+
+#[test]
+fn findings_fail_on_incomplete_runs_and_mark_them_instead_of_linking() {
+    let dir = tmp("findings");
+    let good = run_dir(&dir, "good", &small_run());
+    let mut killed = small_run();
+    killed.interrupted = true;
+    killed.missing = vec!["g/t/sdf:a/x1/t1".into()];
+    let killed = run_dir(&dir, "killed", &killed);
+    let out = dir.join("F.md");
+    let o = marchmesh(
+        &[
+            "findings",
+            good.to_str().unwrap(),
+            killed.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("killed (1 missing"), "{}", stderr(&o));
+    let doc = std::fs::read_to_string(&out).unwrap();
+    assert!(!doc.contains("(killed/summary.md)"), "{doc}");
+}
+
+#[test]
+fn findings_force_onto_a_folder_writes_nothing() {
+    let dir = tmp("findings-folder");
+    let good = run_dir(&dir, "good", &small_run());
+    let out = dir.join("F.md");
+    std::fs::create_dir_all(&out).unwrap();
+    let o = marchmesh(
+        &[
+            "findings",
+            good.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--force",
+        ],
+        &dir,
+    );
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    assert!(
+        !dir.join("F-plots").exists(),
+        "plots written before refusing"
+    );
+}
+
+#[test]
+fn names_cannot_inject_markdown_or_spreadsheet_formulas() {
+    let dir = tmp("inject");
+    let mut res = small_run();
+    res.rows[0].quality = "=HYPERLINK(\"http://x\")|<img src=x onerror=alert(1)>\n# Owned".into();
+    res.rows[0].config_id = format!("g/s/sdf:{}/x1/t1", res.rows[0].quality);
+    res.rows[1].notes = "@SUM(A1)".into();
+    let run = run_dir(&dir, "run", &res);
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let summary = std::fs::read_to_string(run.join("summary.md")).unwrap();
+    assert!(!summary.contains("<img"), "{summary}");
+    assert!(!summary.contains("\n# Owned"), "{summary}");
+    assert!(summary.contains("\\|&lt;img"), "{summary}");
+    // results.csv (written by bench and merge): formula cells are neutralised and read back.
+    res.write_csv(&run.join("results.csv")).unwrap();
+    let csv = std::fs::read_to_string(run.join("results.csv")).unwrap();
+    assert!(
+        !csv.contains(",=HYPERLINK") && !csv.contains("\"=HYPERLINK"),
+        "{csv}"
+    );
+    assert!(csv.contains("'@SUM(A1)"), "{csv}");
+    let back = marchmesh_harness::results::read_csv(&run.join("results.csv")).unwrap();
+    assert_eq!(back[0].quality, res.rows[0].quality);
+    assert_eq!(back[1].notes, "@SUM(A1)");
+}
+
+#[test]
+fn a_closed_stdout_ends_report_compare_merge_and_findings_quietly() {
+    let dir = tmp("pipe");
+    let good = run_dir(&dir, "good", &small_run());
+    let merged = dir.join("merged");
+    let findings = dir.join("F.md");
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["report", good.to_str().unwrap()],
+        vec!["compare", good.to_str().unwrap(), good.to_str().unwrap()],
+        vec![
+            "merge",
+            good.to_str().unwrap(),
+            "--out",
+            merged.to_str().unwrap(),
+        ],
+        vec![
+            "findings",
+            good.to_str().unwrap(),
+            "--out",
+            findings.to_str().unwrap(),
+        ],
+    ];
+    for args in cases {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+            .args(&args)
+            .current_dir(&dir)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let e = stderr(&o);
+        assert!(!e.contains("panicked"), "{args:?}: {e}");
+        assert_ne!(o.status.code(), Some(101), "{args:?}: {e}");
+    }
+}

@@ -1,0 +1,115 @@
+//! The anchor scripts' shared helpers (`scripts/anchor_common.sh`): no interpreter planted in
+//! a shared folder is run, temporary files live in a private folder, and two runs in the same
+//! second never write to one output name.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn tmp(name: &str) -> PathBuf {
+    marchmesh_testkit::temp_dir(&format!("hostile-scripts-{name}"))
+}
+
+/// Runs `body` in bash after sourcing the helpers, with `env` set and HOME/XDG cleared.
+fn helpers(body: &str, env: &[(&str, &str)]) -> Output {
+    let common = marchmesh_testkit::repo_root().join("scripts/anchor_common.sh");
+    let mut c = Command::new("bash");
+    c.arg("-c")
+        .arg(format!(
+            "set -euo pipefail; . '{}'; {body}",
+            common.display()
+        ))
+        .env_remove("EMBREE_VENV")
+        .env_remove("XDG_CACHE_HOME")
+        .env_remove("HOME");
+    for (k, v) in env {
+        c.env(k, v);
+    }
+    c.output().unwrap()
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn the_python_environment_lives_in_the_users_cache_and_planted_ones_are_refused() {
+    let dir = tmp("venv");
+    let home = dir.join("home");
+    let o = helpers(
+        "anchor_venv embree-venv",
+        &[("HOME", home.to_str().unwrap())],
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let venv = text(&o.stdout);
+    assert_eq!(
+        venv.trim(),
+        home.join(".cache/marchmesh/embree-venv")
+            .display()
+            .to_string()
+    );
+    assert!(!venv.contains("/tmp/embree-venv"));
+    // A folder anyone can write into (a planted interpreter) is refused.
+    let planted = home.join(".cache/marchmesh/embree-venv");
+    std::fs::create_dir_all(planted.join("bin")).unwrap();
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(&planted, std::fs::Permissions::from_mode(0o777)).unwrap();
+    let o = helpers(
+        "anchor_venv embree-venv",
+        &[("HOME", home.to_str().unwrap())],
+    );
+    assert!(!o.status.success());
+    assert!(text(&o.stderr).contains("not used"), "{}", text(&o.stderr));
+    // Without HOME or XDG_CACHE_HOME there is no default: nothing under /tmp is guessed.
+    let o = helpers("anchor_venv embree-venv", &[]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o.stderr).contains("EMBREE_VENV"),
+        "{}",
+        text(&o.stderr)
+    );
+}
+
+#[test]
+fn temporary_files_go_to_a_private_folder_removed_at_exit() {
+    let o = helpers(
+        "anchor_private_tmp; stat -c '%a' \"$anchor_tmp\"; echo \"$anchor_tmp\"",
+        &[],
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let mut lines = out.lines();
+    assert_eq!(lines.next(), Some("700"));
+    let folder = lines.next().unwrap();
+    assert!(!folder.ends_with("/tmp"), "{folder}");
+    assert!(
+        !std::path::Path::new(folder).exists(),
+        "not removed at exit"
+    );
+}
+
+#[test]
+fn runs_in_the_same_second_get_distinct_output_names() {
+    let dir = tmp("names");
+    let d = dir.to_str().unwrap();
+    let o = helpers(
+        &format!(
+            "anchor_reserve '{d}' embree; anchor_reserve '{d}' embree; anchor_reserve '{d}' embree"
+        ),
+        &[],
+    );
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let out = text(&o.stdout);
+    let names: std::collections::BTreeSet<&str> = out.lines().collect();
+    assert_eq!(names.len(), 3, "{out}");
+    for n in &names {
+        assert!(std::path::Path::new(&format!("{n}.md")).exists(), "{n}");
+    }
+    // Both scripts use the helpers and no fixed name in a shared folder.
+    for script in ["anchor_embree.sh", "anchor_fidget.sh"] {
+        let text =
+            std::fs::read_to_string(marchmesh_testkit::repo_root().join("scripts").join(script))
+                .unwrap();
+        assert!(text.contains("anchor_common.sh") && text.contains("anchor_reserve"));
+        assert!(!text.contains("/tmp/"), "{script} names a fixed /tmp path");
+    }
+}
