@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
-use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+use marchmesh_harness::backend::{self, BackendId, BackendSpec};
 
 mod assets;
 mod bench;
@@ -316,7 +316,7 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
 }
 
 fn render(args: RenderArgs) -> Result<()> {
-    let kind: BackendKind = args.backend.parse()?;
+    let kind: BackendId = args.backend.parse()?;
     if args.options.iter().any(|o| o == "help") {
         print!("{}", backend::option_help(kind));
         return Ok(());

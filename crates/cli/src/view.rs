@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use marchmesh_harness::backend::{self, BackendKind};
+use marchmesh_harness::backend::{self, BackendId};
 use marchmesh_viewer::{Script, Session, SessionOptions, headless, window};
 
 /// The `--help` text after the options: keys and the script format.
@@ -87,12 +87,12 @@ pub struct ViewArgs {
 /// an option belongs to the backend shown first.
 fn parse_options(
     raw: &[String],
-    first: BackendKind,
-) -> Result<BTreeMap<BackendKind, Vec<(String, String)>>> {
-    let mut out: BTreeMap<BackendKind, Vec<(String, String)>> = BTreeMap::new();
+    first: BackendId,
+) -> Result<BTreeMap<BackendId, Vec<(String, String)>>> {
+    let mut out: BTreeMap<BackendId, Vec<(String, String)>> = BTreeMap::new();
     for o in raw {
         let (kind, pair) = match o.split_once(':') {
-            Some((name, pair)) => match name.trim().parse::<BackendKind>() {
+            Some((name, pair)) => match name.trim().parse::<BackendId>() {
                 Ok(kind) => (kind, pair),
                 Err(_) => (first, o.as_str()),
             },
@@ -112,7 +112,7 @@ fn parse_options(
 
 /// Runs `marchmesh view`.
 pub fn view(args: ViewArgs) -> Result<()> {
-    let kind: BackendKind = args.backend.parse()?;
+    let kind: BackendId = args.backend.parse()?;
     let options = parse_options(&args.options, kind)?;
     // Read the script first: a malformed script fails before anything is built.
     let script = match &args.script {

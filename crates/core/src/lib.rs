@@ -22,7 +22,7 @@ pub mod stats;
 mod stream;
 pub mod tolerance;
 
-pub use backend::Backend;
+pub use backend::{Backend, QualityKnob};
 pub use background::{BackgroundError, BackgroundSampler};
 pub use camera::{PrimarySamples, Tile};
 pub use compare::{Accuracy, compare};
