@@ -746,3 +746,72 @@ pub fn uv_sphere_obj(r: f64, stacks: u32, sectors: u32) -> String {
     }
     s
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn typed_variants_keep_the_labels_and_options_of_committed_runs() {
+        // Labels as in bench-results/stability-*/stability.json: every key written is kept
+        // (defaults too) in the order written, numbers as Rust prints them.
+        for (variant, label) in [
+            (
+                variant!(SdfBackend { eps_abs: 1e-8 }),
+                "sdf[eps_abs=0.00000001]",
+            ),
+            (
+                variant!(SdfBackend { relaxation: 1.0 }),
+                "sdf[relaxation=1]",
+            ),
+            (
+                variant!(SdfBackend { relaxation: 1.2 }),
+                "sdf[relaxation=1.2]",
+            ),
+            (
+                variant!(SdfBackend {
+                    max_steps: 1e5 as u32
+                }),
+                "sdf[max_steps=100000]",
+            ),
+            (
+                variant!(SdfBackend { segment: false }),
+                "sdf[segment=false]",
+            ),
+            (
+                variant!(SdfBackend {
+                    grid: GridKind::Dense,
+                    grid_res: 64u32
+                }),
+                "sdf[grid=dense,grid_res=64]",
+            ),
+            (
+                variant!(SdfBackend {
+                    grid: GridKind::Sparse,
+                    grid_res: 512u32,
+                    quantize: Quantization::U8,
+                    recon: Reconstruction::Normals
+                }),
+                "sdf[grid=sparse,grid_res=512,quantize=u8,recon=normals]",
+            ),
+            (
+                variant!(MeshBackend {
+                    tess_px: STUDY_MESH_TESS_PX
+                }),
+                "mesh[tess_px=0.05]",
+            ),
+            (
+                variant!(MeshBackend { tess_level: 4u32 }),
+                "mesh[tess_level=4]",
+            ),
+            (Variant::default_of(BackendId::REFERENCE), "reference"),
+        ] {
+            assert_eq!(variant.label(), label);
+            marchmesh_registry::check_options(&marchmesh_registry::BackendSpec {
+                kind: variant.backend,
+                options: variant.options.clone(),
+            })
+            .unwrap_or_else(|e| panic!("{label}: {e}"));
+        }
+    }
+}
