@@ -31,8 +31,20 @@ pub(crate) const BOUND_MAX: u32 = INSIDE - 1;
 /// Subdivisions of a cell in an empty word's distance bound (rounded down).
 pub(crate) const BOUND_STEPS: f64 = 16.0;
 
-/// How brick samples are stored.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+/// How brick samples are stored (`f32`, `u16`, `u8` as data).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Quantization {
     /// 32-bit floats: exact distances (clamped to the band, see [`SparseGrid::clamp`]).
     #[default]
@@ -99,8 +111,21 @@ impl Quantization {
     }
 }
 
-/// How a brick is interpolated between its samples.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+/// How a brick is interpolated between its samples (`trilinear`, `tricubic`, `normals` as
+/// data).
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum Reconstruction {
     /// Trilinear over the 8 surrounding samples: exact for linear fields (flat facets), C0,
     /// its gradient jumps across cell faces. Error at most half a cell diagonal.

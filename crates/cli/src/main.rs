@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use marchmesh_core::{BackgroundSampler, RenderOptions, image_io};
-use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+use marchmesh_harness::backend::{self, BackendId, BackendSpec};
 
 /// Prints a line to stdout like `println!`, but a closed stdout ends the process quietly
 /// (see [`say`]) instead of panicking.
@@ -396,7 +396,7 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
 }
 
 fn render(args: RenderArgs) -> Result<()> {
-    let kind: BackendKind = args.backend.parse()?;
+    let kind: BackendId = args.backend.parse()?;
     if args.options.iter().any(|o| o == "help") {
         out!("{}", backend::option_help(kind).trim_end_matches('\n'));
         return Ok(());

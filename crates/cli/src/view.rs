@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use marchmesh_harness::backend::{self, BackendKind};
+use marchmesh_harness::backend::{self, BackendId};
 use marchmesh_viewer::{Script, Session, SessionOptions, headless, window};
 
 /// The `--help` text after the options: keys and the script format.
@@ -87,12 +87,12 @@ pub struct ViewArgs {
 /// an option belongs to the backend shown first.
 fn parse_options(
     raw: &[String],
-    first: BackendKind,
-) -> Result<BTreeMap<BackendKind, Vec<(String, String)>>> {
-    let mut out: BTreeMap<BackendKind, Vec<(String, String)>> = BTreeMap::new();
+    first: BackendId,
+) -> Result<BTreeMap<BackendId, Vec<(String, String)>>> {
+    let mut out: BTreeMap<BackendId, Vec<(String, String)>> = BTreeMap::new();
     for o in raw {
         let (kind, pair) = match o.split_once(':') {
-            Some((name, pair)) => match name.trim().parse::<BackendKind>() {
+            Some((name, pair)) => match name.trim().parse::<BackendId>() {
                 Ok(kind) => (kind, pair),
                 Err(_) => (first, o.as_str()),
             },
@@ -115,7 +115,7 @@ const MAX_STEP: f64 = 1e12;
 
 /// Runs `marchmesh view`.
 pub fn view(args: ViewArgs) -> Result<()> {
-    let kind: BackendKind = args.backend.parse()?;
+    let kind: BackendId = args.backend.parse()?;
     if let Some(step) = args.step
         && !(step.is_finite() && step > 0.0 && step <= MAX_STEP)
     {

@@ -2,14 +2,13 @@
 //!
 //! Every backend runs the same small scenes (64x64) and compares its AOVs with the exact
 //! reference pixel by pixel (`marchmesh_core::compare`). A backend's test file instantiates
-//! the suite with [`conformance_suite!`], giving a builder for itself, a builder for the
-//! reference, and its tolerances per case (the way `fidget` runs one test suite on every
-//! evaluator):
+//! the suite with [`conformance_suite!`], giving its [`Backend`] type, optionally its settings
+//! (default: the backend's defaults), and its tolerances per case (the way `fidget` runs one
+//! test suite on every evaluator):
 //!
 //! ```ignore
 //! marchmesh_conformance::conformance_suite!(
-//!     backend = |scene| marchmesh_sdf::build(scene, &Default::default()).map(|g| Box::new(g) as _),
-//!     reference = |scene| marchmesh_reference::build(scene, &Default::default()).map(|g| Box::new(g) as _),
+//!     backend = marchmesh_sdf::SdfBackend,
 //!     tolerance = |case: marchmesh_conformance::CaseId| marchmesh_conformance::Tolerance::default(),
 //! );
 //! ```
@@ -20,9 +19,12 @@
 
 use std::path::{Path, PathBuf};
 
+pub use marchmesh_core::Backend;
 use marchmesh_core::{
-    Accuracy, BackgroundSampler, Geometry, RenderOptions, RenderStats, compare, render,
+    Accuracy, BackgroundSampler, DEFAULT_MEMORY_LIMIT_BYTES, Geometry, RenderOptions, RenderStats,
+    compare, render,
 };
+use marchmesh_reference::ReferenceBackend;
 use marchmesh_scene::Scene;
 
 /// Image side of every conformance render, pixels.
@@ -265,6 +267,20 @@ pub fn run_case<E1: std::fmt::Display, E2: std::fmt::Display>(
     }
 }
 
+/// Renders case `id` with backend `B` at `settings` and with the reference (both within the
+/// default memory limit), and compares.
+pub fn run_backend_case<B: Backend>(id: CaseId, settings: &B::Settings) -> CaseResult {
+    let backend = |scene: &Scene| {
+        B::build(scene, settings, DEFAULT_MEMORY_LIMIT_BYTES)
+            .map(|g| Box::new(g) as Box<dyn Geometry>)
+    };
+    let reference = |scene: &Scene| {
+        ReferenceBackend::build(scene, &Default::default(), DEFAULT_MEMORY_LIMIT_BYTES)
+            .map(|g| Box::new(g) as Box<dyn Geometry>)
+    };
+    run_case(id, &backend, &reference)
+}
+
 /// Cases whose silhouette must match the reference to [`TWO_PIXEL_SILHOUETTE`] pixels on every
 /// backend, whatever its tolerance says: minimal scenes where any disagreement is a bug in
 /// what the scene means, not an approximation (issue 10's camera-inside and sdf-holes scenes).
@@ -303,19 +319,28 @@ pub fn check(id: CaseId, r: &CaseResult, tol: &Tolerance) {
 
 /// Instantiates one `#[test]` per conformance case for a backend.
 ///
-/// `backend` and `reference` are closures `Fn(&Scene) -> Result<Box<dyn Geometry>, E>`;
-/// `tolerance` is a function `fn(CaseId) -> Tolerance` giving the bounds for each case. The
-/// lists below must name every [`CaseId`] exactly once: an exhaustive match in the expansion
-/// fails to compile when one is missing, and a misspelt one does not exist.
+/// `backend` is the backend's type (a [`Backend`]), run against the reference; `settings`
+/// (optional) an expression of its settings type (default: its defaults); `tolerance` a
+/// function `fn(CaseId) -> Tolerance` giving the bounds for each case. The lists below must
+/// name every [`CaseId`] exactly once: an exhaustive match in the expansion fails to compile
+/// when one is missing, and a misspelt one does not exist.
 /// Two groups can be marked `#[ignore = reason]` for a backend that does not meet them yet:
 /// `ignore_inside_overlapping = "reason"` (a camera inside overlapping solids:
 /// `camera_inside_one`, `camera_inside_two`, `camera_inside_union`, `camera_inside_repeat`) and
 /// `ignore_flat_ellipsoid = "reason"` (`flat_ellipsoid_before_triangle`).
 #[macro_export]
 macro_rules! conformance_suite {
-    (backend = $backend:expr, reference = $reference:expr, tolerance = $tol:expr
+    (backend = $backend:ty $(, settings = $settings:expr)?, tolerance = $tol:expr
      $(, ignore_inside_overlapping = $inside:literal)? $(, ignore_flat_ellipsoid = $flat:literal)? $(,)?) => {
-        $crate::conformance_suite!(@all $backend, $reference, $tol, [$($inside)?], [$($flat)?];
+        /// The settings every case builds the backend with.
+        fn conformance_settings() -> <$backend as $crate::Backend>::Settings {
+            $crate::conformance_suite!(@or_default $($settings)?)
+        }
+        /// Runs case `id`.
+        fn conformance_run(id: $crate::CaseId) -> $crate::CaseResult {
+            $crate::run_backend_case::<$backend>(id, &conformance_settings())
+        }
+        $crate::conformance_suite!(@all $tol, [$($inside)?], [$($flat)?];
             [sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
              nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
              repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin,
@@ -323,13 +348,13 @@ macro_rules! conformance_suite {
             [camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat],
             [flat_ellipsoid_before_triangle]);
     };
-    (@all $backend:expr, $reference:expr, $tol:expr, [$($inside:literal)?], [$($flat:literal)?];
+    (@or_default) => { Default::default() };
+    (@or_default $settings:expr) => { $settings };
+    (@all $tol:expr, [$($inside:literal)?], [$($flat:literal)?];
      [$($plain:ident),*], [$($overlapping:ident),*], [$($ellipsoid:ident),*]) => {
-        $crate::conformance_suite!(@group $backend, $reference, $tol, []; $($plain),*);
-        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($inside)?];
-            $($overlapping),*);
-        $crate::conformance_suite!(@group $backend, $reference, $tol, [$($flat)?];
-            $($ellipsoid),*);
+        $crate::conformance_suite!(@group $tol, []; $($plain),*);
+        $crate::conformance_suite!(@group $tol, [$($inside)?]; $($overlapping),*);
+        $crate::conformance_suite!(@group $tol, [$($flat)?]; $($ellipsoid),*);
         /// Compile-time check that the lists above name every case.
         #[allow(dead_code)]
         fn every_case_is_listed(id: $crate::CaseId) {
@@ -340,23 +365,20 @@ macro_rules! conformance_suite {
             }
         }
     };
-    (@group $backend:expr, $reference:expr, $tol:expr, []; $($name:ident),* $(,)?) => {
-        $crate::conformance_suite!(@cases $backend, $reference, $tol, any(), ""; $($name),*);
+    (@group $tol:expr, []; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $tol, any(), ""; $($name),*);
     };
-    (@group $backend:expr, $reference:expr, $tol:expr, [$reason:literal]; $($name:ident),* $(,)?) => {
-        $crate::conformance_suite!(@cases $backend, $reference, $tol, all(), $reason; $($name),*);
+    (@group $tol:expr, [$reason:literal]; $($name:ident),* $(,)?) => {
+        $crate::conformance_suite!(@cases $tol, all(), $reason; $($name),*);
     };
-    (@cases $backend:expr, $reference:expr, $tol:expr, $ignore:meta, $reason:literal;
-     $($name:ident),* $(,)?) => {
+    (@cases $tol:expr, $ignore:meta, $reason:literal; $($name:ident),* $(,)?) => {
         $(
             #[test]
             #[cfg_attr($ignore, ignore = $reason)]
             fn $name() {
                 let id = $crate::CaseId::$name;
-                let backend = $backend;
-                let reference = $reference;
                 let tol: fn($crate::CaseId) -> $crate::Tolerance = $tol;
-                let r = $crate::run_case(id, &backend, &reference);
+                let r = conformance_run(id);
                 $crate::check(id, &r, &tol(id));
             }
         )*

@@ -12,6 +12,21 @@ use marchmesh_scene::{MaterialId, Scene};
 
 use crate::camera::PrimarySamples;
 
+/// How a render hands camera rays to a geometry ([`Geometry::batch_policy`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum BatchPolicy {
+    /// Tiles of [`crate::TILE_HEIGHT`] rows and [`Geometry::tile_width`] columns (at most
+    /// [`crate::TILE_RAYS`] camera rays, [`crate::tile_width`]), bands of rows traced by
+    /// every worker of the render's thread pool.
+    #[default]
+    Tiles,
+    /// Tiles of the widest camera tile (64 columns) spanning every row of the image, traced
+    /// one after another from the calling thread whatever the render's thread count: each
+    /// wavefront holds `64 x height x samples` camera rays (and its shadow and reflection
+    /// rays), for a geometry that spreads one batch over its own workers.
+    Columns,
+}
+
 /// A ray in render space. `dir` is unit length; valid hits have `t_min <= t <= t_max`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Ray {
@@ -300,6 +315,15 @@ pub trait Geometry: Send + Sync {
     /// batching.
     fn tile_width(&self) -> u32 {
         crate::TILE_WIDTH
+    }
+
+    /// How the integrators cut the image into camera-ray batches and which threads call
+    /// this geometry with them. The default, [`BatchPolicy::Tiles`], is what every CPU
+    /// backend wants; a geometry that parallelises inside one batch (a GPU, a voxel engine
+    /// with its own threads) asks for [`BatchPolicy::Columns`]. Images do not depend on it
+    /// except where a backend's results depend on its batching.
+    fn batch_policy(&self) -> BatchPolicy {
+        BatchPolicy::Tiles
     }
 
     /// The one-query approximations this geometry answers (none by default).

@@ -29,7 +29,7 @@ use crate::camera::{PrimarySamples, Tile, TileRays, sample_offset};
 use crate::clock::Clock;
 use crate::emitter::Emitter;
 use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
-use crate::geometry::RenderSpace;
+use crate::geometry::{BatchPolicy, RenderSpace};
 use crate::geometry::{
     Cone, Geometry, Hit, OcclusionResult, Ray, RayWork, SurfacePoint, Termination, TraceResult,
     Visibility,
@@ -184,10 +184,12 @@ pub fn render_into(
             limit_bytes: options.memory_limit_bytes,
         });
     }
-    // One thread renders on the caller's thread: no pool to start and join.
-    let pool = match options.threads {
-        1 => None,
-        threads => Some(
+    // One thread renders on the caller's thread: no pool to start and join. So does a
+    // geometry that takes whole columns of the image from one thread.
+    let policy = geometry.batch_policy();
+    let pool = match (policy, options.threads) {
+        (BatchPolicy::Columns, _) | (_, 1) => None,
+        (BatchPolicy::Tiles, threads) => Some(
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
@@ -196,6 +198,10 @@ pub fn render_into(
                     reason: e.to_string(),
                 })?,
         ),
+    };
+    let band_rows = match policy {
+        BatchPolicy::Tiles => TILE_HEIGHT,
+        BatchPolicy::Columns => h.max(1),
     };
     let shading = Shading::new(scene);
     let frame = Frame {
@@ -214,7 +220,7 @@ pub fn render_into(
     // Calibrated before the render's clock starts (once per process).
     Clock::get();
     let start = Instant::now();
-    let bands = Band::split(fb, TILE_HEIGHT, options.aovs);
+    let bands = Band::split(fb, band_rows, options.aovs);
     let stats = match scene.render.integrator {
         Integrator::Whitted => run_bands(pool.as_ref(), bands, on_row, |s, b| {
             trace_band(&frame, s, b)
@@ -289,6 +295,16 @@ pub(crate) struct Frame<'a> {
     pub(crate) geometry: &'a dyn Geometry,
     pub(crate) background: &'a BackgroundSampler,
     pub(crate) camera: TileRays,
+}
+
+impl Frame<'_> {
+    /// Columns of the tiles this render traces ([`BatchPolicy`]).
+    pub(crate) fn tile_width(&self) -> u32 {
+        match self.geometry.batch_policy() {
+            BatchPolicy::Tiles => tile_width(self.geometry.tile_width(), self.sh.spp),
+            BatchPolicy::Columns => crate::camera::MAX_TILE_WIDTH as u32,
+        }
+    }
 }
 
 /// The framebuffer's pixels of one band of whole image rows, written in place by the tiles
@@ -975,7 +991,7 @@ pub(crate) fn zero_sums(sum: &mut Vec<Vec3>, len: usize) {
 fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
     zero_sums(&mut s.sum, band.color_len());
-    for tile in band.tiles(tile_width(f.geometry.tile_width(), f.sh.spp)) {
+    for tile in band.tiles(f.tile_width()) {
         trace_tile(f, s, band, tile, &mut stats);
     }
     band.set_colors(&s.sum, f.sh.spp, &mut stats);

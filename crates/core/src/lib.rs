@@ -22,7 +22,7 @@ pub mod stats;
 mod stream;
 pub mod tolerance;
 
-pub use backend::Backend;
+pub use backend::{Backend, QualityKnob};
 pub use background::{
     BackgroundError, BackgroundSampler, ENVIRONMENT_BYTES_PER_TEXEL, check_background,
 };

@@ -82,8 +82,7 @@ pub(crate) struct Scratch {
 pub(crate) fn trace_band(f: &Frame<'_>, s: &mut Scratch, band: &mut Band<'_>) -> RenderStats {
     let mut stats = RenderStats::default();
     crate::integrator::zero_sums(&mut s.sum, band.color_len());
-    let width = crate::integrator::tile_width(f.geometry.tile_width(), f.sh.spp);
-    for tile in band.tiles(width) {
+    for tile in band.tiles(f.tile_width()) {
         trace_tile(f, s, band, tile, &mut stats);
     }
     band.set_colors(&s.sum, f.sh.spp, &mut stats);

@@ -517,3 +517,60 @@ fn geometry_times_are_the_nanoseconds_the_queries_took() {
         (0, 0, 0)
     );
 }
+
+/// [`Spheres`] asking for [`BatchPolicy::Columns`], recording the primary batches' sizes and
+/// the threads that traced them.
+struct ColumnSpheres {
+    inner: Spheres,
+    batches: std::sync::Mutex<Vec<(usize, std::thread::ThreadId)>>,
+}
+
+impl Geometry for ColumnSpheres {
+    fn batch_policy(&self) -> marchmesh_core::BatchPolicy {
+        marchmesh_core::BatchPolicy::Columns
+    }
+
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        self.inner.closest_hit(ray)
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        self.inner.occluded(ray)
+    }
+
+    fn closest_hits_primary(
+        &self,
+        rays: &[Ray],
+        _samples: marchmesh_core::PrimarySamples<'_>,
+        out: &mut [TraceResult],
+    ) {
+        if let Ok(mut b) = self.batches.lock() {
+            b.push((rays.len(), std::thread::current().id()));
+        }
+        self.inner.closest_hits(rays, out);
+    }
+
+    fn report(&self) -> GeometryReport {
+        self.inner.report()
+    }
+}
+
+#[test]
+fn column_batches_come_from_the_calling_thread_and_give_the_same_image() {
+    // 70x33 at one sample: columns of 64 and 6 pixels spanning all 33 rows.
+    let s = scene(&ONE_SPHERE.replace(r#""width": 33"#, r#""width": 70"#));
+    let tiles = run(&s, 2);
+    let columns = ColumnSpheres {
+        inner: Spheres::from_scene(&s),
+        batches: Default::default(),
+    };
+    let out = marchmesh_testkit::render_with(&s, &columns, 2);
+    assert_eq!(out.framebuffer, tiles.framebuffer);
+    let batches = columns.batches.into_inner().expect("no panic while locked");
+    let sizes: Vec<usize> = batches.iter().map(|b| b.0).collect();
+    assert_eq!(sizes, vec![64 * 33, 6 * 33]);
+    assert!(
+        batches.iter().all(|b| b.1 == std::thread::current().id()),
+        "every column batch is traced on the thread that called render"
+    );
+}

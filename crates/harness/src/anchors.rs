@@ -9,6 +9,9 @@
 use std::fmt::Write;
 use std::path::Path;
 
+use marchmesh_core::Backend;
+use marchmesh_mesh::MeshBackend;
+use marchmesh_sdf::SdfBackend;
 use serde::{Deserialize, Serialize};
 
 /// Largest anchor file read (an anchor run writes a few tens of KB).
@@ -191,7 +194,7 @@ pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
             Anchor {
                 tool: "embree".into(),
                 version: f.embree_version,
-                backend: "mesh".into(),
+                backend: MeshBackend::NAME.into(),
                 file,
                 date_utc: f.date_utc,
                 load_average_start: f.load_average_start,
@@ -206,7 +209,7 @@ pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
                 .iter()
                 .map(|s| AnchorEntry {
                     subject: format!("{} ({} voxels)", s.scene, s.fidget_depth_voxels),
-                    tracer: "sdf".into(),
+                    tracer: SdfBackend::NAME.into(),
                     unit: "Mpix/s".into(),
                     ours: s.sdf.mpix_per_s_median,
                     anchor: s.fidget.mpix_per_s_median,
@@ -216,7 +219,7 @@ pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
             Anchor {
                 tool: "fidget".into(),
                 version: format!("fidget {}", f.fidget_version),
-                backend: "sdf".into(),
+                backend: SdfBackend::NAME.into(),
                 file,
                 date_utc: f.date_utc,
                 load_average_start: f.load_average_start,

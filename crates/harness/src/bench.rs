@@ -15,7 +15,7 @@ use marchmesh_core::{
 use marchmesh_scene::{RenderOverrides, Scene};
 
 use crate::alloc::HeapPhase;
-use crate::backend::{self, BackendKind, BackendSpec};
+use crate::backend::{self, BackendId, BackendSpec};
 use crate::images;
 use crate::results::{Failure, ReferenceInfo, Row, TimingSample};
 use crate::rss::RssPhase;
@@ -629,7 +629,7 @@ fn reference_render(
         error: None,
     };
     let spec = BackendSpec {
-        kind: BackendKind::Reference,
+        kind: BackendId::REFERENCE,
         options: Vec::new(),
     };
     let t0 = Instant::now();
@@ -919,7 +919,7 @@ mod tests {
             scene_path: PathBuf::from(format!("{scene}.json")),
             label: "q".into(),
             spec: BackendSpec {
-                kind: BackendKind::Sdf,
+                kind: BackendId::of::<marchmesh_sdf::SdfBackend>(),
                 options: vec![],
             },
             resolution: Resolution::Size {

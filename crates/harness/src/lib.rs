@@ -7,7 +7,7 @@
 //! backend built for it, then the core's integrator):
 //!
 //! ```
-//! use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+//! use marchmesh_harness::backend::{self, BackendId, BackendSpec};
 //!
 //! let scene = marchmesh_scene::parse_scene(
 //!     r#"{ "camera": { "position": [0, 0, -4], "look_at": [0, 0, 0], "width": 9, "height": 9 },
@@ -16,7 +16,7 @@
 //!     std::path::Path::new("."),
 //! )?;
 //! let background = marchmesh_core::BackgroundSampler::load(&scene.background)?;
-//! for kind in BackendKind::ALL {
+//! for kind in BackendId::ALL {
 //!     let spec = BackendSpec { kind, options: vec![] };
 //!     let geometry = backend::build(&scene, &spec)?;
 //!     let options = marchmesh_core::RenderOptions { threads: 1, ..Default::default() };

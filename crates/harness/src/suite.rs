@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use marchmesh_scene::RenderOverrides;
 
-use crate::backend::{self, BackendKind, BackendSpec};
+use crate::backend::{self, BackendId, BackendSpec};
 use crate::stats::RepeatPolicy;
 
 /// A suite file as written (paths still relative to the file).
@@ -601,7 +601,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
         let mut backends = Vec::new();
         for (bi, b) in g.backends.iter().enumerate() {
             let bp = format!("{gp}.backends[{bi}]");
-            let kind: BackendKind = b.backend.parse().map_err(|e: backend::BackendError| {
+            let kind: BackendId = b.backend.parse().map_err(|e: backend::BackendError| {
                 fmt_err(format!("{bp}.backend"), e.to_string())
             })?;
             let mut options = Vec::new();

@@ -31,7 +31,7 @@ fn bench(c: &mut Criterion) {
         group.throughput(Throughput::Elements(case.tris.len() as u64));
         for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let options = MeshOptions {
-                bvh: kind,
+                bvh: Some(kind),
                 ..case.options
             };
             group.bench_function(BenchmarkId::new("marchmesh", format!("{kind:?}")), |b| {
@@ -46,7 +46,7 @@ fn bench(c: &mut Criterion) {
         let primary = primary_rays(&case.scene);
         for kind in [BvhKind::Bvh2, BvhKind::CwBvh, BvhKind::Wide] {
             let options = MeshOptions {
-                bvh: kind,
+                bvh: Some(kind),
                 ..case.options
             };
             let g = build(&case.scene, &options).expect("build");

@@ -141,7 +141,7 @@ fn main() -> Res<()> {
             };
             // The preset by its option name (`build=...`), through the same serde names.
             let build_quality = match args.get(5) {
-                None => MeshOptions::DEFAULT.build_quality,
+                None => MeshOptions::DEFAULT.build_quality(),
                 Some(name) => {
                     use serde::{Deserialize, de::value::StrDeserializer};
                     let de = StrDeserializer::<serde::de::value::Error>::new(name);
@@ -152,9 +152,9 @@ fn main() -> Res<()> {
             let g = build(
                 &scene,
                 &MeshOptions {
-                    bvh: kind,
-                    build_quality,
-                    packets: bvh == "wide" || bvh == "wide4x2",
+                    bvh: Some(kind),
+                    build: Some(build_quality),
+                    packets: Some(bvh == "wide" || bvh == "wide4x2"),
                     ..MeshOptions::DEFAULT
                 },
             )?;

@@ -78,7 +78,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let g = build(
         &case.scene,
         &MeshOptions {
-            bvh,
+            bvh: Some(bvh),
             ..case.options
         },
     )?;

@@ -35,7 +35,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let g = build(
                 &case.scene,
                 &MeshOptions {
-                    bvh: kind,
+                    bvh: Some(kind),
                     ..case.options
                 },
             )?;

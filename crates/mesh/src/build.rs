@@ -342,11 +342,11 @@ fn repeat_offsets(
         }
         total = total.saturating_mul((ranges[a].1 - ranges[a].0 + 1).max(0) as u128);
     }
-    if total > u128::from(ctx.options.max_instances) {
+    if total > u128::from(ctx.options.max_instances()) {
         return Err(MeshError::TooManyInstances {
             json_path: node.json_path.clone(),
             cells: total.min(u128::from(u64::MAX)) as u64,
-            limit: ctx.options.max_instances,
+            limit: ctx.options.max_instances(),
         });
     }
     let mut out = Vec::new();

@@ -49,10 +49,10 @@ use blas::{Blas, BlasHit, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
 pub use options::{
-    BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, MAX_SEGMENTS_PER_TURN, MeshOptions,
-    Tessellation,
+    BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, MAX_SEGMENTS_PER_TURN, MAX_TESS_LEVEL,
+    MeshOptions, MeshPreset, Tessellation,
 };
-pub use settings::{MeshBackend, MeshPreset, MeshSettings};
+pub use settings::MeshBackend;
 use tessellate::{Detail, LocalMesh, ScreenBudget};
 
 /// Why the mesh backend could not build a scene.
@@ -209,7 +209,7 @@ pub struct MeshGeometry {
 pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshError> {
     check_options(options)?;
     let mut report = GeometryReport {
-        backend: "mesh".into(),
+        backend: <MeshBackend as marchmesh_core::Backend>::NAME.into(),
         ..GeometryReport::default()
     };
     let space = RenderSpace::of(scene);
@@ -276,7 +276,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
     Ok(MeshGeometry {
         flat: flat_blas,
         flat_materials_default: flat_material,
-        packets: options.packets,
+        packets: options.packets(),
         interleave,
         blases,
         instances,
@@ -394,7 +394,7 @@ impl ShapeInputs<'_> {
         for (key, placements) in groups {
             let node = placements[0].node;
             // Triangles are stored once per placement unless instanced.
-            let copies = if options.instancing && placements.len() > 1 {
+            let copies = if options.instancing() && placements.len() > 1 {
                 1
             } else {
                 placements.len() as u64
@@ -439,7 +439,7 @@ impl ShapeInputs<'_> {
         let pixel_angle = self.scene.camera.pixel_angle();
         let local = build::local_bounds(node, mesh_bounds).unwrap_or((DVec3::ZERO, DVec3::ZERO));
         let screen_budget;
-        let detail = match options.tessellation {
+        let detail = match options.tessellation()? {
             Tessellation::ScreenError { pixels } => {
                 screen_budget = screen_budget_for(placements, local, pixels * pixel_angle);
                 Detail::Screen(&screen_budget)
@@ -453,7 +453,7 @@ impl ShapeInputs<'_> {
         let tessellated = tessellate::tessellate_within(
             &node.kind,
             detail,
-            options.max_segments_per_turn,
+            options.max_segments_per_turn(),
             budget.triangles_left(copies),
         );
         let mesh = match tessellated {
@@ -487,7 +487,7 @@ impl ShapeInputs<'_> {
             let capped = mesh
                 .segments
                 .iter()
-                .any(|&s| s >= options.max_segments_per_turn);
+                .any(|&s| s >= options.max_segments_per_turn());
             report.notes.push(format!(
                 "{}: {} triangles, segments per turn {:?}{}{}",
                 node.json_path,
@@ -496,7 +496,7 @@ impl ShapeInputs<'_> {
                 match detail {
                     Detail::ChordError(e) => format!(", local chord budget {e:.3e}"),
                     Detail::Level(l) => format!(", level {l}"),
-                    Detail::Screen(_) => match options.tessellation {
+                    Detail::Screen(_) => match options.tessellation()? {
                         Tessellation::ScreenError { pixels } =>
                             format!(", screen budget {pixels} px per band"),
                         _ => String::new(),
@@ -527,11 +527,11 @@ impl ShapeInputs<'_> {
         // Meshes inside a CSG node are baked to distance grids as fine as the
         // extraction grid: a finer bake would not show, a coarser one would.
         let field_options = marchmesh_field::FieldOptions {
-            mesh_grid_resolution: options.surface_resolution,
+            mesh_grid_resolution: options.surface_resolution(),
             cache_dir: None,
             ..marchmesh_field::FieldOptions::DEFAULT
         };
-        let cells = u64::from(options.surface_resolution + 1).pow(3);
+        let cells = u64::from(options.surface_resolution() + 1).pow(3);
         budget.take(
             cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
             false,
@@ -539,12 +539,12 @@ impl ShapeInputs<'_> {
             || {
                 format!(
                     "a surface-extraction grid of {}^3 cells",
-                    options.surface_resolution
+                    options.surface_resolution()
                 )
             },
             "the extraction grid (--opt surface_res)",
         )?;
-        let mesh = extract::extract(node, local, options.surface_resolution, &field_options)?;
+        let mesh = extract::extract(node, local, options.surface_resolution(), &field_options)?;
         budget.take(
             triangle_bytes(mesh.triangles.len() as u64, copies),
             true,
@@ -556,7 +556,7 @@ impl ShapeInputs<'_> {
             "{}: surface extracted from the distance field, {} triangles at resolution {}",
             node.json_path,
             mesh.triangles.len(),
-            options.surface_resolution
+            options.surface_resolution()
         ));
 
         *extract_time += te.elapsed();
@@ -572,7 +572,7 @@ impl ShapeInputs<'_> {
         report: &mut GeometryReport,
     ) -> Assembled {
         let (scene, options, meshes) = (self.scene, self.options, self.meshes);
-        let params = options.build_quality.params();
+        let params = options.build_quality().params();
         let mut flat = FlatBuilder::default();
         let mut blases: Vec<Blas> = Vec::new();
         let mut instances: Vec<Instance> = Vec::new();
@@ -586,14 +586,14 @@ impl ShapeInputs<'_> {
                 (_, Some(l)) => SourceMesh::Local(l),
                 _ => continue,
             };
-            if options.instancing && placements.len() > 1 {
+            if options.instancing() && placements.len() > 1 {
                 let input = source.blas_input();
                 if input.triangles.is_empty() {
                     continue;
                 }
                 let local_box = positions_bounds(&input.positions);
                 let blas_index = blases.len() as u32;
-                blases.push(Blas::build(input, options.bvh, params));
+                blases.push(Blas::build(input, options.bvh(), params));
                 for p in placements {
                     instance_boxes.push(render_box(&p.to_render, local_box));
                     instances.push(Instance {
@@ -622,7 +622,7 @@ impl ShapeInputs<'_> {
         let flat_triangles = flat.triangles.len();
         let (input, flat_material) = flat.into_input();
         let flat_blas =
-            (!input.triangles.is_empty()).then(|| Blas::build(input, options.bvh, params));
+            (!input.triangles.is_empty()).then(|| Blas::build(input, options.bvh(), params));
         let tlas = if instances.is_empty() {
             None
         } else {
@@ -703,14 +703,14 @@ fn describe(
     ];
     report.notes.push(format!(
         "bvh: {:?} with {:?} preset; instancing {}",
-        options.bvh,
-        options.build_quality,
-        if options.instancing { "on" } else { "off" }
+        options.bvh(),
+        options.build_quality(),
+        if options.instancing() { "on" } else { "off" }
     ));
     let fell_back = flat_blas
         .iter()
         .chain(blases.iter())
-        .filter(|b| b.tree.kind() != options.bvh)
+        .filter(|b| b.tree.kind() != options.bvh())
         .count();
     if fell_back > 0 {
         report.notes.push(format!(
@@ -754,7 +754,7 @@ fn screen_budget_for(
 }
 
 fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
-    match o.tessellation {
+    match o.tessellation()? {
         Tessellation::ScreenError { pixels } if !(pixels.is_finite() && pixels > 0.0) => {
             return Err(MeshError::InvalidOption(format!(
                 "ScreenError pixels must be > 0, got {pixels}"
@@ -765,24 +765,24 @@ fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
                 "ChordError world must be > 0, got {world}"
             )));
         }
-        Tessellation::FixedLevel(l) if l > 12 => {
+        Tessellation::FixedLevel(l) if l > MAX_TESS_LEVEL => {
             return Err(MeshError::InvalidOption(format!(
-                "FixedLevel must be <= 12, got {l}"
+                "FixedLevel must be <= {MAX_TESS_LEVEL}, got {l}"
             )));
         }
         _ => {}
     }
-    if o.surface_resolution < 8 || o.surface_resolution > extract::MAX_SURFACE_RESOLUTION {
+    if o.surface_resolution() < 8 || o.surface_resolution() > extract::MAX_SURFACE_RESOLUTION {
         return Err(MeshError::InvalidOption(format!(
             "surface_resolution must be in 8..={}, got {}",
             extract::MAX_SURFACE_RESOLUTION,
-            o.surface_resolution
+            o.surface_resolution()
         )));
     }
-    if !(8..=MAX_SEGMENTS_PER_TURN).contains(&o.max_segments_per_turn) {
+    if !(8..=MAX_SEGMENTS_PER_TURN).contains(&o.max_segments_per_turn()) {
         return Err(MeshError::InvalidOption(format!(
             "max_segments_per_turn must be in 8..={MAX_SEGMENTS_PER_TURN}, got {}",
-            o.max_segments_per_turn
+            o.max_segments_per_turn()
         )));
     }
     Ok(())

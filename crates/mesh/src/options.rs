@@ -1,5 +1,11 @@
 //! Build options of the mesh backend: BVH kind and build preset, tessellation budget,
-//! surface-extraction resolution, instancing.
+//! surface-extraction resolution, instancing. One flat serde type, [`MeshOptions`], whose
+//! fields are the `key=value` options: the first paragraph of each field's doc comment is its
+//! `--opt help` line, the whole comment its JSON Schema description. A key left unset takes
+//! its preset's value ([`MeshPreset::values`]); structured views
+//! ([`MeshOptions::tessellation`], [`MeshOptions::bvh`], ...) are methods. A new option is a
+//! field here, its value in [`MeshPreset::values`] and its use (through a view or
+//! [`MeshOptions::pick`]).
 
 use obvhs::BvhBuildParams;
 use schemars::JsonSchema;
@@ -90,51 +96,132 @@ pub enum Tessellation {
     FixedLevel(u32),
 }
 
-/// Options of [`crate::build`]. Build one with [`MeshOptions::DEFAULT`] or a preset and
-/// change fields.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A starting point for the other mesh options.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum MeshPreset {
+    /// [`MeshOptions::fast`]: Bvh2, fast build, 1-pixel tessellation, 64-cell extraction.
+    Fast,
+    /// [`MeshOptions::DEFAULT`].
+    #[default]
+    Default,
+    /// [`MeshOptions::quality`]: CwBvh, slow build, 0.1-pixel tessellation, 256 cells.
+    Quality,
+}
+
+impl MeshPreset {
+    /// Every key set to its value under this preset (the tessellation by `tess_px`; `preset`
+    /// and the other two tessellation keys unset). The default preset's values are the
+    /// documented defaults.
+    pub const fn values(self) -> MeshOptions {
+        const DEFAULT: MeshOptions = MeshOptions {
+            preset: None,
+            bvh: Some(BvhKind::Wide),
+            build: Some(BuildQuality::Tuned),
+            tess_px: Some(0.25),
+            tess_chord: None,
+            tess_level: None,
+            surface_res: Some(128),
+            packets: Some(true),
+            instancing: Some(true),
+            max_instances: Some(1 << 22),
+            max_segments: Some(4096),
+            memory_limit_bytes: 4 << 30,
+        };
+        match self {
+            MeshPreset::Default => DEFAULT,
+            MeshPreset::Fast => MeshOptions {
+                bvh: Some(BvhKind::Bvh2),
+                build: Some(BuildQuality::Fast),
+                tess_px: Some(1.0),
+                surface_res: Some(64),
+                ..DEFAULT
+            },
+            MeshPreset::Quality => MeshOptions {
+                bvh: Some(BvhKind::CwBvh),
+                build: Some(BuildQuality::Slow),
+                tess_px: Some(0.1),
+                surface_res: Some(256),
+                ..DEFAULT
+            },
+        }
+    }
+}
+
+/// Options of [`crate::build`], and the mesh backend's `key=value` options: a key left out
+/// (`None`) keeps the preset's value. Unknown keys are refused. Build one with
+/// [`MeshOptions::DEFAULT`] or a preset and set fields.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields, default)]
 pub struct MeshOptions {
-    /// BVH layout. Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1
-    /// thread, 500x500 primary rays, interleaved rounds, thread CPU time, load ~12) it traced
-    /// 1.8x (bunny), 1.55x (dragon_res3) and 1.9x (871k-triangle dragon) as many rays per
-    /// second as Bvh2, for about 1.1x its memory then; its single rays now run 1.28x, 1.09x
-    /// and 1.07-1.09x Embree 4's `rtcIntersect1` called from C
-    /// (`bench-results/anchors/embree-20261127T010637Z`). Earlier, Bvh2 rendered
-    /// seed-spheres 1.84x and the bunny 1.24x faster than CwBvh
-    /// (bench-results/20261122T222119Z-default).
-    pub bvh: BvhKind,
-    /// Build preset. Default [`BuildQuality::Tuned`].
-    pub build_quality: BuildQuality,
-    /// Tessellation of analytic shapes. Default `ScreenError { pixels: 0.25 }`.
-    pub tessellation: Tessellation,
-    /// Surface-nets grid cells along the longest side of a CSG / smooth-union object's
-    /// bounds (8..=512). Default 128.
-    pub surface_resolution: u32,
-    /// Trace the rays of a `closest_hits` batch 8 at a time as packets (interval culling,
-    /// `crate::packet`) when the BVH is [`BvhKind::Wide`], nothing is instanced and the
-    /// tree is below the interleaving size (above it batches are interleaved single rays
-    /// either way); same hits as single rays. Default `true`: renders with packets took
-    /// 0.75x (bunny), 0.77x (dragon_res3), 0.79x (seed-spheres), 0.72x (csg) and 0.87x
-    /// (bunny with soft shadows) of the time without (CLI, 1 thread, 6-8 alternating
-    /// rounds, load 2.4-2.9, images byte-identical). It was `false` until the packets were
-    /// vectorised (they measured 1.03x on the bunny then).
-    pub packets: bool,
-    /// Instance shapes used more than once (repetition, a mesh placed twice) from one BLAS
-    /// under a TLAS. `false` flattens everything into one BVH (same image, more memory).
-    /// Default `true`.
-    pub instancing: bool,
-    /// Largest number of instances an infinite repetition may expand to (cells within
-    /// `render.max_distance` of the camera). Exceeding it is an error. Default 4,194,304.
-    pub max_instances: u64,
-    /// Cap on segments per full turn of any parametric direction (bounds triangle counts
-    /// when the camera touches a shape), `8..=`[`MAX_SEGMENTS_PER_TURN`]. Default 4096.
-    pub max_segments_per_turn: u32,
+    /// Start from MeshOptions::fast()/DEFAULT/quality(); the other keys override it.
+    pub preset: Option<MeshPreset>,
+    /// BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2.
+    ///
+    /// Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1 thread, 500x500
+    /// primary rays, interleaved rounds, thread CPU time, load ~12) it traced 1.8x (bunny),
+    /// 1.55x (dragon_res3) and 1.9x (871k-triangle dragon) as many rays per second as Bvh2,
+    /// for about 1.1x its memory then; its single rays now run 1.28x, 1.09x and 1.07-1.09x
+    /// Embree 4's `rtcIntersect1` called from C
+    /// (`bench-results/anchors/embree-20261127T010637Z`). Earlier, Bvh2 rendered seed-spheres
+    /// 1.84x and the bunny 1.24x faster than CwBvh (bench-results/20261122T222119Z-default).
+    pub bvh: Option<BvhKind>,
+    /// BVH build preset: an obvhs preset, or tuned (medium, more reinsertion; the default).
+    ///
+    /// Default [`BuildQuality::Tuned`].
+    pub build: Option<BuildQuality>,
+    /// Tessellation chord error on screen, pixels.
+    ///
+    /// [`Tessellation::ScreenError`]; default 0.25.
+    pub tess_px: Option<f64>,
+    /// Tessellation chord error, world units (instead of tess_px).
+    ///
+    /// [`Tessellation::ChordError`].
+    pub tess_chord: Option<f64>,
+    /// Fixed tessellation: 8*2^level segments per turn, <= 12 (instead of tess_px).
+    ///
+    /// [`Tessellation::FixedLevel`], at most [`MAX_TESS_LEVEL`].
+    pub tess_level: Option<u32>,
+    /// Surface-nets cells on the longest side of CSG / smooth-union objects (8..=512).
+    ///
+    /// Grid cells along the longest side of the object's bounds. Default 128.
+    pub surface_res: Option<u32>,
+    /// Trace 8 rays of a batch as one packet (bvh=wide, no instances).
+    ///
+    /// Interval culling (`crate::packet`) when the BVH is [`BvhKind::Wide`], nothing is
+    /// instanced and the tree is below the interleaving size (above it batches are
+    /// interleaved single rays either way); same hits as single rays. Default `true`: renders
+    /// with packets took 0.75x (bunny), 0.77x (dragon_res3), 0.79x (seed-spheres), 0.72x (csg)
+    /// and 0.87x (bunny with soft shadows) of the time without (CLI, 1 thread, 6-8
+    /// alternating rounds, load 2.4-2.9, images byte-identical). It was `false` until the
+    /// packets were vectorised (they measured 1.03x on the bunny then).
+    pub packets: Option<bool>,
+    /// Instance repeated shapes under a TLAS (false = flatten into one BVH).
+    ///
+    /// Shapes used more than once (repetition, a mesh placed twice) come from one BLAS.
+    /// `false` gives the same image with more memory. Default `true`.
+    pub instancing: Option<bool>,
+    /// Largest instance count an infinite repetition may expand to.
+    ///
+    /// Cells within `render.max_distance` of the camera; exceeding it is an error. Default
+    /// 4,194,304.
+    pub max_instances: Option<u64>,
+    /// Cap on segments per full turn of any parametric direction (8..=65536).
+    ///
+    /// Bounds triangle counts when the camera touches a shape, `8..=`
+    /// [`MAX_SEGMENTS_PER_TURN`]. Default 4096.
+    pub max_segments: Option<u32>,
     /// The build refuses, before allocating, to plan more than this many bytes
     /// ([`crate::MeshError::OverMemoryLimit`]); estimated at [`BUILD_BYTES_PER_TRIANGLE`] per
-    /// triangle plus extraction grids and instances. Not a `key=value` option: the harness
+    /// triangle plus extraction grids and instances. Not a `key=value` option: the registry
     /// sets it from `--memory-limit-mib`. Default 4 GiB.
+    #[serde(skip)]
+    #[schemars(skip)]
     pub memory_limit_bytes: u64,
 }
+
+/// Largest accepted [`Tessellation::FixedLevel`] (`8 * 2^12` segments per turn).
+pub const MAX_TESS_LEVEL: u32 = 12;
 
 /// Largest accepted [`MeshOptions::max_segments_per_turn`] (the angle lists alone would
 /// otherwise take gigabytes before any triangle exists).
@@ -147,46 +234,157 @@ pub const MAX_SEGMENTS_PER_TURN: u32 = 1 << 16;
 pub const BUILD_BYTES_PER_TRIANGLE: u64 = 320;
 
 impl MeshOptions {
-    /// The documented defaults.
+    /// Every key unset: the default preset's values ([`MeshPreset::values`]).
     pub const DEFAULT: Self = Self {
-        bvh: BvhKind::Wide,
-        build_quality: BuildQuality::Tuned,
-        tessellation: Tessellation::ScreenError { pixels: 0.25 },
-        surface_resolution: 128,
-        packets: true,
-        instancing: true,
-        max_instances: 1 << 22,
-        max_segments_per_turn: 4096,
+        preset: None,
+        bvh: None,
+        build: None,
+        tess_px: None,
+        tess_chord: None,
+        tess_level: None,
+        surface_res: None,
+        packets: None,
+        instancing: None,
+        max_instances: None,
+        max_segments: None,
         memory_limit_bytes: 4 << 30,
     };
 
-    /// Defaults with a fast build: Bvh2, `fast_build`, 1-pixel tessellation error, 64-cell
-    /// surface extraction. For previews and tests.
+    /// The fast preset: Bvh2, `fast_build`, 1-pixel tessellation error, 64-cell surface
+    /// extraction. For previews and tests.
     pub const fn fast() -> Self {
         Self {
-            bvh: BvhKind::Bvh2,
-            build_quality: BuildQuality::Fast,
-            tessellation: Tessellation::ScreenError { pixels: 1.0 },
-            surface_resolution: 64,
+            preset: Some(MeshPreset::Fast),
             ..Self::DEFAULT
         }
     }
 
-    /// Defaults with a high-quality build: CwBvh, `slow_build`, 0.1-pixel tessellation error,
-    /// 256-cell surface extraction.
+    /// The quality preset: CwBvh, `slow_build`, 0.1-pixel tessellation error, 256-cell
+    /// surface extraction.
     pub const fn quality() -> Self {
         Self {
-            bvh: BvhKind::CwBvh,
-            build_quality: BuildQuality::Slow,
-            tessellation: Tessellation::ScreenError { pixels: 0.1 },
-            surface_resolution: 256,
+            preset: Some(MeshPreset::Quality),
             ..Self::DEFAULT
         }
+    }
+
+    /// The value of one key: as given, else its preset's. `key` reads the field, e.g.
+    /// `o.pick(|o| o.bvh)`.
+    pub fn pick<T>(&self, key: impl Fn(&MeshOptions) -> Option<T>) -> T {
+        key(self)
+            .or_else(|| key(&self.preset.unwrap_or_default().values()))
+            .or_else(|| key(&MeshPreset::Default.values()))
+            .expect("MeshPreset::values sets every key but preset, tess_chord and tess_level")
+    }
+
+    /// BVH layout (`bvh`).
+    pub fn bvh(&self) -> BvhKind {
+        self.pick(|o| o.bvh)
+    }
+
+    /// Build preset (`build`).
+    pub fn build_quality(&self) -> BuildQuality {
+        self.pick(|o| o.build)
+    }
+
+    /// The tessellation: by whichever of `tess_px`, `tess_chord`, `tess_level` is given,
+    /// else the preset's. Errors: more than one of them is given.
+    pub fn tessellation(&self) -> Result<Tessellation, crate::MeshError> {
+        Ok(match (self.tess_px, self.tess_chord, self.tess_level) {
+            (None, None, None) => Tessellation::ScreenError {
+                pixels: self.pick(|o| o.tess_px),
+            },
+            (Some(pixels), None, None) => Tessellation::ScreenError { pixels },
+            (None, Some(world), None) => Tessellation::ChordError { world },
+            (None, None, Some(level)) => Tessellation::FixedLevel(level),
+            _ => {
+                return Err(crate::MeshError::InvalidOption(
+                    "give one of tess_px, tess_chord, tess_level".into(),
+                ));
+            }
+        })
+    }
+
+    /// Surface-nets cells on the longest side (`surface_res`).
+    pub fn surface_resolution(&self) -> u32 {
+        self.pick(|o| o.surface_res)
+    }
+
+    /// Whether batches are traced as packets (`packets`).
+    pub fn packets(&self) -> bool {
+        self.pick(|o| o.packets)
+    }
+
+    /// Whether repeated shapes are instanced (`instancing`).
+    pub fn instancing(&self) -> bool {
+        self.pick(|o| o.instancing)
+    }
+
+    /// Largest instance count of an infinite repetition (`max_instances`).
+    pub fn max_instances(&self) -> u64 {
+        self.pick(|o| o.max_instances)
+    }
+
+    /// Cap on segments per full turn (`max_segments`).
+    pub fn max_segments_per_turn(&self) -> u32 {
+        self.pick(|o| o.max_segments)
     }
 }
 
 impl Default for MeshOptions {
     fn default() -> Self {
         Self::DEFAULT
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_preset_sets_every_key_and_keys_override_it() {
+        for preset in [MeshPreset::Fast, MeshPreset::Default, MeshPreset::Quality] {
+            let o = MeshOptions {
+                preset: Some(preset),
+                ..MeshOptions::DEFAULT
+            };
+            let v = preset.values();
+            assert_eq!(
+                (o.bvh(), o.build_quality(), o.surface_resolution()),
+                (
+                    v.bvh.expect("set"),
+                    v.build.expect("set"),
+                    v.surface_res.expect("set")
+                )
+            );
+            assert_eq!(
+                (o.packets(), o.instancing(), o.max_instances()),
+                (
+                    v.packets.expect("set"),
+                    v.instancing.expect("set"),
+                    v.max_instances.expect("set")
+                )
+            );
+            assert_eq!(o.max_segments_per_turn(), v.max_segments.expect("set"));
+            assert_eq!(
+                o.tessellation().expect("valid"),
+                Tessellation::ScreenError {
+                    pixels: v.tess_px.expect("set")
+                }
+            );
+        }
+        let o = MeshOptions {
+            bvh: Some(BvhKind::CwBvh),
+            ..MeshOptions::fast()
+        };
+        assert_eq!(o.bvh(), BvhKind::CwBvh);
+        assert_eq!(o.surface_resolution(), 64);
+        assert_eq!(MeshOptions::DEFAULT.bvh(), BvhKind::Wide);
+        let both = MeshOptions {
+            tess_px: Some(1.0),
+            tess_level: Some(2),
+            ..MeshOptions::DEFAULT
+        };
+        assert!(both.tessellation().is_err());
     }
 }

@@ -6,21 +6,7 @@
 //! say why; everything else meets the suite's default tolerances.
 
 use marchmesh_conformance::{CaseId, Tolerance, conformance_suite};
-use marchmesh_core::Geometry;
-use marchmesh_mesh::{MeshOptions, Tessellation, build};
-use marchmesh_scene::Scene;
-
-fn backend(scene: &Scene) -> Result<Box<dyn Geometry>, marchmesh_mesh::MeshError> {
-    let options = MeshOptions {
-        tessellation: Tessellation::ScreenError { pixels: 0.05 },
-        ..MeshOptions::DEFAULT
-    };
-    build(scene, &options).map(|g| Box::new(g) as Box<dyn Geometry>)
-}
-
-fn reference(scene: &Scene) -> Result<Box<dyn Geometry>, marchmesh_reference::ReferenceError> {
-    marchmesh_reference::build(scene, &Default::default()).map(|g| Box::new(g) as Box<dyn Geometry>)
-}
+use marchmesh_mesh::{MeshBackend, MeshOptions};
 
 fn tolerance(case: CaseId) -> Tolerance {
     let t = Tolerance::default();
@@ -45,7 +31,10 @@ fn tolerance(case: CaseId) -> Tolerance {
 }
 
 conformance_suite!(
-    backend = backend,
-    reference = reference,
+    backend = MeshBackend,
+    settings = MeshOptions {
+        tess_px: Some(0.05),
+        ..MeshOptions::DEFAULT
+    },
     tolerance = tolerance
 );

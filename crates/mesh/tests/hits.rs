@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 use marchmesh_core::Geometry;
-use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation, build};
+use marchmesh_mesh::{BvhKind, MeshOptions, build};
 use marchmesh_testkit::*;
 
 #[test]
@@ -16,7 +16,7 @@ fn sphere_hits_match_the_analytic_sphere_within_the_chord_budget() {
     let g = build(
         &s,
         &MeshOptions {
-            tessellation: Tessellation::ChordError { world: budget },
+            tess_chord: Some(budget),
             ..MeshOptions::DEFAULT
         },
     )
@@ -86,7 +86,7 @@ fn bunny_hits_match_a_brute_force_f64_ray_caster() {
         let g = build(
             &s,
             &MeshOptions {
-                bvh: kind,
+                bvh: Some(kind),
                 ..MeshOptions::DEFAULT
             },
         )
@@ -183,7 +183,7 @@ fn instancing_gives_the_same_hits_as_flattened_geometry() {
         let flat = build(
             &s,
             &MeshOptions {
-                instancing: false,
+                instancing: Some(false),
                 ..MeshOptions::DEFAULT
             },
         )
@@ -207,7 +207,7 @@ fn bvh2_and_cwbvh_and_every_preset_agree() {
     let reference = build(
         &s,
         &MeshOptions {
-            bvh: BvhKind::Bvh2,
+            bvh: Some(BvhKind::Bvh2),
             ..MeshOptions::DEFAULT
         },
     )
@@ -220,8 +220,8 @@ fn bvh2_and_cwbvh_and_every_preset_agree() {
             let g = build(
                 &s,
                 &MeshOptions {
-                    bvh,
-                    build_quality: quality,
+                    bvh: Some(bvh),
+                    build: Some(quality),
                     ..MeshOptions::DEFAULT
                 },
             )
@@ -370,7 +370,7 @@ fn infinite_repetition_is_bounded_and_reported() {
     let err = build(
         &s,
         &MeshOptions {
-            max_instances: 100,
+            max_instances: Some(100),
             ..MeshOptions::DEFAULT
         },
     )
@@ -391,7 +391,7 @@ fn depth_error_against_the_analytic_sphere_falls_as_the_screen_budget_shrinks() 
         let g = build(
             &s,
             &MeshOptions {
-                tessellation: Tessellation::ScreenError { pixels },
+                tess_px: Some(pixels),
                 ..MeshOptions::DEFAULT
             },
         )

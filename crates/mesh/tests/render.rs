@@ -92,7 +92,7 @@ fn single_triangle_and_empty_scenes_build() {
         let g = build(
             &s,
             &MeshOptions {
-                bvh,
+                bvh: Some(bvh),
                 ..MeshOptions::DEFAULT
             },
         )
@@ -122,7 +122,7 @@ fn instanced_and_flattened_images_match() {
     let flat = build(
         &s,
         &MeshOptions {
-            instancing: false,
+            instancing: Some(false),
             ..MeshOptions::DEFAULT
         },
     )
@@ -145,7 +145,7 @@ fn tiny_scenes_render_with_a_cwbvh_request() {
             "objects": [{"shape": {"sphere": {"radius": 1e-6}}}], "render": {"max_distance": 1e-4}}"#,
     );
     let options = MeshOptions {
-        bvh: marchmesh_mesh::BvhKind::CwBvh,
+        bvh: Some(marchmesh_mesh::BvhKind::CwBvh),
         ..MeshOptions::DEFAULT
     };
     let g = build(&scene, &options).unwrap();

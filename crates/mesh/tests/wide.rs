@@ -4,7 +4,7 @@
 
 use glam::{DVec3, Vec3};
 use marchmesh_core::{Geometry, Ray};
-use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation, build};
+use marchmesh_mesh::{BvhKind, MeshOptions, build};
 use marchmesh_scene::Scene;
 use marchmesh_testkit::*;
 
@@ -12,7 +12,7 @@ fn both(scene: &Scene, options: MeshOptions) -> (impl Geometry, impl Geometry) {
     let bvh2 = build(
         scene,
         &MeshOptions {
-            bvh: BvhKind::Bvh2,
+            bvh: Some(BvhKind::Bvh2),
             ..options
         },
     )
@@ -20,7 +20,7 @@ fn both(scene: &Scene, options: MeshOptions) -> (impl Geometry, impl Geometry) {
     let wide = build(
         scene,
         &MeshOptions {
-            bvh: BvhKind::Wide,
+            bvh: Some(BvhKind::Wide),
             ..options
         },
     )
@@ -94,7 +94,7 @@ fn wide_matches_bvh2_on_the_bunny_at_every_build_preset() {
         let (bvh2, wide) = both(
             &s,
             MeshOptions {
-                build_quality: quality,
+                build: Some(quality),
                 ..MeshOptions::DEFAULT
             },
         );
@@ -117,8 +117,8 @@ fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
     let g = build(
         &s,
         &MeshOptions {
-            bvh: BvhKind::Wide,
-            tessellation: Tessellation::FixedLevel(3),
+            bvh: Some(BvhKind::Wide),
+            tess_level: Some(3),
             ..MeshOptions::DEFAULT
         },
     )
@@ -159,15 +159,15 @@ fn packets_match_single_rays_on_every_conformance_case_and_the_bunny() {
     let mut hits = 0;
     for (i, s) in scenes.iter().enumerate() {
         let options = MeshOptions {
-            bvh: BvhKind::Wide,
-            packets: false,
+            bvh: Some(BvhKind::Wide),
+            packets: Some(false),
             ..MeshOptions::fast()
         };
         let single = build(s, &options).expect("build");
         let packets = build(
             s,
             &MeshOptions {
-                packets: true,
+                packets: Some(true),
                 ..options
             },
         )
@@ -205,8 +205,8 @@ fn interleaved_batches_match_single_rays_on_a_large_mesh() {
     let g = build(
         &s,
         &MeshOptions {
-            bvh: BvhKind::Wide,
-            tessellation: Tessellation::FixedLevel(6),
+            bvh: Some(BvhKind::Wide),
+            tess_level: Some(6),
             ..MeshOptions::DEFAULT
         },
     )

@@ -137,7 +137,7 @@ pub fn build(
     let build_ms = t0.elapsed().as_secs_f64() * 1e3;
     let node_bytes = count_nodes(&scene.objects) * std::mem::size_of::<CompiledNode>() as u64;
     let report = GeometryReport {
-        backend: "reference".into(),
+        backend: <ReferenceBackend as marchmesh_core::Backend>::NAME.into(),
         triangles: None,
         memory_bytes: node_bytes + compiler.mesh_bytes,
         build_phases_ms: vec![("reference_build".into(), build_ms)],
@@ -295,6 +295,7 @@ pub struct ReferenceBackend;
 
 impl marchmesh_core::Backend for ReferenceBackend {
     const NAME: &'static str = "reference";
+    const GROUND_TRUTH: bool = true;
     type Settings = ReferenceSettings;
     type Error = ReferenceError;
     type Geometry = ReferenceGeometry;

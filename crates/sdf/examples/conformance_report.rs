@@ -13,14 +13,14 @@ fn main() {
     let res = std::env::var("MESH_RES")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(SdfOptions::DEFAULT.mesh_grid_resolution);
+        .unwrap_or(SdfOptions::DEFAULT.grid_res);
     // EPS_PX and MAX_STEPS override the hit shell and the step budget (candidate defaults).
     let mut opts = SdfOptions {
-        mesh_grid_resolution: res,
+        grid_res: res,
         ..SdfOptions::DEFAULT
     };
     if let Some(k) = std::env::var("EPS_PX").ok().and_then(|v| v.parse().ok()) {
-        opts.hit_epsilon = marchmesh_sdf::HitEpsilon::PixelCone(k);
+        opts.eps_px = k;
     }
     if let Some(n) = std::env::var("MAX_STEPS").ok().and_then(|v| v.parse().ok()) {
         opts.max_steps = n;

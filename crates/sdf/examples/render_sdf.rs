@@ -9,7 +9,7 @@ use std::path::Path;
 
 use marchmesh_core::{BackgroundSampler, Geometry, RenderOptions, RenderSpace, render};
 use marchmesh_scene::NodeKind;
-use marchmesh_sdf::{HitEpsilon, SdfOptions, build};
+use marchmesh_sdf::{SdfOptions, build};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -23,7 +23,7 @@ fn main() {
     let side = arg(1, 128.0) as u32;
     let opts = SdfOptions {
         normal_step: arg(2, SdfOptions::DEFAULT.normal_step),
-        hit_epsilon: HitEpsilon::PixelCone(arg(3, 0.25)),
+        eps_px: arg(3, 0.25),
         relaxation: arg(4, SdfOptions::DEFAULT.relaxation),
         ..SdfOptions::DEFAULT
     };

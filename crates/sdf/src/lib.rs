@@ -47,8 +47,10 @@ use marchmesh_scene::{MaterialId, Scene};
 use beam::BEAM_BATCH;
 use inside::Inside;
 use march::{Lanes8, March, Next, Params};
-pub use options::{HitEpsilon, SdfOptions};
-pub use settings::{GridKind, QuantizeKind, ReconKind, SdfBackend, SdfSettings};
+/// The types of [`SdfOptions::quantize`] and [`SdfOptions::recon`].
+pub use marchmesh_field::bake::{Quantization, Reconstruction};
+pub use options::{GridKind, HitEpsilon, SdfOptions};
+pub use settings::SdfBackend;
 
 /// Why the SDF backend could not build a scene.
 #[derive(Debug, thiserror::Error)]
@@ -64,7 +66,7 @@ pub enum SdfError {
     OverMemoryLimit {
         /// Distinct mesh files in the scene.
         meshes: u64,
-        /// [`SdfOptions::mesh_grid_resolution`].
+        /// [`SdfOptions::grid_res`].
         resolution: u32,
         /// Estimated bytes, MiB (rounded up).
         needed_mib: u64,
@@ -106,10 +108,10 @@ pub const CULL_MIN_NODES: usize = 8;
 /// of [`marchmesh_field::bake::SparseOptions::max_bake_bytes`] (every brick cell holding a
 /// brick, which a surface cannot reach: the real grid is proportional to its area).
 pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
-    match opts.mesh_grid {
+    match opts.mesh_grid() {
         MeshGrid::Dense => {
             // Cells on the longest side, plus the apron of one sample each side.
-            u64::from(opts.mesh_grid_resolution + 3)
+            u64::from(opts.grid_res + 3)
                 .pow(3)
                 .saturating_mul(BAKE_BYTES_PER_CELL)
         }
@@ -118,7 +120,7 @@ pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
             quantization,
             reconstruction,
         } => marchmesh_field::bake::SparseOptions {
-            resolution: opts.mesh_grid_resolution,
+            resolution: opts.grid_res,
             band_voxels,
             quantization,
             reconstruction,
@@ -141,7 +143,7 @@ fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
     if needed > opts.memory_limit_bytes {
         return Err(SdfError::OverMemoryLimit {
             meshes,
-            resolution: opts.mesh_grid_resolution,
+            resolution: opts.grid_res,
             needed_mib: needed.div_ceil(1 << 20),
             limit_mib: opts.memory_limit_bytes >> 20,
         });
@@ -204,7 +206,7 @@ fn check(ok: bool, name: &'static str, reason: &str) -> Result<(), SdfError> {
 
 /// Compiles `scene` for sphere tracing. Errors name the offending node, mesh file or option.
 pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> {
-    let (eps_abs, eps_cone) = match opts.hit_epsilon {
+    let (eps_abs, eps_cone) = match opts.hit_epsilon() {
         HitEpsilon::Absolute(e) => {
             check(
                 e > 0.0 && e.is_finite(),
@@ -235,17 +237,13 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     )?;
     let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
     check(max_distance > 0.0, "max_distance", "must be > 0")?;
-    check(
-        opts.mesh_grid_resolution >= 2,
-        "mesh_grid_resolution",
-        "must be >= 2",
-    )?;
-    if let MeshGrid::Sparse { band_voxels, .. } = opts.mesh_grid {
+    check(opts.grid_res >= 2, "mesh_grid_resolution", "must be >= 2")?;
+    if let MeshGrid::Sparse { band_voxels, .. } = opts.mesh_grid() {
         use marchmesh_field::bake::{
             MAX_BAND_VOXELS, MAX_RESOLUTION, MIN_BAND_VOXELS, MIN_RESOLUTION,
         };
         check(
-            (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.mesh_grid_resolution),
+            (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.grid_res),
             "mesh_grid_resolution",
             &format!("sparse grids take {MIN_RESOLUTION}..={MAX_RESOLUTION} cells"),
         )?;
@@ -258,9 +256,9 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
     let field_opts = FieldOptions {
-        mesh_grid_resolution: opts.mesh_grid_resolution,
+        mesh_grid_resolution: opts.grid_res,
         cache_dir: opts.cache_dir.clone(),
-        mesh_grid: opts.mesh_grid,
+        mesh_grid: opts.mesh_grid(),
     };
     let field = Field::compile_scene(scene, &field_opts)?;
     let field = if opts.bounds {
@@ -282,7 +280,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     let mut notes = fr.notes.clone();
     notes.push(format!(
         "sphere tracing: {:?}, max_steps {}, max_distance {}, relaxation {}, normals by central differences with step {} pixel footprints",
-        opts.hit_epsilon, opts.max_steps, max_distance, opts.relaxation, opts.normal_step
+        opts.hit_epsilon(), opts.max_steps, max_distance, opts.relaxation, opts.normal_step
     ));
     notes.push(
         "memory counts the f32 program the tracer reads, the f64 program (shared field API) and mesh grids"
@@ -305,7 +303,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     let accounted: f64 = phases.iter().map(|p| p.1).sum();
     phases.push(("other".into(), (total_ms - accounted).max(0.0)));
     let report = GeometryReport {
-        backend: "sdf".into(),
+        backend: <SdfBackend as marchmesh_core::Backend>::NAME.into(),
         triangles: None,
         memory_bytes: field.memory_bytes() + inside.as_ref().map_or(0, Inside::memory_bytes),
         build_phases_ms: phases,

@@ -3,7 +3,6 @@
 //! Tolerances are the suite's defaults except where a measured need is stated per case.
 
 use marchmesh_conformance::{CaseId, Tolerance, conformance_suite};
-use marchmesh_scene::Scene;
 
 fn tolerance(case: CaseId) -> Tolerance {
     let t = Tolerance::default();
@@ -21,10 +20,4 @@ fn tolerance(case: CaseId) -> Tolerance {
     }
 }
 
-conformance_suite!(
-    backend =
-        |scene: &Scene| marchmesh_sdf::build(scene, &Default::default()).map(|g| Box::new(g) as _),
-    reference = |scene: &Scene| marchmesh_reference::build(scene, &Default::default())
-        .map(|g| Box::new(g) as _),
-    tolerance = tolerance,
-);
+conformance_suite!(backend = marchmesh_sdf::SdfBackend, tolerance = tolerance,);

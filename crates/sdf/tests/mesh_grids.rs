@@ -13,10 +13,10 @@ fn accuracy(scene: &marchmesh_scene::Scene, grid: MeshGrid, res: u32) -> (Accura
     let g = build(
         scene,
         &SdfOptions {
-            mesh_grid: grid,
-            mesh_grid_resolution: res,
+            grid_res: res,
             ..SdfOptions::DEFAULT
-        },
+        }
+        .with_mesh_grid(grid),
     )
     .expect("builds");
     let truth = marchmesh_reference::build(scene, &Default::default()).expect("reference");
@@ -120,10 +120,10 @@ fn stored_normals_shade_the_facets_through_the_scene_transform() {
     let g = build(
         &scene,
         &SdfOptions {
-            mesh_grid: sparse(Reconstruction::Normals),
-            mesh_grid_resolution: 256,
+            grid_res: 256,
             ..SdfOptions::DEFAULT
-        },
+        }
+        .with_mesh_grid(sparse(Reconstruction::Normals)),
     )
     .expect("builds");
     assert!(g.field().stores_normals());
@@ -165,14 +165,16 @@ fn sparse_grid_options_out_of_range_are_refused_by_name_before_baking() {
         .expect("committed scene")
         .with_image_size(16, 12)
         .expect("size");
-    let sparse = |band_voxels, res| SdfOptions {
-        mesh_grid: MeshGrid::Sparse {
+    let sparse = |band_voxels, res| {
+        SdfOptions {
+            grid_res: res,
+            ..SdfOptions::DEFAULT
+        }
+        .with_mesh_grid(MeshGrid::Sparse {
             band_voxels,
             quantization: Quantization::U8,
             reconstruction: Reconstruction::Trilinear,
-        },
-        mesh_grid_resolution: res,
-        ..SdfOptions::DEFAULT
+        })
     };
     for (opts, name) in [
         (sparse(0, 128), "band"),

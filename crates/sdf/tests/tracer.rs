@@ -5,7 +5,7 @@
 use glam::Vec3;
 use marchmesh_core::{Geometry, Ray, Termination, TraceResult};
 use marchmesh_scene::{Scene, parse_scene};
-use marchmesh_sdf::{HitEpsilon, SdfOptions, build};
+use marchmesh_sdf::{SdfOptions, build};
 use proptest::prelude::*;
 
 fn scene(objects: &str, extra: &str) -> Scene {
@@ -430,7 +430,7 @@ fn scale_invariance_of_the_cone_epsilon() {
         let g1 = build(
             &s,
             &SdfOptions {
-                hit_epsilon: HitEpsilon::Absolute(1e-6 * scale),
+                eps_abs: Some(1e-6 * scale),
                 ..SdfOptions::DEFAULT
             },
         )
@@ -458,7 +458,7 @@ fn options_out_of_range_are_rejected() {
             ..SdfOptions::DEFAULT
         },
         SdfOptions {
-            hit_epsilon: HitEpsilon::PixelCone(0.0),
+            eps_px: 0.0,
             ..SdfOptions::DEFAULT
         },
         SdfOptions {
@@ -584,7 +584,7 @@ fn absolute_epsilon_extremes_still_converge() {
         let g = build(
             &s,
             &SdfOptions {
-                hit_epsilon: HitEpsilon::Absolute(eps),
+                eps_abs: Some(eps),
                 ..SdfOptions::DEFAULT
             },
         )

@@ -9,56 +9,61 @@ use std::fmt::Write as _;
 use std::io;
 use std::path::{Path, PathBuf};
 
-use marchmesh_harness::backend::BackendKind;
+use marchmesh_core::Backend;
+use marchmesh_mesh::MeshBackend;
+use marchmesh_registry::BackendId;
+use marchmesh_sdf::{GridKind, Quantization, Reconstruction, SdfBackend};
 use serde_json::{Value, json};
 
-/// Option keys of the backends as the harness parses them (`key=value`).
-pub mod keys {
-    /// SDF: absolute hit epsilon, world units.
-    pub const SDF_EPSILON_ABS: &str = "eps_abs";
-    /// SDF: maximum sphere-tracing steps per ray.
-    pub const SDF_MAX_STEPS: &str = "max_steps";
-    /// SDF: over-relaxation factor in [1, 2).
-    pub const SDF_RELAXATION: &str = "relaxation";
-    /// SDF: segment tracing of slowly progressing (grazing) rays, `true` or `false`.
-    pub const SDF_SEGMENT: &str = "segment";
-    /// SDF: mesh bake grid resolution (cells on the longest side).
-    pub const SDF_GRID: &str = "grid_res";
-    /// SDF: mesh grid kind, `dense` or `sparse`.
-    pub const SDF_GRID_KIND: &str = "grid";
-    /// SDF: sparse grid sample storage, `f32`, `u16` or `u8`.
-    pub const SDF_QUANTIZE: &str = "quantize";
-    /// SDF: sparse grid reconstruction, `trilinear`, `tricubic` or `normals`.
-    pub const SDF_RECON: &str = "recon";
-    /// Mesh: fixed tessellation level.
-    pub const MESH_TESS_LEVEL: &str = "tess_level";
-    /// Mesh: screen-space chord budget, pixels.
-    pub const MESH_TESS_PX: &str = "tess_px";
+/// A [`Variant`] of backend type `$backend` with fields of its settings type set:
+/// `variant!(SdfBackend { relaxation: w })`. The compiler checks each field's name and value
+/// type against the backend's [`Backend::Settings`]; the label names the fields in the order
+/// written (also where a value equals the default, so labels stay comparable across runs).
+macro_rules! variant {
+    ($backend:ty { $($key:ident : $value:expr),* $(,)? }) => {{
+        #[allow(unused_mut)]
+        let mut settings = <<$backend as Backend>::Settings as Default>::default();
+        $(settings.$key = ($value).into();)*
+        Variant::of::<$backend>(&settings, &[$(stringify!($key)),*])
+    }};
 }
 
 /// One backend configuration measured in a case.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Variant {
     /// The backend.
-    pub backend: BackendKind,
-    /// `key=value` options for [`marchmesh_harness::backend::build`].
+    pub backend: BackendId,
+    /// `key=value` options for [`marchmesh_registry::build`].
     pub options: Vec<(String, String)>,
 }
 
 impl Variant {
     /// A backend at its defaults.
-    pub fn default_of(backend: BackendKind) -> Self {
+    pub fn default_of(backend: BackendId) -> Self {
         Self {
             backend,
             options: Vec::new(),
         }
     }
 
-    /// A backend with one option set.
-    pub fn with(backend: BackendKind, key: &str, value: impl ToString) -> Self {
+    /// Backend `B` at `settings`, given as the values of `keys` (in this order) read from
+    /// them (`variant!` writes both from one list). Panics if a key is not a field of the
+    /// serialized settings: the macro derives keys from field names, so only a settings type
+    /// that renames a field could, and the study's tests build every variant.
+    pub fn of<B: Backend>(settings: &B::Settings, keys: &[&str]) -> Self {
+        let values = serde_json::to_value(settings).unwrap_or_default();
+        let options = keys
+            .iter()
+            .map(|&key| {
+                let value = values
+                    .get(key)
+                    .unwrap_or_else(|| panic!("`{key}` is not a key of backend `{}`", B::NAME));
+                (key.to_string(), option_text(value))
+            })
+            .collect();
         Self {
-            backend,
-            options: vec![(key.to_string(), value.to_string())],
+            backend: BackendId::of::<B>(),
+            options,
         }
     }
 
@@ -73,6 +78,22 @@ impl Variant {
             .map(|(k, v)| format!("{k}={v}"))
             .collect();
         format!("{}[{}]", self.backend.name(), opts.join(","))
+    }
+}
+
+/// A settings value as `key=value` text: numbers as Rust prints them (`0.000001`, `8`), words
+/// as they are, unset as `none`.
+fn option_text(value: &Value) -> String {
+    match value {
+        Value::Null => "none".to_string(),
+        Value::String(s) => s.clone(),
+        Value::Number(n) => match (n.as_u64(), n.as_i64(), n.as_f64()) {
+            (Some(u), _, _) => u.to_string(),
+            (None, Some(i), _) => i.to_string(),
+            (None, None, Some(f)) => f.to_string(),
+            _ => n.to_string(),
+        },
+        other => other.to_string(),
     }
 }
 
@@ -144,8 +165,10 @@ pub const STUDY_MESH_TESS_PX: f64 = 0.05;
 
 fn both_backends() -> Vec<Variant> {
     vec![
-        Variant::default_of(BackendKind::Sdf),
-        Variant::with(BackendKind::Mesh, keys::MESH_TESS_PX, STUDY_MESH_TESS_PX),
+        Variant::default_of(BackendId::of::<SdfBackend>()),
+        variant!(MeshBackend {
+            tess_px: STUDY_MESH_TESS_PX
+        }),
     ]
 }
 
@@ -276,7 +299,7 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         let grazing = |family, json| {
             let mut c = case(family, "angle_deg", a, json, 1.0 / a.to_radians().sin());
             c.variants
-                .insert(1, Variant::with(BackendKind::Sdf, keys::SDF_SEGMENT, false));
+                .insert(1, variant!(SdfBackend { segment: false }));
             c
         };
         out.push(grazing("grazing_plane", plane));
@@ -332,7 +355,7 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
     let knob_scene = scaled_scene(1.0, 0.0);
     for eps in [1e-8, 1e-6, 1e-4, 1e-3, 1e-2, 1e-1] {
         let mut c = case("sdf_epsilon", "epsilon_abs", eps, knob_scene.clone(), 6.0);
-        c.variants = vec![Variant::with(BackendKind::Sdf, keys::SDF_EPSILON_ABS, eps)];
+        c.variants = vec![variant!(SdfBackend { eps_abs: eps })];
         out.push(c);
     }
     let mut steps: Vec<f64> = vec![8.0, 16.0, 32.0, 64.0, 128.0, 1000.0];
@@ -341,16 +364,14 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
     }
     for n in steps {
         let mut c = case("sdf_max_steps", "max_steps", n, knob_scene.clone(), 6.0);
-        c.variants = vec![Variant::with(
-            BackendKind::Sdf,
-            keys::SDF_MAX_STEPS,
-            n as u64,
-        )];
+        c.variants = vec![variant!(SdfBackend {
+            max_steps: n as u32
+        })];
         out.push(c);
     }
     for w in [1.0, 1.2, 1.4, 1.6, 1.8, 1.99] {
         let mut c = case("sdf_relaxation", "relaxation", w, knob_scene.clone(), 6.0);
-        c.variants = vec![Variant::with(BackendKind::Sdf, keys::SDF_RELAXATION, w)];
+        c.variants = vec![variant!(SdfBackend { relaxation: w })];
         out.push(c);
     }
 
@@ -373,9 +394,11 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         c.judge_by_image = true;
         c.self_truth = true;
         c.variants = vec![
-            Variant::default_of(BackendKind::Reference),
-            Variant::default_of(BackendKind::Sdf),
-            Variant::with(BackendKind::Mesh, keys::MESH_TESS_PX, STUDY_MESH_TESS_PX),
+            Variant::default_of(BackendId::REFERENCE),
+            Variant::default_of(BackendId::of::<SdfBackend>()),
+            variant!(MeshBackend {
+                tess_px: STUDY_MESH_TESS_PX
+            }),
         ];
         out.push(c);
     }
@@ -477,21 +500,19 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         }
         // Dense grids at 32..128, sparse (u8 bricks) at 128..512 effective: one case per
         // (kind, resolution).
-        let dense = |res: u32| Variant {
-            backend: BackendKind::Sdf,
-            options: vec![
-                (keys::SDF_GRID_KIND.to_string(), "dense".to_string()),
-                (keys::SDF_GRID.to_string(), res.to_string()),
-            ],
+        let dense = |res: u32| {
+            variant!(SdfBackend {
+                grid: GridKind::Dense,
+                grid_res: res
+            })
         };
-        let sparse = |res: u32, recon: &str| Variant {
-            backend: BackendKind::Sdf,
-            options: vec![
-                (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
-                (keys::SDF_GRID.to_string(), res.to_string()),
-                (keys::SDF_QUANTIZE.to_string(), "u8".to_string()),
-                (keys::SDF_RECON.to_string(), recon.to_string()),
-            ],
+        let sparse = |res: u32, recon: Reconstruction| {
+            variant!(SdfBackend {
+                grid: GridKind::Sparse,
+                grid_res: res,
+                quantize: Quantization::U8,
+                recon: recon
+            })
         };
         for (res, is_sparse, variants) in [
             (32u32, false, vec![dense(32)]),
@@ -501,27 +522,27 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 128,
                 true,
                 vec![
-                    sparse(128, "trilinear"),
-                    sparse(128, "tricubic"),
-                    sparse(128, "normals"),
+                    sparse(128, Reconstruction::Trilinear),
+                    sparse(128, Reconstruction::Tricubic),
+                    sparse(128, Reconstruction::Normals),
                 ],
             ),
             (
                 256,
                 true,
                 vec![
-                    sparse(256, "trilinear"),
-                    sparse(256, "tricubic"),
-                    sparse(256, "normals"),
+                    sparse(256, Reconstruction::Trilinear),
+                    sparse(256, Reconstruction::Tricubic),
+                    sparse(256, Reconstruction::Normals),
                 ],
             ),
             (
                 512,
                 true,
                 vec![
-                    sparse(512, "trilinear"),
-                    sparse(512, "tricubic"),
-                    sparse(512, "normals"),
+                    sparse(512, Reconstruction::Trilinear),
+                    sparse(512, Reconstruction::Tricubic),
+                    sparse(512, Reconstruction::Normals),
                 ],
             ),
         ] {
@@ -566,11 +587,7 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
                 level as f64,
                 sphere.clone(),
                 None,
-                vec![Variant::with(
-                    BackendKind::Mesh,
-                    keys::MESH_TESS_LEVEL,
-                    level,
-                )],
+                vec![variant!(MeshBackend { tess_level: level })],
             );
             c.base_dir = ctx.scenes_dir.clone();
             out.push(c);
@@ -596,20 +613,23 @@ fn mesh_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
             // grids that hold its detail at a size this study can afford. At 512 also u16
             // tricubic: u8's steps cost about 0.14 degrees of normal there.
             for res in [128u32, 256, 512] {
-                let mut configs = vec![("u8", "trilinear"), ("u8", "tricubic"), ("u8", "normals")];
+                let mut configs = vec![
+                    (Quantization::U8, Reconstruction::Trilinear),
+                    (Quantization::U8, Reconstruction::Tricubic),
+                    (Quantization::U8, Reconstruction::Normals),
+                ];
                 if res == 512 {
-                    configs.push(("u16", "tricubic"));
+                    configs.push((Quantization::U16, Reconstruction::Tricubic));
                 }
                 let variants = configs
                     .into_iter()
-                    .map(|(quant, recon)| Variant {
-                        backend: BackendKind::Sdf,
-                        options: vec![
-                            (keys::SDF_GRID_KIND.to_string(), "sparse".to_string()),
-                            (keys::SDF_GRID.to_string(), res.to_string()),
-                            (keys::SDF_QUANTIZE.to_string(), quant.to_string()),
-                            (keys::SDF_RECON.to_string(), recon.to_string()),
-                        ],
+                    .map(|(quant, recon)| {
+                        variant!(SdfBackend {
+                            grid: GridKind::Sparse,
+                            grid_res: res,
+                            quantize: quant,
+                            recon: recon
+                        })
                     })
                     .collect();
                 out.push(StabilityCase {
@@ -725,4 +745,73 @@ pub fn uv_sphere_obj(r: f64, stacks: u32, sectors: u32) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn typed_variants_keep_the_labels_and_options_of_committed_runs() {
+        // Labels as in bench-results/stability-*/stability.json: every key written is kept
+        // (defaults too) in the order written, numbers as Rust prints them.
+        for (variant, label) in [
+            (
+                variant!(SdfBackend { eps_abs: 1e-8 }),
+                "sdf[eps_abs=0.00000001]",
+            ),
+            (
+                variant!(SdfBackend { relaxation: 1.0 }),
+                "sdf[relaxation=1]",
+            ),
+            (
+                variant!(SdfBackend { relaxation: 1.2 }),
+                "sdf[relaxation=1.2]",
+            ),
+            (
+                variant!(SdfBackend {
+                    max_steps: 1e5 as u32
+                }),
+                "sdf[max_steps=100000]",
+            ),
+            (
+                variant!(SdfBackend { segment: false }),
+                "sdf[segment=false]",
+            ),
+            (
+                variant!(SdfBackend {
+                    grid: GridKind::Dense,
+                    grid_res: 64u32
+                }),
+                "sdf[grid=dense,grid_res=64]",
+            ),
+            (
+                variant!(SdfBackend {
+                    grid: GridKind::Sparse,
+                    grid_res: 512u32,
+                    quantize: Quantization::U8,
+                    recon: Reconstruction::Normals
+                }),
+                "sdf[grid=sparse,grid_res=512,quantize=u8,recon=normals]",
+            ),
+            (
+                variant!(MeshBackend {
+                    tess_px: STUDY_MESH_TESS_PX
+                }),
+                "mesh[tess_px=0.05]",
+            ),
+            (
+                variant!(MeshBackend { tess_level: 4u32 }),
+                "mesh[tess_level=4]",
+            ),
+            (Variant::default_of(BackendId::REFERENCE), "reference"),
+        ] {
+            assert_eq!(variant.label(), label);
+            marchmesh_registry::check_options(&marchmesh_registry::BackendSpec {
+                kind: variant.backend,
+                options: variant.options.clone(),
+            })
+            .unwrap_or_else(|e| panic!("{label}: {e}"));
+        }
+    }
 }

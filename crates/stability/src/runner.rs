@@ -7,7 +7,7 @@ use marchmesh_core::{
     Accuracy, BackgroundSampler, Framebuffer, Measured, RenderOptions, RenderOutput, Tolerance,
     compare, render,
 };
-use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+use marchmesh_registry::{self as backend, BackendId, BackendSpec};
 use marchmesh_scene::{Scene, parse_scene};
 use serde::Serialize;
 
@@ -287,7 +287,7 @@ pub fn run_case(case: &StabilityCase, options: &RunOptions) -> Result<Vec<Row>, 
             reason,
         })
     };
-    let reference = Variant::default_of(BackendKind::Reference);
+    let reference = Variant::default_of(BackendId::REFERENCE);
     let shared_truth = if case.self_truth {
         None
     } else {

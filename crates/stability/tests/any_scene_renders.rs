@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 
 use marchmesh_core::{BackgroundSampler, RenderOptions, render};
-use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+use marchmesh_registry::{self as backend, BackendId, BackendSpec};
 use marchmesh_scene::parse_scene;
 use proptest::prelude::*;
 use serde_json::{Value, json};
@@ -122,7 +122,7 @@ fn render_everywhere(json: &str, base: &Path) {
         .with_image_size(16, 16)
         .expect("16x16 is a valid size");
     let background = BackgroundSampler::load(&scene.background).expect("colour background");
-    for kind in BackendKind::ALL {
+    for kind in BackendId::ALL {
         let started = std::time::Instant::now();
         let trace = std::env::var_os("MARCHMESH_TRACE_PROPTEST").is_some();
         if trace {
@@ -193,7 +193,7 @@ fn missing_and_corrupt_meshes_are_named_by_every_backend() {
         let json = json!({ "objects": [ { "shape": { "mesh": { "path": file } }, "transform": { "translate": [0, 0, 3] } } ] });
         let scene = parse_scene(&json.to_string(), "<hostile>", &dir)
             .expect("paths are not checked at parse time");
-        for kind in BackendKind::ALL {
+        for kind in BackendId::ALL {
             let spec = BackendSpec {
                 kind,
                 options: Vec::new(),

@@ -14,7 +14,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use marchmesh_harness::backend::BackendKind;
+use marchmesh_registry::BackendId;
 use marchmesh_viewer::{Event, Key, Session, SessionOptions};
 
 fn load_average() -> String {
@@ -54,7 +54,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         scene.display(),
         load_average()
     );
-    for kind in [BackendKind::Sdf, BackendKind::Mesh] {
+    for kind in BackendId::ALL.into_iter().filter(|k| !k.is_ground_truth()) {
         let mut opts = SessionOptions::new(&scene);
         opts.backend = kind;
         opts.threads = threads;

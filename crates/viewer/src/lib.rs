@@ -38,7 +38,7 @@ pub enum ViewerError {
     Scene(#[from] marchmesh_scene::SceneError),
     /// A backend option is bad or a backend failed to build.
     #[error(transparent)]
-    Backend(#[from] marchmesh_harness::backend::BackendError),
+    Backend(#[from] marchmesh_registry::BackendError),
     /// A render could not run.
     #[error(transparent)]
     Render(#[from] marchmesh_core::RenderError),

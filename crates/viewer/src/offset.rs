@@ -111,7 +111,7 @@ impl Geometry for Offset<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+    use marchmesh_registry::{self as backend, BackendId, BackendSpec};
 
     #[test]
     fn a_shifted_geometry_hits_what_a_rebuilt_one_hits() {
@@ -122,7 +122,7 @@ mod tests {
             ))
         };
         let spec = BackendSpec {
-            kind: BackendKind::Reference,
+            kind: BackendId::REFERENCE,
             options: vec![],
         };
         let anchor = backend::build(&at(0.0), &spec).expect("build");

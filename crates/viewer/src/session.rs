@@ -1,6 +1,6 @@
 //! A viewing session: the scene, the state, the backends built so far, and the renderer that
 //! turns a state into a frame through the same code paths as `marchmesh render` (the
-//! harness's backend registry and `marchmesh_core::render`).
+//! backend registry and `marchmesh_core::render`).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -10,7 +10,7 @@ use glam::{DVec2, DVec3, Vec3};
 use marchmesh_core::{
     Accuracy, BackgroundSampler, Framebuffer, Geometry, RenderOptions, RenderOutput,
 };
-use marchmesh_harness::backend::{self, BackendKind};
+use marchmesh_registry::{self as backend, BackendId};
 use marchmesh_scene::{Scene, SceneFile};
 
 use crate::ViewerError;
@@ -24,9 +24,9 @@ pub struct SessionOptions {
     /// The scene file.
     pub scene: PathBuf,
     /// The backend shown first.
-    pub backend: BackendKind,
+    pub backend: BackendId,
     /// The user's `key=value` options of each backend (the quality knob is applied on top).
-    pub options: BTreeMap<BackendKind, Vec<(String, String)>>,
+    pub options: BTreeMap<BackendId, Vec<(String, String)>>,
     /// Window width in pixels (default: the scene's image width).
     pub width: Option<u32>,
     /// Window height in pixels (default: the scene's image height).
@@ -42,11 +42,12 @@ pub struct SessionOptions {
 }
 
 impl SessionOptions {
-    /// Defaults for `scene`: sdf first, the scene's size, all cores, accuracy on.
+    /// Defaults for `scene`: the first backend of [`crate::state::view_order`] (sdf) first,
+    /// the scene's size, all cores, accuracy on.
     pub fn new(scene: impl Into<PathBuf>) -> Self {
         SessionOptions {
             scene: scene.into(),
-            backend: BackendKind::Sdf,
+            backend: crate::state::view_order()[0],
             options: BTreeMap::new(),
             width: None,
             height: None,
@@ -75,7 +76,7 @@ struct Built {
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewReport {
     /// The backend.
-    pub backend: BackendKind,
+    pub backend: BackendId,
     /// Its quality knob, e.g. `eps_px 0.25 px (q+0)`.
     pub knob: String,
     /// The full `key=value` options it was built with (user's, then the knob's).
@@ -126,9 +127,9 @@ pub struct Session {
     background: BackgroundSampler,
     config: ViewConfig,
     state: ViewState,
-    user_options: BTreeMap<BackendKind, Vec<(String, String)>>,
-    knobs: BTreeMap<BackendKind, Knob>,
-    built: BTreeMap<BackendKind, Built>,
+    user_options: BTreeMap<BackendId, Vec<(String, String)>>,
+    knobs: BTreeMap<BackendId, Knob>,
+    built: BTreeMap<BackendId, Built>,
     threads: usize,
     memory_limit_bytes: u64,
     accuracy: bool,
@@ -186,7 +187,7 @@ impl Session {
         }
         let mut knobs = BTreeMap::new();
         let mut user_options = BTreeMap::new();
-        for kind in BackendKind::ALL {
+        for kind in BackendId::ALL {
             let user = opts.options.get(&kind).cloned().unwrap_or_default();
             knobs.insert(kind, Knob::of(kind, &user)?);
             user_options.insert(kind, user);
@@ -219,10 +220,14 @@ impl Session {
             reference_frame: None,
             bake_cache: None,
         };
-        let user_cache = opts
-            .options
-            .get(&BackendKind::Sdf)
-            .is_some_and(|o| o.iter().any(|(k, _)| k == "cache_dir"));
+        let user_cache = BackendId::ALL
+            .into_iter()
+            .filter(|k| caches_bakes(*k))
+            .all(|k| {
+                opts.options
+                    .get(&k)
+                    .is_some_and(|o| o.iter().any(|(key, _)| key == CACHE_DIR_KEY))
+            });
         if !session.scene.mesh_paths().is_empty() && !user_cache {
             let dir = std::env::temp_dir().join(format!(
                 "marchmesh-view-bakes-{}-{}",
@@ -230,7 +235,7 @@ impl Session {
                 BAKE_CACHES.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
             ));
             // A new folder (never one that exists, nor a symlink planted under its name);
-            // without it the sdf backend bakes at every rebuild: slower, not wrong.
+            // without it a backend that bakes (sdf) bakes at every rebuild: slower, not wrong.
             if std::fs::create_dir(&dir).is_ok() {
                 session.bake_cache = Some(dir);
             }
@@ -270,8 +275,8 @@ impl Session {
         self.state = update(&self.state, event, &self.config);
     }
 
-    /// Bytes of every backend built so far, in [`BackendKind`] order.
-    pub fn memory(&self) -> Vec<(BackendKind, u64)> {
+    /// Bytes of every backend built so far, in [`BackendId`] order.
+    pub fn memory(&self) -> Vec<(BackendId, u64)> {
         self.built
             .iter()
             .map(|(k, b)| (*k, b.memory_bytes))
@@ -279,16 +284,16 @@ impl Session {
     }
 
     /// The `key=value` options `kind` is built with at quality `level`.
-    pub fn options_of(&self, kind: BackendKind, level: i32) -> Vec<(String, String)> {
+    pub fn options_of(&self, kind: BackendId, level: i32) -> Vec<(String, String)> {
         quality::spec(kind, &self.user(kind), &self.knob(kind), level).options
     }
 
-    fn user(&self, kind: BackendKind) -> Vec<(String, String)> {
+    fn user(&self, kind: BackendId) -> Vec<(String, String)> {
         self.user_options.get(&kind).cloned().unwrap_or_default()
     }
 
-    fn knob(&self, kind: BackendKind) -> Knob {
-        self.knobs.get(&kind).cloned().unwrap_or(Knob::None)
+    fn knob(&self, kind: BackendId) -> Knob {
+        self.knobs.get(&kind).cloned().unwrap_or_default()
     }
 
     /// The scene at the current camera and full window size.
@@ -303,7 +308,7 @@ impl Session {
 
     /// Builds `kind` if it is not built at the current quality, or (`exact`) not at the
     /// current camera position. Returns the build time when it built.
-    fn ensure_built(&mut self, kind: BackendKind, exact: bool) -> Result<Option<f64>, ViewerError> {
+    fn ensure_built(&mut self, kind: BackendId, exact: bool) -> Result<Option<f64>, ViewerError> {
         let level = self.state.quality.of(kind);
         let position = self.state.position;
         let current = self.built.get(&kind);
@@ -318,10 +323,11 @@ impl Session {
         self.built.remove(&kind);
         let scene = self.scene_at_camera()?;
         let mut spec = quality::spec(kind, &self.user(kind), &self.knob(kind), level);
-        if let (BackendKind::Sdf, Some(dir)) = (kind, &self.bake_cache) {
-            // Not a picture setting: kept out of the options the frames report.
+        if let (true, Some(dir)) = (caches_bakes(kind), &self.bake_cache) {
+            // Not a picture setting: kept out of the options the frames report. First, so a
+            // `cache_dir` the user gave wins.
             spec.options
-                .insert(0, ("cache_dir".into(), dir.display().to_string()));
+                .insert(0, (CACHE_DIR_KEY.into(), dir.display().to_string()));
         }
         let t0 = Instant::now();
         let geometry = backend::build_within(&scene, &spec, self.memory_limit_bytes)?;
@@ -343,7 +349,7 @@ impl Session {
     /// Renders `scene` with `kind`'s geometry (shifted when built elsewhere).
     fn render_kind(
         &self,
-        kind: BackendKind,
+        kind: BackendId,
         scene: &Scene,
     ) -> Result<(RenderOutput, bool), ViewerError> {
         let built = self.built.get(&kind).ok_or_else(|| {
@@ -418,7 +424,7 @@ impl Session {
         let t1 = Instant::now();
         if self.accuracy && state.is_refined() {
             for (view, fb) in views.iter_mut().zip(&outputs) {
-                if view.backend != BackendKind::Reference {
+                if view.backend != BackendId::REFERENCE {
                     view.accuracy = Some(self.accuracy_of(fb, &full)?);
                 }
             }
@@ -447,10 +453,8 @@ impl Session {
         let reference = match self.reference_frame.take() {
             Some((k, frame)) if k == key => frame,
             _ => {
-                self.ensure_built(BackendKind::Reference, true)?;
-                self.render_kind(BackendKind::Reference, scene)?
-                    .0
-                    .framebuffer
+                self.ensure_built(BackendId::REFERENCE, true)?;
+                self.render_kind(BackendId::REFERENCE, scene)?.0.framebuffer
             }
         };
         let accuracy = marchmesh_core::compare(fb, &reference);
@@ -459,9 +463,18 @@ impl Session {
     }
 
     /// Build wall time of each built backend, milliseconds.
-    pub fn build_times(&self) -> Vec<(BackendKind, f64)> {
+    pub fn build_times(&self) -> Vec<(BackendId, f64)> {
         self.built.iter().map(|(k, b)| (*k, b.build_ms)).collect()
     }
+}
+
+/// The option key of backends that keep baked data in a folder across builds.
+const CACHE_DIR_KEY: &str = "cache_dir";
+
+/// Whether `kind` has a [`CACHE_DIR_KEY`] option (the session then lends it a folder of its
+/// own, so a rebuild at a new camera reads its bakes back).
+fn caches_bakes(kind: BackendId) -> bool {
+    kind.option_docs().iter().any(|d| d.key == CACHE_DIR_KEY)
 }
 
 /// Sessions opened by this process so far (names their bake cache folders apart).

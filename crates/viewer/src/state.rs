@@ -3,7 +3,7 @@
 //! else, so a script replays exactly what a person at the window would see.
 
 use glam::DVec3;
-use marchmesh_harness::backend::BackendKind;
+use marchmesh_registry::{BackendId, COUNT};
 use marchmesh_scene::{Camera, CameraSpec};
 
 /// Refinement levels: the image is rendered at `1 / REFINE_SCALES[level]` of the window's
@@ -41,11 +41,11 @@ pub enum Key {
     Q,
     /// Move up one step.
     E,
-    /// Show the sdf backend.
+    /// Show the first backend of [`view_order`] (sdf).
     Digit1,
-    /// Show the mesh backend.
+    /// Show the second backend of [`view_order`] (mesh).
     Digit2,
-    /// Show the reference backend.
+    /// Show the third backend of [`view_order`] (the reference).
     Digit3,
     /// Toggle the split view (active backend left, the previously shown one right).
     Tab,
@@ -117,15 +117,24 @@ impl Key {
         matches!(self, Key::W | Key::A | Key::S | Key::D | Key::Q | Key::E)
     }
 
-    /// The backend a digit key selects.
-    pub const fn backend(self) -> Option<BackendKind> {
-        match self {
-            Key::Digit1 => Some(BackendKind::Sdf),
-            Key::Digit2 => Some(BackendKind::Mesh),
-            Key::Digit3 => Some(BackendKind::Reference),
-            _ => None,
-        }
+    /// The backend a digit key selects (`None` past the last backend).
+    pub fn backend(self) -> Option<BackendId> {
+        let place = match self {
+            Key::Digit1 => 0,
+            Key::Digit2 => 1,
+            Key::Digit3 => 2,
+            _ => return None,
+        };
+        view_order().get(place).copied()
     }
+}
+
+/// The backends in the order of the digit keys: the measured ones in registry order, then
+/// the ground truth (sdf, mesh, reference).
+pub fn view_order() -> [BackendId; COUNT] {
+    let mut order = BackendId::ALL;
+    order.sort_by_key(|k| k.is_ground_truth());
+    order
 }
 
 /// One input to the update rule.
@@ -144,31 +153,23 @@ pub enum Event {
     Still,
 }
 
-/// Per-backend quality levels (0 = the backend's defaults or the user's options).
+/// Per-backend quality levels (0 = the backend's defaults or the user's options), indexed by
+/// [`BackendId::index`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Quality {
-    /// Level of the sdf backend's hit epsilon.
-    pub sdf: i32,
-    /// Level of the mesh backend's tessellation budget.
-    pub mesh: i32,
+    levels: [i32; COUNT],
 }
 
 impl Quality {
-    /// The level of `kind` (the reference has no knob: always 0).
-    pub const fn of(&self, kind: BackendKind) -> i32 {
-        match kind {
-            BackendKind::Sdf => self.sdf,
-            BackendKind::Mesh => self.mesh,
-            BackendKind::Reference => 0,
-        }
+    /// The level of `kind` (backends without a quality knob, like the reference: always 0).
+    pub fn of(&self, kind: BackendId) -> i32 {
+        self.levels[kind.index()]
     }
 
-    fn adjust(mut self, kind: BackendKind, by: i32) -> Self {
-        let clamp = |q: i32| (q + by).clamp(-MAX_QUALITY, MAX_QUALITY);
-        match kind {
-            BackendKind::Sdf => self.sdf = clamp(self.sdf),
-            BackendKind::Mesh => self.mesh = clamp(self.mesh),
-            BackendKind::Reference => {}
+    fn adjust(mut self, kind: BackendId, by: i32) -> Self {
+        if kind.has_quality_knob() {
+            let q = &mut self.levels[kind.index()];
+            *q = (*q + by).clamp(-MAX_QUALITY, MAX_QUALITY);
         }
         self
     }
@@ -184,9 +185,9 @@ pub struct ViewState {
     /// Elevation above the horizontal plane, degrees in [-89, 89].
     pub pitch_deg: f64,
     /// The backend shown (the left half in split mode).
-    pub active: BackendKind,
+    pub active: BackendId,
     /// The backend shown in the right half in split mode: the one shown before `active`.
-    pub partner: BackendKind,
+    pub partner: BackendId,
     /// Whether the window is split between `active` (left) and `partner` (right).
     pub split: bool,
     /// Quality level of each backend.
@@ -197,7 +198,7 @@ pub struct ViewState {
 
 impl ViewState {
     /// The backends on screen: `active`, then `partner` in split mode.
-    pub fn shown(&self) -> Vec<BackendKind> {
+    pub fn shown(&self) -> Vec<BackendId> {
         if self.split {
             vec![self.active, self.partner]
         } else {
@@ -260,7 +261,7 @@ impl ViewConfig {
     /// The configuration of a session starting from the scene camera `spec` with backend
     /// `active`, moving `step` world units per key event. Errors: the camera is invalid
     /// (`look_at == position`, `up` parallel to the view, non-finite values).
-    pub fn new(spec: &CameraSpec, active: BackendKind, step: f64) -> Result<Self, String> {
+    pub fn new(spec: &CameraSpec, active: BackendId, step: f64) -> Result<Self, String> {
         let position = DVec3::from(spec.position);
         let forward = (DVec3::from(spec.look_at) - position)
             .try_normalize()
@@ -285,10 +286,13 @@ impl ViewConfig {
             .asin()
             .to_degrees()
             .clamp(-MAX_PITCH_DEG, MAX_PITCH_DEG);
-        let partner = if active == BackendKind::Mesh {
-            BackendKind::Sdf
+        // The second backend of the digit keys' order, or the first when it is the active
+        // one (sdf and mesh show each other; the reference shows mesh).
+        let order = view_order();
+        let partner = if active == order[1] {
+            order[0]
         } else {
-            BackendKind::Mesh
+            order[1]
         };
         Ok(ViewConfig {
             home: ViewState {
@@ -353,7 +357,7 @@ impl ViewConfig {
 ///   horizontal right vector, `Q`/`E` along the up axis (down/up).
 /// - a drag turns by [`LOOK_DEG_PER_PX`] per pixel: right turns right, down looks down;
 ///   pitch stays within [`MAX_PITCH_DEG`].
-/// - `1`/`2`/`3` show sdf/mesh/reference; the one shown before becomes the split partner.
+/// - `1`/`2`/`3` show the backends of [`view_order`] (sdf/mesh/reference); the one shown before becomes the split partner.
 /// - `Tab` toggles the split; `+`/`-` change the active backend's quality level within
 ///   [`MAX_QUALITY`]; `R` restores the start camera and quality levels; `P` changes nothing.
 /// - a still frame refines one level; anything that changes the picture restarts at level 0.
@@ -420,6 +424,11 @@ fn wrap_deg(deg: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use marchmesh_mesh::MeshBackend;
+    use marchmesh_sdf::SdfBackend;
+
+    const SDF: BackendId = BackendId::of::<SdfBackend>();
+    const MESH: BackendId = BackendId::of::<MeshBackend>();
 
     fn config() -> ViewConfig {
         let spec = CameraSpec {
@@ -430,7 +439,7 @@ mod tests {
             width: 64,
             height: 48,
         };
-        ViewConfig::new(&spec, BackendKind::Sdf, 0.5).expect("valid camera")
+        ViewConfig::new(&spec, SDF, 0.5).expect("valid camera")
     }
 
     fn apply(events: &[Event]) -> ViewState {
@@ -466,7 +475,7 @@ mod tests {
         let c = config();
         let mut spec = c.camera.clone();
         spec.look_at = [0.0, 0.5, 7.0];
-        let c = ViewConfig::new(&spec, BackendKind::Sdf, 1.0).expect("valid");
+        let c = ViewConfig::new(&spec, SDF, 1.0).expect("valid");
         assert_eq!(c.camera_spec(&c.home), spec);
         let moved = update(&c.home, &Event::Key(Key::W), &c);
         let back = update(&moved, &Event::Key(Key::R), &c);
@@ -533,46 +542,47 @@ mod tests {
         assert_eq!(s.position, home.position);
         assert_eq!((s.yaw_deg, s.pitch_deg), (home.yaw_deg, home.pitch_deg));
         assert_eq!(s.quality, Quality::default());
-        assert_eq!(s.active, BackendKind::Mesh);
+        assert_eq!(s.active, MESH);
         assert!(s.split);
     }
 
     #[test]
     fn digits_switch_backend_and_remember_the_partner() {
         let s = apply(&[Event::Key(Key::Digit2)]);
-        assert_eq!((s.active, s.partner), (BackendKind::Mesh, BackendKind::Sdf));
+        assert_eq!((s.active, s.partner), (MESH, SDF));
         let s = apply(&[Event::Key(Key::Digit2), Event::Key(Key::Digit3)]);
-        assert_eq!(
-            (s.active, s.partner),
-            (BackendKind::Reference, BackendKind::Mesh)
-        );
+        assert_eq!((s.active, s.partner), (BackendId::REFERENCE, MESH));
         let s = apply(&[Event::Key(Key::Digit1)]);
-        assert_eq!(
-            s.active,
-            BackendKind::Sdf,
-            "pressing the shown backend's key"
-        );
-        assert_eq!(s.partner, BackendKind::Mesh);
+        assert_eq!(s.active, SDF, "pressing the shown backend's key");
+        assert_eq!(s.partner, MESH);
     }
 
     #[test]
     fn tab_toggles_the_split() {
         let s = apply(&[Event::Key(Key::Tab)]);
         assert!(s.split);
-        assert_eq!(s.shown(), vec![BackendKind::Sdf, BackendKind::Mesh]);
+        assert_eq!(s.shown(), vec![SDF, MESH]);
         let s = apply(&[Event::Key(Key::Tab), Event::Key(Key::Tab)]);
         assert!(!s.split);
-        assert_eq!(s.shown(), vec![BackendKind::Sdf]);
+        assert_eq!(s.shown(), vec![SDF]);
     }
 
     #[test]
     fn plus_minus_change_the_active_backend_quality_within_limits() {
         let s = apply(&[Event::Key(Key::Plus), Event::Key(Key::Plus)]);
-        assert_eq!(s.quality, Quality { sdf: 2, mesh: 0 });
+        let levels = |s: ViewState| BackendId::ALL.map(|k| s.quality.of(k));
+        let at = |sdf: i32, mesh: i32| {
+            BackendId::ALL.map(|k| match k {
+                SDF => sdf,
+                MESH => mesh,
+                _ => 0,
+            })
+        };
+        assert_eq!(levels(s), at(2, 0));
         let s = apply(&[Event::Key(Key::Digit2), Event::Key(Key::Minus)]);
-        assert_eq!(s.quality, Quality { sdf: 0, mesh: -1 });
+        assert_eq!(levels(s), at(0, -1));
         let many = vec![Event::Key(Key::Plus); 10];
-        assert_eq!(apply(&many).quality.sdf, MAX_QUALITY);
+        assert_eq!(apply(&many).quality.of(SDF), MAX_QUALITY);
         let s = apply(&[Event::Key(Key::Digit3), Event::Key(Key::Plus)]);
         assert_eq!(s.quality, Quality::default(), "the reference has no knob");
     }
@@ -608,10 +618,10 @@ mod tests {
     fn invalid_start_cameras_are_errors() {
         let mut spec = config().camera;
         spec.look_at = spec.position;
-        assert!(ViewConfig::new(&spec, BackendKind::Sdf, 1.0).is_err());
+        assert!(ViewConfig::new(&spec, SDF, 1.0).is_err());
         let mut spec = config().camera;
         spec.up = [0.0, 0.0, 1.0];
-        assert!(ViewConfig::new(&spec, BackendKind::Sdf, 1.0).is_err());
-        assert!(ViewConfig::new(&config().camera, BackendKind::Sdf, f64::NAN).is_err());
+        assert!(ViewConfig::new(&spec, SDF, 1.0).is_err());
+        assert!(ViewConfig::new(&config().camera, SDF, f64::NAN).is_err());
     }
 }

@@ -7,8 +7,9 @@ use std::path::Path;
 use plotters::prelude::*;
 
 use super::{group_scenes, short_num};
-use crate::backend::BackendKind;
+use crate::backend::BackendId;
 use crate::results::Results;
+use marchmesh_core::Backend;
 
 pub(crate) fn plot_err(e: impl std::fmt::Display) -> String {
     e.to_string()
@@ -25,10 +26,10 @@ pub(crate) const COLORS: [RGBColor; 8] = [
     RGBColor(23, 190, 207),
 ];
 
-/// A backend's plot colour: by its place in [`BackendKind::ALL`], so a backend keeps its
+/// A backend's plot colour: by its place in [`BackendId::ALL`], so a backend keeps its
 /// colour in every plot (sdf blue, mesh red as before); unknown names share one other colour.
 pub(crate) fn color_of(backend: &str) -> RGBColor {
-    let i = BackendKind::ALL
+    let i = BackendId::ALL
         .iter()
         .position(|k| k.name() == backend)
         .map_or(COLORS.len() - 2, |i| (i + COLORS.len() - 1) % COLORS.len());
@@ -266,7 +267,7 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
         // Steps histogram of every sdf configuration of the scene.
         let series: Vec<(String, Vec<(f64, f64)>)> = rows
             .iter()
-            .filter(|r| r.backend == "sdf")
+            .filter(|r| r.backend == marchmesh_sdf::SdfBackend::NAME)
             .filter_map(|r| {
                 let h = res.steps_histograms.get(&r.config_id)?;
                 let total: u64 = h.iter().sum();

@@ -8,7 +8,7 @@ use std::time::Duration;
 use glam::{DVec3, Vec3, Vec3A};
 use marchmesh_core::{Geometry, Ray};
 use marchmesh_mesh::tessellate::{Detail, tessellate};
-use marchmesh_mesh::{BvhKind, MeshOptions, Tessellation};
+use marchmesh_mesh::{BvhKind, MeshOptions};
 use marchmesh_scene::{NodeKind, Scene};
 use obvhs::{
     BvhBuildParams,
@@ -101,7 +101,7 @@ pub fn sphere_case() -> Case {
         name: "sphere_1m",
         scene,
         options: MeshOptions {
-            tessellation: Tessellation::FixedLevel(SPHERE_LEVEL),
+            tess_level: Some(SPHERE_LEVEL),
             ..MeshOptions::DEFAULT
         },
         tris,

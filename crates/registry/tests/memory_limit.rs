@@ -1,7 +1,12 @@
 //! Issue 11 item 3: a backend's build is estimated and refused over the memory limit before
 //! it allocates, with the object, the estimate, the limit and the option named.
 
-use marchmesh_harness::backend::{self, BackendKind, BackendSpec};
+use marchmesh_mesh::MeshBackend;
+use marchmesh_registry::{self as backend, BackendId, BackendSpec};
+use marchmesh_sdf::SdfBackend;
+
+const MESH: BackendId = BackendId::of::<MeshBackend>();
+const SDF: BackendId = BackendId::of::<SdfBackend>();
 
 const MIB: u64 = 1 << 20;
 
@@ -10,7 +15,7 @@ fn scene(text: &str) -> marchmesh_scene::Scene {
     marchmesh_scene::parse_scene(text, "limit.json", &base).expect("valid scene")
 }
 
-fn spec(kind: BackendKind, options: &[&str]) -> BackendSpec {
+fn spec(kind: BackendId, options: &[&str]) -> BackendSpec {
     BackendSpec {
         kind,
         options: options
@@ -35,7 +40,7 @@ fn a_sphere_seen_through_a_tiny_field_of_view_is_refused_not_tessellated() {
                          "vfov_deg": 1e-3 },
              "objects": [ { "shape": { "sphere": { "radius": 1 } } } ] }"#,
     );
-    let msg = build_error(&s, &spec(BackendKind::Mesh, &[]), 100 * MIB);
+    let msg = build_error(&s, &spec(MESH, &[]), 100 * MIB);
     for part in [
         "objects[0]",
         "triangles",
@@ -46,7 +51,7 @@ fn a_sphere_seen_through_a_tiny_field_of_view_is_refused_not_tessellated() {
         assert!(msg.contains(part), "{part}: {msg}");
     }
     // The same scene at a coarse budget fits.
-    backend::build_within(&s, &spec(BackendKind::Mesh, &["tess_level=3"]), 100 * MIB)
+    backend::build_within(&s, &spec(MESH, &["tess_level=3"]), 100 * MIB)
         .expect("a fixed level-3 sphere is small");
 }
 
@@ -55,10 +60,7 @@ fn segment_caps_beyond_the_documented_maximum_are_refused() {
     let s = scene(r#"{ "objects": [ { "shape": { "sphere": { "radius": 1 } } } ] }"#);
     let msg = build_error(
         &s,
-        &spec(
-            BackendKind::Mesh,
-            &["max_segments=4000000000", "tess_px=1e-9"],
-        ),
+        &spec(MESH, &["max_segments=4000000000", "tess_px=1e-9"]),
         4096 * MIB,
     );
     assert!(
@@ -75,11 +77,7 @@ fn extraction_grids_count_against_the_limit() {
                { "shape": { "box": { "half_extents": [0.5, 0.5, 0.5] } },
                  "transform": { "translate": [1, 0, 0] } } ] } } } ] }"#,
     );
-    let msg = build_error(
-        &s,
-        &spec(BackendKind::Mesh, &["surface_res=512"]),
-        200 * MIB,
-    );
+    let msg = build_error(&s, &spec(MESH, &["surface_res=512"]), 200 * MIB);
     assert!(
         msg.contains("surface-extraction grid of 512^3") && msg.contains("surface_res"),
         "{msg}"
@@ -89,7 +87,7 @@ fn extraction_grids_count_against_the_limit() {
 #[test]
 fn mesh_grids_of_the_sdf_backend_count_against_the_limit() {
     let s = scene(r#"{ "objects": [ { "shape": { "mesh": { "path": "meshes/bunny.obj" } } } ] }"#);
-    let msg = build_error(&s, &spec(BackendKind::Sdf, &["grid_res=512"]), 1000 * MIB);
+    let msg = build_error(&s, &spec(SDF, &["grid_res=512"]), 1000 * MIB);
     for part in [
         "resolution 512",
         "1000 MiB",
@@ -98,7 +96,7 @@ fn mesh_grids_of_the_sdf_backend_count_against_the_limit() {
     ] {
         assert!(msg.contains(part), "{part}: {msg}");
     }
-    let msg = build_error(&s, &spec(BackendKind::Mesh, &[]), MIB / 2);
+    let msg = build_error(&s, &spec(MESH, &[]), MIB / 2);
     assert!(
         msg.contains("bunny.obj") && msg.contains("triangles"),
         "{msg}"

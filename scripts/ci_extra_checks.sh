@@ -1,0 +1,33 @@
+#!/usr/bin/env bash
+# CI checks beyond the root workspace's build and tests (called by .ci/run):
+#
+# 1. The two crates with workspaces of their own type-check against their committed lock files
+#    (`--locked`: a lock file that drifted from its manifest is an error, not a silent rewrite):
+#    the fidget anchor (fidget and its JIT stay out of the root build) and the fuzz targets.
+#    The fuzz targets need nightly and cargo-fuzz to run, but they compile on stable, which is
+#    what this checks.
+# 2. The root workspace type-checks for a portable x86-64 target. `.cargo/config.toml` builds
+#    for the host CPU (`target-cpu=native`); RUSTFLAGS replaces that setting, so this catches
+#    code that only compiles with the host's target features (the mesh backend's AVX and
+#    AVX-512 paths are chosen at run time and must compile without them).
+#
+# `cargo check` only (no code generation, no linking): it type-checks every crate and target,
+# which is what these gates are for, at a fraction of a build's time and disk. All output goes
+# under target/ (target/extra for the two crates, target/portable for the portable check), so
+# `rm -rf target` still removes everything and the main build's artifacts stay as they are.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+extra="$PWD/target/extra"
+
+echo "== cargo check crates/anchor-fidget (own workspace, --locked)"
+CARGO_TARGET_DIR="$extra" cargo check --manifest-path crates/anchor-fidget/Cargo.toml \
+  --all-targets --locked
+
+echo "== cargo check crates/fuzz (own workspace, --locked, stable)"
+CARGO_TARGET_DIR="$extra" cargo check --manifest-path crates/fuzz/Cargo.toml \
+  --all-targets --locked
+
+echo "== cargo check --workspace for a portable x86-64 target"
+RUSTFLAGS="-C target-cpu=x86-64" CARGO_TARGET_DIR="$PWD/target/portable" \
+  cargo check --workspace --all-targets --locked
