@@ -16,7 +16,7 @@
 use anyhow::{Result, bail};
 use fidget::context::Tree;
 use glam::{DAffine3, DVec3};
-use marchmesh_scene::{Node, NodeKind, Scene};
+use marchmesh_scene::{Node, NodeKind, Scene, Shape};
 
 /// How scene shapes that fidget cannot take as they are become fidget trees.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,12 +90,12 @@ impl Translator {
             c.iter().map(|c| t.node(c, to_local)).collect()
         };
         Ok(match &n.kind {
-            NodeKind::Sphere { radius } => {
+            NodeKind::Leaf(Shape::Sphere { radius }) => {
                 self.leaves += 1;
                 let [x, y, z] = affine_axes(&to_local);
                 (x.square() + y.square() + z.square()).sqrt() - *radius
             }
-            NodeKind::Box { half_extents } => {
+            NodeKind::Leaf(Shape::Box { half_extents }) => {
                 self.leaves += 1;
                 let [x, y, z] = affine_axes(&to_local);
                 let qx = x.abs() - half_extents.x;
@@ -106,7 +106,7 @@ impl Translator {
                 let inside = qx.max(qy.max(qz)).min(0.0);
                 outside + inside
             }
-            NodeKind::Plane { normal, offset } => {
+            NodeKind::Leaf(Shape::Plane { normal, offset }) => {
                 self.leaves += 1;
                 self.notes.push(format!(
                     "{}: plane made a slab {} thick below it (fidget clips it to its volume; marchmesh's plane reaches max_distance)",
@@ -127,31 +127,11 @@ impl Translator {
                     base.max(-balanced(trees, |a, b| a.min(b)))
                 }
             }
-            other => bail!(
-                "{}: shape `{}` is not supported by the fidget anchor (supported: sphere, box, plane as a slab, union, intersection, subtraction)",
-                n.json_path,
-                kind_name(other)
+            _ => bail!(
+                "{}.shape: not supported by the fidget anchor (supported: sphere, box, plane as a slab, union, intersection, subtraction)",
+                n.json_path
             ),
         })
-    }
-}
-
-/// The scene-format name of a shape kind.
-fn kind_name(k: &NodeKind) -> &'static str {
-    match k {
-        NodeKind::Sphere { .. } => "sphere",
-        NodeKind::Plane { .. } => "plane",
-        NodeKind::Triangle { .. } => "triangle",
-        NodeKind::Box { .. } => "box",
-        NodeKind::Ellipsoid { .. } => "ellipsoid",
-        NodeKind::Cylinder { .. } => "cylinder",
-        NodeKind::Torus { .. } => "torus",
-        NodeKind::Mesh { .. } => "mesh",
-        NodeKind::Union(_) => "union",
-        NodeKind::Intersection(_) => "intersection",
-        NodeKind::Subtraction(_) => "subtraction",
-        NodeKind::SmoothUnion { .. } => "smooth_union",
-        NodeKind::Repeat { .. } => "repeat",
     }
 }
 

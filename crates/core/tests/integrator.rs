@@ -16,7 +16,9 @@ impl Spheres {
         let origin = scene.camera.position;
         let mut v = Vec::new();
         scene.visit_nodes(|n| {
-            if let marchmesh_scene::NodeKind::Sphere { radius } = n.kind {
+            if let marchmesh_scene::NodeKind::Leaf(marchmesh_scene::Shape::Sphere { radius }) =
+                n.kind
+            {
                 let c = (n.transform.translation - origin).as_vec3();
                 v.push((c, radius as f32, n.material));
             }

@@ -2,9 +2,10 @@
 //! Lipschitz scale, bounding boxes in each parent's frame, repetition windows.
 
 use glam::{DAffine3, DMat3, DVec3};
-use marchmesh_scene::{Node, NodeKind};
+use marchmesh_scene::{Node, NodeKind, Shape};
 
 use crate::FieldError;
+use crate::leaf::Leaf;
 use crate::program::{Affine, Instr, MAX_WINDOW, Op, Program};
 use crate::shapes::TriData;
 
@@ -12,8 +13,8 @@ pub(crate) use marchmesh_scene::bounds::Aabb;
 use marchmesh_scene::bounds::{LocalBounds, combine, singular_values};
 
 /// A leaf shape's box in its own frame, from the scene's one definition of shape bounds.
-fn leaf_box(kind: &NodeKind) -> Aabb {
-    match kind.local_bounds() {
+fn leaf_box(shape: &Shape) -> Aabb {
+    match shape.local_bounds() {
         LocalBounds::Finite(b) => b,
         LocalBounds::Unbounded | LocalBounds::MeshFile(_) | LocalBounds::Composite => {
             Aabb::INFINITE
@@ -91,117 +92,124 @@ impl Compiler<'_> {
             op: Op::Union,
         });
         let (op, local) = match &n.kind {
-            NodeKind::Sphere { radius } => {
-                let m = xf.matrix3;
-                let sc = m.x_axis.length();
-                let g = m.transpose() * m;
-                let conformal = (0..3).all(|c| {
-                    (0..3).all(|r| {
-                        let want = if c == r { sc * sc } else { 0.0 };
-                        (g.col(c)[r] - want).abs() <= 1e-12 * sc * sc
-                    })
-                });
-                let c = xf.translation;
-                let r = radius * sc;
-                // Only when the frame origin (the camera, in render space) is close to the
-                // surface relative to the radius does `|p - c| - r` lose precision in f32.
-                if conformal && r >= 16.0 * (c.length() - r).abs() {
-                    // Rotation and uniform scale: a sphere in the parent frame, evaluated
-                    // without moving the point into the local frame first (see Op::SphereAt).
-                    self.instrs[idx].evaluate_in_parent_frame();
-                    (
-                        Op::SphereAt {
-                            c: a3(c),
-                            r,
-                            k: (c.length_squared() - r * r),
+            NodeKind::Leaf(shape) => {
+                let (leaf, local) = match shape {
+                    Shape::Sphere { radius } => {
+                        let m = xf.matrix3;
+                        let sc = m.x_axis.length();
+                        let g = m.transpose() * m;
+                        let conformal = (0..3).all(|c| {
+                            (0..3).all(|r| {
+                                let want = if c == r { sc * sc } else { 0.0 };
+                                (g.col(c)[r] - want).abs() <= 1e-12 * sc * sc
+                            })
+                        });
+                        let c = xf.translation;
+                        let r = radius * sc;
+                        // Only when the frame origin (the camera, in render space) is close to the
+                        // surface relative to the radius does `|p - c| - r` lose precision in f32.
+                        if conformal && r >= 16.0 * (c.length() - r).abs() {
+                            // Rotation and uniform scale: a sphere in the parent frame, evaluated
+                            // without moving the point into the local frame first (see Leaf::SphereAt).
+                            self.instrs[idx].evaluate_in_parent_frame();
+                            (
+                                Leaf::SphereAt {
+                                    c: a3(c),
+                                    r,
+                                    k: (c.length_squared() - r * r),
+                                },
+                                leaf_box(shape),
+                            )
+                        } else {
+                            (Leaf::Sphere { r: *radius }, leaf_box(shape))
+                        }
+                    }
+                    Shape::Plane { normal, offset } => {
+                        // A plane stays a plane under any affine map: express it in the parent frame
+                        // in f64 (`n.(A x + b) = offset`) and evaluate it there, exactly. Moving the
+                        // point into the local frame in f32 instead would add the camera's world
+                        // position back (1e5 units away: 0.008-unit rounding, step exhaustion).
+                        let a = inv.matrix3;
+                        let n_parent = a.transpose() * *normal;
+                        let len = n_parent.length();
+                        let offset_parent = (offset - normal.dot(inv.translation)) / len;
+                        self.instrs[idx].evaluate_in_parent_frame();
+                        (
+                            Leaf::Plane {
+                                n: a3(n_parent / len),
+                                offset: offset_parent,
+                            },
+                            Aabb::INFINITE,
+                        )
+                    }
+                    Shape::Box { half_extents } => (
+                        Leaf::Box {
+                            b: a3(*half_extents),
                         },
-                        leaf_box(&n.kind),
-                    )
-                } else {
-                    (Op::Sphere { r: *radius }, leaf_box(&n.kind))
-                }
-            }
-            NodeKind::Plane { normal, offset } => {
-                // A plane stays a plane under any affine map: express it in the parent frame
-                // in f64 (`n.(A x + b) = offset`) and evaluate it there, exactly. Moving the
-                // point into the local frame in f32 instead would add the camera's world
-                // position back (1e5 units away: 0.008-unit rounding, step exhaustion).
-                let a = inv.matrix3;
-                let n_parent = a.transpose() * *normal;
-                let len = n_parent.length();
-                let offset_parent = (offset - normal.dot(inv.translation)) / len;
-                self.instrs[idx].evaluate_in_parent_frame();
-                (
-                    Op::Plane {
-                        n: a3(n_parent / len),
-                        offset: offset_parent,
-                    },
-                    Aabb::INFINITE,
-                )
-            }
-            NodeKind::Box { half_extents } => (
-                Op::Box {
-                    b: a3(*half_extents),
-                },
-                leaf_box(&n.kind),
-            ),
-            NodeKind::Ellipsoid { radii } => (
-                Op::Ellipsoid {
-                    inv_r: a3(radii.recip()),
-                    rmin: radii.min_element(),
-                },
-                leaf_box(&n.kind),
-            ),
-            NodeKind::Cylinder {
-                radius,
-                half_height,
-            } => (
-                Op::Cylinder {
-                    r: *radius,
-                    h: *half_height,
-                },
-                leaf_box(&n.kind),
-            ),
-            NodeKind::Torus {
-                major_radius,
-                minor_radius,
-            } => (
-                Op::Torus {
-                    big: *major_radius,
-                    small: *minor_radius,
-                },
-                leaf_box(&n.kind),
-            ),
-            NodeKind::Triangle { vertices } => {
-                let [a, b, c] = *vertices;
-                let (ba, cb, ac) = (b - a, c - b, a - c);
-                let nor = ba.cross(ac);
-                if nor.length_squared().partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                    return Err(FieldError::Degenerate {
-                        json_path: n.json_path.clone(),
-                        reason: "triangle has collinear vertices".into(),
-                    });
-                }
-                let t = TriData {
-                    a: a3(a),
-                    b: a3(b),
-                    c: a3(c),
-                    ba: a3(ba),
-                    cb: a3(cb),
-                    ac: a3(ac),
-                    en: [a3(ba.cross(nor)), a3(cb.cross(nor)), a3(ac.cross(nor))],
-                    n: a3(nor.normalize()),
-                    inv2: [
-                        1.0 / ba.length_squared(),
-                        1.0 / cb.length_squared(),
-                        1.0 / ac.length_squared(),
-                    ],
+                        leaf_box(shape),
+                    ),
+                    Shape::Ellipsoid { radii } => (
+                        Leaf::Ellipsoid {
+                            inv_r: a3(radii.recip()),
+                            rmin: radii.min_element(),
+                        },
+                        leaf_box(shape),
+                    ),
+                    Shape::Cylinder {
+                        radius,
+                        half_height,
+                    } => (
+                        Leaf::Cylinder {
+                            r: *radius,
+                            h: *half_height,
+                        },
+                        leaf_box(shape),
+                    ),
+                    Shape::Torus {
+                        major_radius,
+                        minor_radius,
+                    } => (
+                        Leaf::Torus {
+                            big: *major_radius,
+                            small: *minor_radius,
+                        },
+                        leaf_box(shape),
+                    ),
+                    Shape::Triangle { vertices } => {
+                        let [a, b, c] = *vertices;
+                        let (ba, cb, ac) = (b - a, c - b, a - c);
+                        let nor = ba.cross(ac);
+                        if nor.length_squared().partial_cmp(&0.0)
+                            != Some(std::cmp::Ordering::Greater)
+                        {
+                            return Err(FieldError::Degenerate {
+                                json_path: n.json_path.clone(),
+                                reason: "triangle has collinear vertices".into(),
+                            });
+                        }
+                        let t = TriData {
+                            a: a3(a),
+                            b: a3(b),
+                            c: a3(c),
+                            ba: a3(ba),
+                            cb: a3(cb),
+                            ac: a3(ac),
+                            en: [a3(ba.cross(nor)), a3(cb.cross(nor)), a3(ac.cross(nor))],
+                            n: a3(nor.normalize()),
+                            inv2: [
+                                1.0 / ba.length_squared(),
+                                1.0 / cb.length_squared(),
+                                1.0 / ac.length_squared(),
+                            ],
+                        };
+                        (Leaf::Triangle(Box::new(t)), leaf_box(shape))
+                    }
+                    Shape::Mesh { .. } => {
+                        let (grid, bb) = self.meshes.resolve(n)?;
+                        (Leaf::Mesh { grid }, bb)
+                    }
                 };
-                (Op::Triangle(Box::new(t)), leaf_box(&n.kind))
-            }
-            NodeKind::Mesh { .. } => {
-                let (grid, bb) = self.meshes.resolve(n)?;
-                (Op::Mesh { grid }, bb)
+                (Op::Leaf(leaf), local)
             }
             NodeKind::Union(ch) if ch.len() > GROUP => {
                 let items: Vec<(&Node, DAffine3)> = ch.iter().map(|c| (c, c.transform)).collect();
@@ -216,13 +224,15 @@ impl Compiler<'_> {
                 };
                 (op, combine(&n.kind, &boxes).unwrap_or(Aabb::INFINITE))
             }
-            NodeKind::SmoothUnion {
+            NodeKind::Smooth {
+                op,
                 children,
                 blend_radius,
             } => {
                 let boxes = self.children(children)?;
                 (
-                    Op::SmoothUnion {
+                    Op::Smooth {
+                        op: *op,
                         k: *blend_radius,
                         inv_k: 1.0 / blend_radius,
                     },
@@ -287,7 +297,9 @@ impl Compiler<'_> {
         let parent_box = local.transformed(&xf);
         let cheap = matches!(
             op,
-            Op::Sphere { .. } | Op::SphereAt { .. } | Op::Box { .. } | Op::Plane { .. }
+            Op::Leaf(
+                Leaf::Sphere { .. } | Leaf::SphereAt { .. } | Leaf::Box { .. } | Leaf::Plane { .. }
+            )
         );
         let end = self.instrs.len() as u32;
         let ins = &mut self.instrs[idx];
@@ -296,17 +308,10 @@ impl Compiler<'_> {
         ins.lo = a3(parent_box.lo);
         ins.hi = a3(parent_box.hi);
         ins.has_bound = !cheap && parent_box.any_finite();
-        let leaf = !matches!(
-            ins.op,
-            Op::Union
-                | Op::Intersection
-                | Op::Subtraction
-                | Op::SmoothUnion { .. }
-                | Op::Repeat { .. }
-        );
+        let leaf = matches!(ins.op, Op::Leaf(_));
         // Leaves keep only the exact skips (their value is >= the box distance anyway), so
         // exact primitives stay exact everywhere; subtrees switch to their box beyond tau.
-        ins.tau = if leaf && !matches!(ins.op, Op::Mesh { .. }) {
+        ins.tau = if leaf && !matches!(ins.op, Op::Leaf(Leaf::Mesh { .. })) {
             f64::INFINITY
         } else if parent_box.is_finite() {
             ((parent_box.hi - parent_box.lo).length() * 0.5).max(1e-30)

@@ -39,6 +39,7 @@ pub mod compile;
 pub mod cull;
 pub mod dual;
 pub mod lane;
+pub mod leaf;
 pub mod program;
 mod recede;
 pub mod shapes;
@@ -48,7 +49,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::{DAffine3, DVec3, Vec3};
-use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
+use marchmesh_scene::{MaterialId, Node, NodeKind, Scene, Shape};
 
 use compile::{Aabb, MeshResolver, compile_roots};
 pub use cull::{RayCone, Restricted};
@@ -225,7 +226,7 @@ impl GridSampler for Grid {
 
 impl MeshResolver for Meshes<'_> {
     fn resolve(&mut self, node: &Node) -> Result<(u32, Aabb), FieldError> {
-        let NodeKind::Mesh { path } = &node.kind else {
+        let NodeKind::Leaf(Shape::Mesh { path }) = &node.kind else {
             unreachable!("resolve is called on mesh nodes only")
         };
         if let Some((_, idx, bb)) = self.seen.iter().find(|(p, _, _)| p == path) {
@@ -364,8 +365,8 @@ impl Field {
         let mut has_smooth = false;
         for (n, _) in nodes {
             n.visit(&mut |n| match n.kind {
-                NodeKind::Ellipsoid { .. } => has_ellipsoid = true,
-                NodeKind::SmoothUnion { .. } => has_smooth = true,
+                NodeKind::Leaf(Shape::Ellipsoid { .. }) => has_ellipsoid = true,
+                NodeKind::Smooth { .. } => has_smooth = true,
                 _ => {}
             });
         }

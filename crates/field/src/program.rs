@@ -26,6 +26,9 @@
 //! `MAX_WINDOW` copies only, the result may over-estimate, and the compiler records a note.
 
 use crate::lane::{Lane, Scalar, V3};
+use marchmesh_scene::SmoothOp;
+
+use crate::leaf::{GridList, Leaf};
 use crate::shapes::{self, TriData};
 
 pub mod segment;
@@ -77,74 +80,23 @@ impl<S: Scalar> Affine<S> {
     }
 }
 
-/// What a node computes.
+/// What a node computes: a leaf ([`Leaf`], its distance in [`Leaf::distance`]) or a
+/// combinator of the nodes of its subtree.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Op<S> {
-    /// [`shapes::sphere`].
-    Sphere {
-        /// Radius.
-        r: S,
-    },
-    /// A sphere in the parent frame (centre `c`, radius `r`, `k = |c|^2 - r^2`), evaluated
-    /// as `(|p|^2 - 2 p.c + k) / (|p - c| + r)`: the same value as `|p - c| - r`, but
-    /// without the cancellation of `|p - c| ~ r` in f32 when a huge sphere (a ground) passes
-    /// near the camera: the terms stay small in render space.
-    SphereAt {
-        /// Centre.
-        c: [S; 3],
-        /// Radius.
-        r: S,
-        /// `|c|^2 - r^2`.
-        k: S,
-    },
-    /// [`shapes::plane`].
-    Plane {
-        /// Unit normal.
-        n: [S; 3],
-        /// Offset.
-        offset: S,
-    },
-    /// [`shapes::box3`].
-    Box {
-        /// Half extents.
-        b: [S; 3],
-    },
-    /// [`shapes::ellipsoid`].
-    Ellipsoid {
-        /// 1 / radii.
-        inv_r: [S; 3],
-        /// Smallest radius.
-        rmin: S,
-    },
-    /// [`shapes::cylinder`].
-    Cylinder {
-        /// Radius.
-        r: S,
-        /// Half height.
-        h: S,
-    },
-    /// [`shapes::torus`].
-    Torus {
-        /// Major radius.
-        big: S,
-        /// Minor radius.
-        small: S,
-    },
-    /// [`shapes::triangle`].
-    Triangle(Box<TriData<S>>),
-    /// A baked mesh grid (index into the field's grid list).
-    Mesh {
-        /// Grid index.
-        grid: u32,
-    },
+    /// A primitive: an analytic shape or a mesh grid.
+    Leaf(Leaf<S>),
     /// Minimum of the children.
     Union,
     /// Maximum of the children.
     Intersection,
     /// `max(first, -others...)`.
     Subtraction,
-    /// Folded [`shapes::smin`].
-    SmoothUnion {
+    /// The children folded left to right by a smooth operator ([`shapes::smin`] for a
+    /// union; see [`SmoothOp`]).
+    Smooth {
+        /// The blended operation.
+        op: SmoothOp,
         /// Blend radius.
         k: S,
         /// 1 / k.
@@ -190,7 +142,7 @@ pub struct Instr<S> {
 impl Program<f32> {
     /// The normal a baked mesh stores at the surface point `p` (root's parent frame), when
     /// the surface there is a mesh grid's: the nearest child is followed down through plain
-    /// unions to a [`Op::Mesh`] leaf, whose [`GridSampler::stored_normal`] is carried back
+    /// unions to a [`Op::Leaf(Leaf::Mesh)`] leaf, whose [`GridSampler::stored_normal`] is carried back
     /// up through the nodes' frames (a gradient maps by the transpose of `to_local`'s
     /// linear part). `None` when the path meets any other operation (CSG, smooth blends,
     /// repetition, an analytic leaf) or the grid has no normal there: the caller then
@@ -214,7 +166,9 @@ impl Program<f32> {
         let ins = self.instrs.get(i)?;
         let q = ins.to_local.apply(p);
         let local = match &ins.op {
-            Op::Mesh { grid } => grids.get(*grid as usize)?.stored_normal(q.x, q.y, q.z)?,
+            Op::Leaf(Leaf::Mesh { grid }) => {
+                grids.get(*grid as usize)?.stored_normal(q.x, q.y, q.z)?
+            }
             Op::Union => {
                 let (mut best, mut best_d) = (None, f32::INFINITY);
                 let mut j = i + 1;
@@ -327,7 +281,7 @@ impl<S: Scalar> Program<S> {
         let tri = self
             .instrs
             .iter()
-            .filter(|i| matches!(i.op, Op::Triangle(_)))
+            .filter(|i| matches!(i.op, Op::Leaf(Leaf::Triangle(_))))
             .count();
         (self.instrs.len() * std::mem::size_of::<Instr<S>>()
             + tri * std::mem::size_of::<TriData<S>>()) as u64
@@ -392,24 +346,7 @@ impl<S: Scalar> Program<S> {
         let mat = T::mat_splat(ins.material);
         let end = ins.end as usize;
         let (d, m) = match &ins.op {
-            Op::Sphere { r } => (shapes::sphere(q, T::splat(*r)), mat),
-            Op::SphereAt { c, r, k } => (
-                shapes::sphere_at(q, V3::splat3(*c), T::splat(*r), T::splat(*k)),
-                mat,
-            ),
-            Op::Plane { n, offset } => (shapes::plane(q, V3::splat3(*n), T::splat(*offset)), mat),
-            Op::Box { b } => (shapes::box3(q, V3::splat3(*b)), mat),
-            Op::Ellipsoid { inv_r, rmin } => (
-                shapes::ellipsoid(q, V3::splat3(*inv_r), T::splat(*rmin)),
-                mat,
-            ),
-            Op::Cylinder { r, h } => (shapes::cylinder(q, T::splat(*r), T::splat(*h)), mat),
-            Op::Torus { big, small } => (shapes::torus(q, T::splat(*big), T::splat(*small)), mat),
-            Op::Triangle(t) => (shapes::triangle(q, t), mat),
-            Op::Mesh { grid } => {
-                let g = &grids[*grid as usize];
-                (T::sample_grid(g.as_ref(), q.x, q.y, q.z), mat)
-            }
+            Op::Leaf(leaf) => (leaf.distance(q, GridList(grids)), mat),
             Op::Union => {
                 let mut j = i + 1;
                 if let Some(second) = self.nearer_second::<T>(j, end, q) {
@@ -476,7 +413,11 @@ impl<S: Scalar> Program<S> {
                 }
                 (best, bm)
             }
-            Op::SmoothUnion { k, inv_k } => {
+            Op::Smooth {
+                op: SmoothOp::Union,
+                k,
+                inv_k,
+            } => {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);
                 let mut j = i + 1;
@@ -649,42 +590,12 @@ impl<S: Scalar> Program<S> {
                     },
                     dscale: c(i.dscale),
                     op: match &i.op {
-                        Op::Sphere { r } => Op::Sphere { r: c(*r) },
-                        Op::SphereAt { c: cen, r, k } => Op::SphereAt {
-                            c: c3(*cen),
-                            r: c(*r),
-                            k: c(*k),
-                        },
-                        Op::Plane { n, offset } => Op::Plane {
-                            n: c3(*n),
-                            offset: c(*offset),
-                        },
-                        Op::Box { b } => Op::Box { b: c3(*b) },
-                        Op::Ellipsoid { inv_r, rmin } => Op::Ellipsoid {
-                            inv_r: c3(*inv_r),
-                            rmin: c(*rmin),
-                        },
-                        Op::Cylinder { r, h } => Op::Cylinder { r: c(*r), h: c(*h) },
-                        Op::Torus { big, small } => Op::Torus {
-                            big: c(*big),
-                            small: c(*small),
-                        },
-                        Op::Triangle(t) => Op::Triangle(Box::new(TriData {
-                            a: c3(t.a),
-                            b: c3(t.b),
-                            c: c3(t.c),
-                            ba: c3(t.ba),
-                            cb: c3(t.cb),
-                            ac: c3(t.ac),
-                            en: t.en.map(c3),
-                            n: c3(t.n),
-                            inv2: c3(t.inv2),
-                        })),
-                        Op::Mesh { grid } => Op::Mesh { grid: *grid },
+                        Op::Leaf(leaf) => Op::Leaf(leaf.cast()),
                         Op::Union => Op::Union,
                         Op::Intersection => Op::Intersection,
                         Op::Subtraction => Op::Subtraction,
-                        Op::SmoothUnion { k, inv_k } => Op::SmoothUnion {
+                        Op::Smooth { op, k, inv_k } => Op::Smooth {
+                            op: *op,
                             k: c(*k),
                             inv_k: c(*inv_k),
                         },

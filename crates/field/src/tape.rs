@@ -17,6 +17,7 @@ use glam::Vec3;
 
 use crate::dual::{Dual1, Dual8};
 use crate::lane::{F32x8, Lane, V3};
+use crate::leaf::{GridList, GridSource, Leaf, NoGrids};
 use crate::program::segment::{bounded_step, fallback, leaf_lambda, leaf_step};
 use crate::program::{Affine, GridSampler, Instr, Op, Program};
 use crate::recede;
@@ -44,7 +45,7 @@ impl Bound {
 /// One leaf (an analytic shape or a mesh grid) with its frame, distance scale and
 /// (optional) bound.
 #[derive(Debug, Clone, PartialEq)]
-struct Leaf {
+struct TapeLeaf {
     to_local: Affine<f32>,
     dscale: f32,
     bound: Option<Bound>,
@@ -52,7 +53,7 @@ struct Leaf {
     /// is off because testing it costs more than the leaf): [`Tape::recedes`] uses it.
     bbox: ([f32; 3], [f32; 3]),
     material: u32,
-    op: Op<f32>,
+    shape: Leaf<f32>,
 }
 
 /// The root union's own frame and bound.
@@ -72,7 +73,7 @@ struct Root {
 pub struct Tape {
     /// `None`: the program is the single leaf `leaves[0]`.
     root: Option<Root>,
-    leaves: Vec<Leaf>,
+    leaves: Vec<TapeLeaf>,
     /// Whether a leaf is a mesh grid (evaluations then take the grid list).
     has_mesh: bool,
 }
@@ -80,33 +81,22 @@ pub struct Tape {
 /// Whether `op` is a leaf the tape evaluates: every analytic primitive and mesh grids
 /// (sampled through the grid list the tape's evaluations are given).
 pub(crate) fn tape_leaf(op: &Op<f32>) -> bool {
-    match op {
-        Op::Sphere { .. }
-        | Op::SphereAt { .. }
-        | Op::Plane { .. }
-        | Op::Box { .. }
-        | Op::Ellipsoid { .. }
-        | Op::Cylinder { .. }
-        | Op::Torus { .. }
-        | Op::Triangle(_)
-        | Op::Mesh { .. } => true,
-        Op::Union
-        | Op::Intersection
-        | Op::Subtraction
-        | Op::SmoothUnion { .. }
-        | Op::Repeat { .. } => false,
-    }
+    matches!(op, Op::Leaf(_))
 }
 
-fn leaf(ins: &Instr<f32>) -> Leaf {
-    Leaf {
+/// The tape's copy of leaf node `ins` (an [`Op::Leaf`]); `None` for another node.
+fn leaf(ins: &Instr<f32>) -> Option<TapeLeaf> {
+    let Op::Leaf(shape) = &ins.op else {
+        return None;
+    };
+    Some(TapeLeaf {
         to_local: ins.to_local.clone(),
         dscale: ins.dscale,
         bound: Bound::of(ins),
         bbox: (ins.lo, ins.hi),
         material: ins.material,
-        op: ins.op.clone(),
-    }
+        shape: shape.clone(),
+    })
 }
 
 impl Tape {
@@ -135,12 +125,12 @@ impl Tape {
         let Some(first) = prog.instrs.first() else {
             return false;
         };
-        if tape_leaf(&first.op) {
+        if let Some(only) = leaf(first) {
             if prog.instrs.len() != 1 {
                 return false;
             }
-            self.leaves.push(leaf(first));
-            self.has_mesh = matches!(first.op, Op::Mesh { .. });
+            self.has_mesh = matches!(only.shape, Leaf::Mesh { .. });
+            self.leaves.push(only);
             return true;
         }
         if !matches!(first.op, Op::Union) || first.end as usize != prog.instrs.len() {
@@ -152,10 +142,10 @@ impl Tape {
         }
         // Every node after the root must be a leaf of it (its subtree is itself).
         for (k, ins) in prog.instrs[1..].iter().enumerate() {
-            if !tape_leaf(&ins.op) || ins.end as usize != k + 2 {
-                return false;
+            match leaf(ins) {
+                Some(l) if ins.end as usize == k + 2 => self.leaves.push(l),
+                _ => return false,
             }
-            self.leaves.push(leaf(ins));
         }
         self.root = Some(Root {
             to_local: first.to_local.clone(),
@@ -164,7 +154,10 @@ impl Tape {
             material: first.material,
             pair: n == 2 && self.leaves.iter().all(|l| l.bound.is_some()),
         });
-        self.has_mesh = self.leaves.iter().any(|l| matches!(l.op, Op::Mesh { .. }));
+        self.has_mesh = self
+            .leaves
+            .iter()
+            .any(|l| matches!(l.shape, Leaf::Mesh { .. }));
         true
     }
 
@@ -180,7 +173,7 @@ impl Tape {
 
     /// The value of the program at `p` (and the material when `M`), bit for bit
     /// [`Program::eval`]'s with the same `grids` (the field's mesh grids, indexed by the
-    /// program's [`Op::Mesh`] leaves; panics on an index past them, as the interpreter).
+    /// program's [`Op::Leaf(Leaf::Mesh)`] leaves; panics on an index past them, as the interpreter).
     #[inline]
     pub fn eval<T: Lane<S = f32>, const M: bool>(
         &self,
@@ -395,7 +388,7 @@ impl Tape {
     /// The analytic gradient of leaf `k`'s distance alone at `p` (through the root's frame).
     fn leaf_gradient(&self, k: u32, p: Vec3) -> Vec3 {
         let leaf = &self.leaves[k as usize];
-        if matches!(leaf.op, Op::Mesh { .. }) {
+        if matches!(leaf.shape, Leaf::Mesh { .. }) {
             // Sampled without a derivative: no need to sample it.
             return Vec3::NAN;
         }
@@ -410,7 +403,7 @@ impl Tape {
     /// [`Tape::leaf_gradient`] of leaf `k` at eight points at once, bit for bit.
     fn leaf_gradients(&self, k: u32, p: V3<F32x8>) -> [Vec3; 8] {
         let leaf = &self.leaves[k as usize];
-        if matches!(leaf.op, Op::Mesh { .. }) {
+        if matches!(leaf.shape, Leaf::Mesh { .. }) {
             return [Vec3::NAN; 8];
         }
         let x = Dual8::seed(p);
@@ -462,7 +455,7 @@ fn lane_point(p: V3<F32x8>, k: usize) -> Vec3 {
     Vec3::new(p.x.0[k], p.y.0[k], p.z.0[k])
 }
 
-fn bound_of(l: &Leaf) -> &Bound {
+fn bound_of(l: &TapeLeaf) -> &Bound {
     l.bound
         .as_ref()
         .expect("a pair union's members are bounded (checked when built)")
@@ -478,7 +471,7 @@ fn msel<T: Lane, const M: bool>(m: T::Mask, a: T::Mat, b: T::Mat) -> T::Mat {
 /// skipped against (`Ctx::Below`), `p` in its parent's frame.
 #[inline(always)]
 fn bounded<T: Lane<S = f32>, const M: bool, G: GridSource>(
-    leaf: &Leaf,
+    leaf: &TapeLeaf,
     p: V3<T>,
     below: Option<T>,
     grids: G,
@@ -507,7 +500,7 @@ fn bounded<T: Lane<S = f32>, const M: bool, G: GridSource>(
 /// [`bounded`] with a safe step (`Program::seg_child` of a leaf).
 #[inline(always)]
 fn seg_bounded<T: Lane<S = f32>, G: GridSource>(
-    leaf: &Leaf,
+    leaf: &TapeLeaf,
     p: V3<T>,
     d: V3<T>,
     len: T,
@@ -517,7 +510,7 @@ fn seg_bounded<T: Lane<S = f32>, G: GridSource>(
     let node = || {
         let v = value(leaf, p, grids);
         let dl = leaf.to_local.apply_linear(d);
-        match leaf_lambda(&leaf.op, || leaf.to_local.apply(p), dl, len) {
+        match leaf_lambda(&leaf.shape, || leaf.to_local.apply(p), dl, len) {
             Some(lambda) => (v, leaf_step(v, lambda, dl.len(), len, d)),
             None => (v, fallback(v, d)),
         }
@@ -530,104 +523,25 @@ fn seg_bounded<T: Lane<S = f32>, G: GridSource>(
 
 /// A leaf's value (`Program::node` for a leaf), `p` in its parent's frame.
 #[inline(always)]
-fn value<T: Lane<S = f32>, G: GridSource>(leaf: &Leaf, p: V3<T>, grids: G) -> T {
+fn value<T: Lane<S = f32>, G: GridSource>(leaf: &TapeLeaf, p: V3<T>, grids: G) -> T {
     let q = leaf.to_local.apply(p);
-    let d = match &leaf.op {
-        Op::Sphere { r } => shapes::sphere(q, T::splat(*r)),
-        Op::SphereAt { c, r, k } => {
-            shapes::sphere_at(q, V3::splat3(*c), T::splat(*r), T::splat(*k))
-        }
-        Op::Plane { n, offset } => shapes::plane(q, V3::splat3(*n), T::splat(*offset)),
-        Op::Box { b } => shapes::box3(q, V3::splat3(*b)),
-        Op::Ellipsoid { inv_r, rmin } => shapes::ellipsoid(q, V3::splat3(*inv_r), T::splat(*rmin)),
-        Op::Cylinder { r, h } => shapes::cylinder(q, T::splat(*r), T::splat(*h)),
-        Op::Torus { big, small } => shapes::torus(q, T::splat(*big), T::splat(*small)),
-        Op::Triangle(t) => shapes::triangle(q, t),
-        Op::Mesh { grid } => grids.sample(*grid, q),
-        // Never on a tape (`tape_leaf`); NaN rather than a panic in the hot loop.
-        Op::Union
-        | Op::Intersection
-        | Op::Subtraction
-        | Op::SmoothUnion { .. }
-        | Op::Repeat { .. } => T::c(f64::NAN),
-    };
+    let d = leaf.shape.distance(q, grids);
     d * T::splat(leaf.dscale)
-}
-
-/// Where a tape's mesh leaves are sampled. A tape without mesh leaves is evaluated with
-/// [`NoGrids`], so its leaf loop holds no call: a possible call there (even out of line)
-/// made the analytic leaves' values spill around it, 8% more instructions per image on
-/// seed-spheres.
-trait GridSource: Copy {
-    /// Mesh grid `grid`'s value at `q` (its local frame), before the leaf's `dscale`.
-    fn sample<T: Lane<S = f32>>(self, grid: u32, q: V3<T>) -> T;
-}
-
-/// No grids: a tape without mesh leaves (NaN if one were met, as for a non-leaf op).
-#[derive(Clone, Copy)]
-struct NoGrids;
-
-impl GridSource for NoGrids {
-    #[inline(always)]
-    fn sample<T: Lane<S = f32>>(self, _grid: u32, _q: V3<T>) -> T {
-        T::c(f64::NAN)
-    }
-}
-
-/// The field's grids; panics on an index past them, as the interpreter.
-#[derive(Clone, Copy)]
-struct GridList<'a>(&'a [Box<dyn GridSampler>]);
-
-impl GridSource for GridList<'_> {
-    #[inline(always)]
-    fn sample<T: Lane<S = f32>>(self, grid: u32, q: V3<T>) -> T {
-        T::sample_grid(self.0[grid as usize].as_ref(), q.x, q.y, q.z)
-    }
 }
 
 /// [`Tape::recedes`] for one leaf, `q` and `dq` in the leaf's parent frame (`inv` the
 /// reciprocals of `dq`'s components).
-fn leaf_recedes(l: &Leaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
+fn leaf_recedes(l: &TapeLeaf, q: V3<f32>, dq: V3<f32>, inv: V3<f32>) -> bool {
     // A mesh grid's zero set keeps to its mesh's box only while the leaf's bound keeps the
     // value outside the box at least the box distance; unbounded (`Field::without_bounds`),
     // quantisation or an open mesh's sign can put it a little outside.
-    if matches!(l.op, Op::Mesh { .. }) && l.bound.is_none() {
+    if matches!(l.shape, Leaf::Mesh { .. }) && l.bound.is_none() {
         return false;
     }
     let (lq, ld) = (l.to_local.apply(q), l.to_local.apply_linear(dq));
     // The gradient direction of a convex leaf's value at `lq` (`None`: not convex, or the
     // point is inside where the direction is not the outward one).
-    let outward: Option<V3<f32>> = match &l.op {
-        Op::Sphere { .. } => Some(lq),
-        Op::SphereAt { c, .. } => Some(lq - V3::splat3(*c)),
-        Op::Plane { n, .. } => Some(V3::splat3(*n)),
-        Op::Box { b } => {
-            let e = V3::new(
-                lq.x - lq.x.clamp(-b[0], b[0]),
-                lq.y - lq.y.clamp(-b[1], b[1]),
-                lq.z - lq.z.clamp(-b[2], b[2]),
-            );
-            (e.len2() > 0.0).then_some(e)
-        }
-        Op::Ellipsoid { inv_r, .. } => {
-            let w = V3::splat3(*inv_r);
-            Some(lq.mul_elem(w).mul_elem(w))
-        }
-        Op::Cylinder { r, h } => {
-            let rad = (lq.x * lq.x + lq.z * lq.z).sqrt();
-            let k = if rad > *r { 1.0 - *r / rad } else { 0.0 };
-            let e = V3::new(lq.x * k, lq.y - lq.y.clamp(-*h, *h), lq.z * k);
-            (e.len2() > 0.0).then_some(e)
-        }
-        Op::Torus { .. }
-        | Op::Triangle(_)
-        | Op::Mesh { .. }
-        | Op::Union
-        | Op::Intersection
-        | Op::Subtraction
-        | Op::SmoothUnion { .. }
-        | Op::Repeat { .. } => None,
-    };
+    let outward = l.shape.outward(lq);
     if let Some(g) = outward {
         // Growing, by more than rounding can fake: cos(angle to the surface) > 1e-4.
         let along = g.dot(ld);

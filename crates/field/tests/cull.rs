@@ -5,7 +5,7 @@
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::{Field, FieldOptions, RayCone, Restricted};
-use marchmesh_scene::{Node, NodeKind};
+use marchmesh_scene::{Node, NodeKind, Shape};
 use proptest::prelude::*;
 
 /// `n` spheres (radius `r`) at the given centres, plus a box and a ground plane, under one
@@ -20,13 +20,13 @@ fn scene(centres: &[DVec3], r: f64) -> (Field, Vec<(DVec3, f64)>) {
     };
     let mut children: Vec<Node> = centres
         .iter()
-        .map(|&c| leaf(NodeKind::Sphere { radius: r }, c))
+        .map(|&c| leaf(NodeKind::Leaf(Shape::Sphere { radius: r }), c))
         .collect();
     children.push(leaf(
-        NodeKind::Plane {
+        NodeKind::Leaf(Shape::Plane {
             normal: DVec3::Y,
             offset: 0.0,
-        },
+        }),
         DVec3::new(0.0, -3.0, 0.0),
     ));
     let root = leaf(NodeKind::Union(children), DVec3::ZERO);

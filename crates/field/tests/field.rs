@@ -4,7 +4,7 @@
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::{Field, FieldOptions, MeshGrid};
-use marchmesh_scene::{Node, NodeKind, compose_transform};
+use marchmesh_scene::{Node, NodeKind, Shape, SmoothOp, compose_transform};
 use proptest::prelude::*;
 
 fn node(kind: NodeKind, transform: DAffine3, material: u32) -> Node {
@@ -42,7 +42,7 @@ fn field(n: &Node) -> Field {
 }
 
 fn sphere(r: f64) -> NodeKind {
-    NodeKind::Sphere { radius: r }
+    NodeKind::Leaf(Shape::Sphere { radius: r })
 }
 
 /// Independent exact box distance: clamp for the outside, nearest face inside.
@@ -166,21 +166,21 @@ proptest! {
         let s = field(&leaf(sphere(1.3)));
         prop_assert!((s.distance_f64(p) - (p.length() - 1.3)).abs() < 1e-12);
         let b = DVec3::new(1.0, 0.5, 2.0);
-        let bx = field(&leaf(NodeKind::Box { half_extents: b }));
+        let bx = field(&leaf(NodeKind::Leaf(Shape::Box { half_extents: b })));
         prop_assert!((bx.distance_f64(p) - box_exact(p, b)).abs() < 1e-12);
-        let c = field(&leaf(NodeKind::Cylinder { radius: 0.8, half_height: 1.5 }));
+        let c = field(&leaf(NodeKind::Leaf(Shape::Cylinder { radius: 0.8, half_height: 1.5 })));
         prop_assert!((c.distance_f64(p) - cyl_exact(p, 0.8, 1.5)).abs() < 1e-12);
-        let t = field(&leaf(NodeKind::Torus { major_radius: 2.0, minor_radius: 0.5 }));
+        let t = field(&leaf(NodeKind::Leaf(Shape::Torus { major_radius: 2.0, minor_radius: 0.5 })));
         prop_assert!((t.distance_f64(p) - torus_exact(p, 2.0, 0.5)).abs() < 1e-12);
         let n = DVec3::new(1.0, 2.0, -0.5).normalize();
-        let pl = field(&leaf(NodeKind::Plane { normal: n, offset: 0.7 }));
+        let pl = field(&leaf(NodeKind::Leaf(Shape::Plane { normal: n, offset: 0.7 })));
         prop_assert!((pl.distance_f64(p) - (n.dot(p) - 0.7)).abs() < 1e-12);
     }
 
     #[test]
     fn triangle_matches_brute_force(p in pt()) {
         let v = [DVec3::new(-1.0, 0.2, 0.1), DVec3::new(2.0, -0.5, 0.3), DVec3::new(0.3, 1.7, -0.8)];
-        let f = field(&leaf(NodeKind::Triangle { vertices: v }));
+        let f = field(&leaf(NodeKind::Leaf(Shape::Triangle { vertices: v })));
         let d = f.distance_f64(p);
         let brute = triangle_brute(p, v, 200);
         // Sampling spacing: the longest edge / 200.
@@ -193,7 +193,7 @@ proptest! {
     #[test]
     fn ellipsoid_bound_never_over_estimates(p in pt()) {
         let r = DVec3::new(2.0, 0.5, 1.0);
-        let f = field(&leaf(NodeKind::Ellipsoid { radii: r }));
+        let f = field(&leaf(NodeKind::Leaf(Shape::Ellipsoid { radii: r })));
         let d = f.distance_f64(p);
         let exact = ellipsoid_exact(p, r);
         prop_assert_eq!(d < 0.0, exact < 0.0);
@@ -213,7 +213,7 @@ proptest! {
     fn rigid_and_uniform_transforms_exact(p in pt(), s in 0.2f64..3.0) {
         let b = DVec3::new(0.7, 0.4, 1.1);
         let xf = compose_transform(DVec3::new(0.5, -1.0, 2.0), DVec3::new(30.0, -40.0, 75.0), DVec3::splat(s));
-        let f = field(&node(NodeKind::Box { half_extents: b }, xf, 0));
+        let f = field(&node(NodeKind::Leaf(Shape::Box { half_extents: b }), xf, 0));
         let local = xf.inverse().transform_point3(p);
         prop_assert!((f.distance_f64(p) - s * box_exact(local, b)).abs() < 1e-9);
     }
@@ -222,8 +222,8 @@ proptest! {
     fn union_is_exact_outside_and_a_bound_inside(p in pt()) {
         let u = node(NodeKind::Union(vec![
             at(sphere(1.0), DVec3::new(-1.0, 0.0, 0.0)),
-            at(NodeKind::Torus { major_radius: 1.0, minor_radius: 0.3 }, DVec3::new(1.5, 0.0, 0.0)),
-            at(NodeKind::Cylinder { radius: 0.5, half_height: 1.0 }, DVec3::new(0.0, 2.0, 0.0)),
+            at(NodeKind::Leaf(Shape::Torus { major_radius: 1.0, minor_radius: 0.3 }), DVec3::new(1.5, 0.0, 0.0)),
+            at(NodeKind::Leaf(Shape::Cylinder { radius: 0.5, half_height: 1.0 }), DVec3::new(0.0, 2.0, 0.0)),
         ]), DAffine3::IDENTITY, 0);
         let f = field(&u);
         let e = ((p - DVec3::new(-1.0, 0.0, 0.0)).length() - 1.0)
@@ -242,17 +242,17 @@ proptest! {
 /// Nodes exercising every operator (and transforms, repetition) for the Lipschitz test.
 fn operator_cases() -> Vec<(&'static str, Node)> {
     let a = at(
-        NodeKind::Box {
+        NodeKind::Leaf(Shape::Box {
             half_extents: DVec3::new(1.0, 0.6, 0.8),
-        },
+        }),
         DVec3::new(0.3, 0.0, 0.0),
     );
     let b = at(sphere(0.9), DVec3::new(-0.4, 0.5, 0.2));
     let c = node(
-        NodeKind::Torus {
+        NodeKind::Leaf(Shape::Torus {
             major_radius: 0.8,
             minor_radius: 0.25,
-        },
+        }),
         compose_transform(
             DVec3::new(0.0, -0.3, 0.0),
             DVec3::new(60.0, 0.0, 20.0),
@@ -269,16 +269,16 @@ fn operator_cases() -> Vec<(&'static str, Node)> {
         ),
         0,
     );
-    let ell = leaf(NodeKind::Ellipsoid {
+    let ell = leaf(NodeKind::Leaf(Shape::Ellipsoid {
         radii: DVec3::new(1.5, 0.4, 0.9),
-    });
-    let tri = leaf(NodeKind::Triangle {
+    }));
+    let tri = leaf(NodeKind::Leaf(Shape::Triangle {
         vertices: [
             DVec3::new(-1.0, 0.0, 0.0),
             DVec3::new(1.0, 0.3, 0.0),
             DVec3::new(0.0, 1.5, 0.5),
         ],
-    });
+    }));
     let op = |k: NodeKind| node(k, DAffine3::IDENTITY, 0);
     vec![
         (
@@ -295,7 +295,8 @@ fn operator_cases() -> Vec<(&'static str, Node)> {
         ),
         (
             "smooth_union",
-            op(NodeKind::SmoothUnion {
+            op(NodeKind::Smooth {
+                op: SmoothOp::Union,
                 children: vec![a.clone(), b.clone(), c.clone()],
                 blend_radius: 0.5,
             }),
@@ -402,10 +403,10 @@ fn repeat_brute(child: &Field, p: DVec3, period: DVec3, count: [Option<u32>; 3])
 #[test]
 fn repetition_is_exact_below_the_window_and_continuous_at_borders() {
     let child = node(
-        NodeKind::Torus {
+        NodeKind::Leaf(Shape::Torus {
             major_radius: 0.9,
             minor_radius: 0.3,
-        },
+        }),
         compose_transform(
             DVec3::new(0.1, 0.0, -0.05),
             DVec3::new(80.0, 10.0, 0.0),
@@ -474,9 +475,9 @@ fn repetition_is_exact_below_the_window_and_continuous_at_borders() {
 #[test]
 fn materials_follow_the_surface() {
     let a = node(
-        NodeKind::Box {
+        NodeKind::Leaf(Shape::Box {
             half_extents: DVec3::ONE,
-        },
+        }),
         DAffine3::IDENTITY,
         1,
     );
@@ -511,10 +512,10 @@ fn bounds_and_errors() {
         (lo, hi),
         (DVec3::new(1.0, -1.0, -1.0), DVec3::new(3.0, 1.0, 1.0))
     );
-    let pl = field(&leaf(NodeKind::Plane {
+    let pl = field(&leaf(NodeKind::Leaf(Shape::Plane {
         normal: DVec3::Y,
         offset: 0.0,
-    }));
+    })));
     assert!(pl.bounds().is_none());
     let singular = node(
         sphere(1.0),
@@ -531,10 +532,10 @@ fn bounds_and_errors() {
 fn far_subtrees_pay_only_their_bound_and_stay_lower_bounds() {
     // Far away, the value of a complex subtree is the distance to its box.
     let t = at(
-        NodeKind::Torus {
+        NodeKind::Leaf(Shape::Torus {
             major_radius: 1.0,
             minor_radius: 0.2,
-        },
+        }),
         DVec3::ZERO,
     );
     let f = field(&t);
@@ -582,7 +583,7 @@ fn mesh_node_matches_brute_force_distance_within_half_a_cell() {
         DVec3::new(0.0, 30.0, 0.0),
         DVec3::splat(0.25),
     );
-    let n = node(NodeKind::Mesh { path: path.clone() }, xf, 3);
+    let n = node(NodeKind::Leaf(Shape::Mesh { path: path.clone() }), xf, 3);
     let f = field(&n);
     let (lo, hi) = mesh.bounds();
     let cell = (hi - lo).max_element() as f64 / 64.0;
@@ -636,7 +637,7 @@ fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
         DVec3::new(0.0, 30.0, 0.0),
         DVec3::splat(0.25),
     );
-    let n = node(NodeKind::Mesh { path }, xf, 3);
+    let n = node(NodeKind::Leaf(Shape::Mesh { path }), xf, 3);
     let sparse_u8 = MeshGrid::Sparse {
         band_voxels: 2,
         quantization: marchmesh_bake::Quantization::U8,
@@ -653,7 +654,7 @@ fn mesh_grids_in_f32_lanes_match_single_points_and_f64() {
             NodeKind::Subtraction(vec![
                 n.clone(),
                 node(
-                    NodeKind::Sphere { radius: 0.2 },
+                    NodeKind::Leaf(Shape::Sphere { radius: 0.2 }),
                     DAffine3::from_translation(DVec3::new(0.3, 0.0, 1.0)),
                     1,
                 ),
@@ -696,10 +697,10 @@ fn large_unions_are_grouped_without_changing_values() {
     let mut next = uniform(99);
     let mut spheres = Vec::new();
     let mut children = vec![node(
-        NodeKind::Plane {
+        NodeKind::Leaf(Shape::Plane {
             normal: DVec3::Y,
             offset: -3.0,
-        },
+        }),
         DAffine3::IDENTITY,
         1,
     )];

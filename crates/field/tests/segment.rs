@@ -6,7 +6,7 @@
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::{Field, FieldOptions};
-use marchmesh_scene::{Node, NodeKind, compose_transform};
+use marchmesh_scene::{Node, NodeKind, Shape, SmoothOp, compose_transform};
 use proptest::prelude::*;
 
 fn node(kind: NodeKind, transform: DAffine3) -> Node {
@@ -28,20 +28,26 @@ fn field(n: &Node) -> Field {
 }
 
 fn plane(normal: DVec3, offset: f64) -> NodeKind {
-    NodeKind::Plane {
+    NodeKind::Leaf(Shape::Plane {
         normal: normal.normalize(),
         offset,
-    }
+    })
 }
 
 fn cube(b: DVec3) -> NodeKind {
-    NodeKind::Box { half_extents: b }
+    NodeKind::Leaf(Shape::Box { half_extents: b })
 }
 
 fn cases() -> Vec<(&'static str, Node)> {
     let a = at(cube(DVec3::new(1.0, 0.6, 0.8)), DVec3::new(0.3, 0.0, 0.0));
-    let b = at(NodeKind::Sphere { radius: 0.9 }, DVec3::new(-0.4, 0.5, 0.2));
-    let far = at(NodeKind::Sphere { radius: 0.5 }, DVec3::new(2.5, 1.0, -2.0));
+    let b = at(
+        NodeKind::Leaf(Shape::Sphere { radius: 0.9 }),
+        DVec3::new(-0.4, 0.5, 0.2),
+    );
+    let far = at(
+        NodeKind::Leaf(Shape::Sphere { radius: 0.5 }),
+        DVec3::new(2.5, 1.0, -2.0),
+    );
     let ground = node(plane(DVec3::new(0.1, 1.0, -0.2), -1.0), DAffine3::IDENTITY);
     let tilted = node(
         cube(DVec3::new(1.5, 0.2, 1.0)),
@@ -52,17 +58,17 @@ fn cases() -> Vec<(&'static str, Node)> {
         ),
     );
     let stretched = node(
-        NodeKind::Sphere { radius: 1.0 },
+        NodeKind::Leaf(Shape::Sphere { radius: 1.0 }),
         compose_transform(
             DVec3::ZERO,
             DVec3::new(15.0, 25.0, 0.0),
             DVec3::new(2.0, 0.3, 1.0),
         ),
     );
-    let cylinder = NodeKind::Cylinder {
+    let cylinder = NodeKind::Leaf(Shape::Cylinder {
         radius: 0.7,
         half_height: 0.9,
-    };
+    });
     let tilted_cylinder = node(
         cylinder.clone(),
         compose_transform(
@@ -111,7 +117,8 @@ fn cases() -> Vec<(&'static str, Node)> {
         ),
         (
             "smooth_union",
-            op(NodeKind::SmoothUnion {
+            op(NodeKind::Smooth {
+                op: SmoothOp::Union,
                 children: vec![a, b],
                 blend_radius: 0.5,
             }),
@@ -211,10 +218,10 @@ fn rays_skimming_a_cylinder_cap_step_to_the_cap_or_past_it() {
     // within its radius (at 0.01 degrees 5.7 units on).
     let turn = DAffine3::from_rotation_z(30f64.to_radians());
     let f = field(&node(
-        NodeKind::Cylinder {
+        NodeKind::Leaf(Shape::Cylinder {
             radius: 10.0,
             half_height: 1.0,
-        },
+        }),
         turn,
     ));
     for deg in [1.0f64, 0.1, 0.01] {
@@ -238,7 +245,7 @@ fn rays_skimming_a_cylinder_cap_step_to_the_cap_or_past_it() {
 #[test]
 fn a_ray_passing_a_sphere_steps_past_it_and_a_ray_towards_it_stops_before_it() {
     let f = field(&at(
-        NodeKind::Sphere { radius: 1.0 },
+        NodeKind::Leaf(Shape::Sphere { radius: 1.0 }),
         DVec3::new(0.0, 0.0, 5.0),
     ));
     // Passing 1.01 from the centre: the bound along the ray is small near closest approach

@@ -8,7 +8,7 @@
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::lane::{F32x8, V3};
 use marchmesh_field::{Field, FieldOptions};
-use marchmesh_scene::{Node, NodeKind, compose_transform};
+use marchmesh_scene::{Node, NodeKind, Shape, compose_transform};
 use proptest::prelude::*;
 
 fn node(kind: NodeKind, transform: DAffine3, material: u32) -> Node {
@@ -36,56 +36,56 @@ fn leaves() -> Vec<Node> {
     };
     vec![
         node(
-            NodeKind::Sphere { radius: 0.7 },
+            NodeKind::Leaf(Shape::Sphere { radius: 0.7 }),
             xf([0.5, 0.2, 3.0], [0.0; 3], 1.0),
             1,
         ),
         node(
-            NodeKind::Box {
+            NodeKind::Leaf(Shape::Box {
                 half_extents: DVec3::new(0.4, 0.3, 0.5),
-            },
+            }),
             xf([1.1, -0.6, 2.2], [10.0, 35.0, 0.0], 1.0),
             2,
         ),
         node(
-            NodeKind::Ellipsoid {
+            NodeKind::Leaf(Shape::Ellipsoid {
                 radii: DVec3::new(0.9, 0.3, 0.5),
-            },
+            }),
             xf([-1.0, 0.4, 2.5], [0.0, 20.0, 40.0], 1.0),
             3,
         ),
         node(
-            NodeKind::Torus {
+            NodeKind::Leaf(Shape::Torus {
                 major_radius: 0.6,
                 minor_radius: 0.2,
-            },
+            }),
             xf([0.0, -1.0, 4.0], [60.0, 0.0, 20.0], 1.3),
             4,
         ),
         node(
-            NodeKind::Cylinder {
+            NodeKind::Leaf(Shape::Cylinder {
                 radius: 0.3,
                 half_height: 1.0,
-            },
+            }),
             xf([-1.5, -0.5, 3.5], [0.0, 0.0, 15.0], 1.0),
             5,
         ),
         node(
-            NodeKind::Triangle {
+            NodeKind::Leaf(Shape::Triangle {
                 vertices: [
                     DVec3::new(-1.0, 0.0, 5.0),
                     DVec3::new(1.0, 0.3, 5.0),
                     DVec3::new(0.0, 1.5, 5.5),
                 ],
-            },
+            }),
             DAffine3::IDENTITY,
             6,
         ),
         node(
-            NodeKind::Plane {
+            NodeKind::Leaf(Shape::Plane {
                 normal: DVec3::Y,
                 offset: -2.0,
-            },
+            }),
             DAffine3::IDENTITY,
             7,
         ),
@@ -297,7 +297,7 @@ fn unions_with_mesh_grids_get_a_tape_bit_for_bit_the_interpreter() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/meshes/bunny.obj");
     let bunny = node(
-        NodeKind::Mesh { path },
+        NodeKind::Leaf(Shape::Mesh { path }),
         compose_transform(
             DVec3::new(0.3, -0.2, 3.0),
             DVec3::new(0.0, 30.0, 0.0),
@@ -309,10 +309,10 @@ fn unions_with_mesh_grids_get_a_tape_bit_for_bit_the_interpreter() {
         bunny,
         leaves()[0].clone(),
         node(
-            NodeKind::Plane {
+            NodeKind::Leaf(Shape::Plane {
                 normal: DVec3::Y,
                 offset: -1.0,
-            },
+            }),
             DAffine3::IDENTITY,
             5,
         ),

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use glam::{DAffine3, DMat3, DVec3};
 use marchmesh_scene::bounds::{Aabb, singular_values};
-use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
+use marchmesh_scene::{MaterialId, Node, NodeKind, Scene, Shape};
 
 use crate::MeshError;
 use crate::options::{MeshOptions, Tessellation};
@@ -15,8 +15,8 @@ use crate::tessellate::Detail;
 /// What a placed shape is; equal keys share one BLAS.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub(crate) enum ShapeKey {
-    /// An analytic shape: discriminant and parameter bits.
-    Analytic(u8, [u64; 9]),
+    /// An analytic shape: its `Debug` form, every parameter bit included.
+    Analytic(String),
     /// A mesh file.
     Mesh(PathBuf),
     /// A CSG / smooth-union subtree, by node address (stable while the scene is borrowed).
@@ -111,54 +111,14 @@ struct Ctx<'b> {
     mesh_bounds: &'b HashMap<PathBuf, (DVec3, DVec3)>,
 }
 
-fn analytic_key(kind: &NodeKind) -> Option<ShapeKey> {
-    let b = |v: f64| v.to_bits();
-    let v3 = |v: DVec3| [b(v.x), b(v.y), b(v.z)];
-    let mut p = [0u64; 9];
-    let tag = match kind {
-        NodeKind::Sphere { radius } => {
-            p[0] = b(*radius);
-            0
-        }
-        NodeKind::Ellipsoid { radii } => {
-            p[..3].copy_from_slice(&v3(*radii));
-            1
-        }
-        NodeKind::Box { half_extents } => {
-            p[..3].copy_from_slice(&v3(*half_extents));
-            2
-        }
-        NodeKind::Cylinder {
-            radius,
-            half_height,
-        } => {
-            p[0] = b(*radius);
-            p[1] = b(*half_height);
-            3
-        }
-        NodeKind::Torus {
-            major_radius,
-            minor_radius,
-        } => {
-            p[0] = b(*major_radius);
-            p[1] = b(*minor_radius);
-            4
-        }
-        NodeKind::Triangle { vertices } => {
-            for (k, v) in vertices.iter().enumerate() {
-                p[3 * k..3 * k + 3].copy_from_slice(&v3(*v));
-            }
-            5
-        }
-        NodeKind::Plane { .. }
-        | NodeKind::Mesh { .. }
-        | NodeKind::Union(_)
-        | NodeKind::SmoothUnion { .. }
-        | NodeKind::Intersection(_)
-        | NodeKind::Subtraction(_)
-        | NodeKind::Repeat { .. } => return None,
-    };
-    Some(ShapeKey::Analytic(tag, p))
+/// The key under which equal analytic shapes share one tessellation: every shape but a
+/// plane and a mesh file is tessellated from its parameters alone, so shapes whose `Debug`
+/// forms agree (which keeps every f64 bit: shortest round-trip digits) are equal.
+fn analytic_key(shape: &Shape) -> Option<ShapeKey> {
+    match shape {
+        Shape::Plane { .. } | Shape::Mesh { .. } => None,
+        _ => Some(ShapeKey::Analytic(format!("{shape:?}"))),
+    }
 }
 
 fn visit<'a>(
@@ -169,8 +129,8 @@ fn visit<'a>(
 ) -> Result<(), MeshError> {
     let m = parent * node.transform;
     match &node.kind {
-        NodeKind::Plane { .. } => w.planes.push((node, m)),
-        NodeKind::Mesh { path } => w.placements.push(Placement {
+        NodeKind::Leaf(Shape::Plane { .. }) => w.planes.push((node, m)),
+        NodeKind::Leaf(Shape::Mesh { path }) => w.placements.push(Placement {
             node,
             key: ShapeKey::Mesh(path.clone()),
             to_render: m,
@@ -201,7 +161,7 @@ fn visit<'a>(
                 visit(c, m, ctx, w)?;
             }
         }
-        NodeKind::Intersection(_) | NodeKind::Subtraction(_) | NodeKind::SmoothUnion { .. } => {
+        NodeKind::Intersection(_) | NodeKind::Subtraction(_) | NodeKind::Smooth { .. } => {
             w.placements.push(Placement {
                 node,
                 key: ShapeKey::Composite(node as *const Node as usize),
@@ -219,8 +179,8 @@ fn visit<'a>(
                 visit(child, m * DAffine3::from_translation(o), ctx, w)?;
             }
         }
-        kind => {
-            let key = analytic_key(kind).ok_or_else(|| MeshError::Unsupported {
+        NodeKind::Leaf(shape) => {
+            let key = analytic_key(shape).ok_or_else(|| MeshError::Unsupported {
                 json_path: node.json_path.clone(),
                 reason: "unknown shape".into(),
             })?;
@@ -256,16 +216,11 @@ fn may_show_inner_faces(node: &Node, ctx: &Ctx) -> bool {
 fn camera_inside_solid(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
     fn analytic_solids(n: &Node) -> bool {
         match &n.kind {
-            NodeKind::Sphere { .. }
-            | NodeKind::Ellipsoid { .. }
-            | NodeKind::Box { .. }
-            | NodeKind::Cylinder { .. }
-            | NodeKind::Torus { .. } => true,
-            NodeKind::Plane { .. } | NodeKind::Triangle { .. } | NodeKind::Mesh { .. } => false,
+            NodeKind::Leaf(shape) => shape.is_analytic_solid(),
             NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
                 c.iter().all(analytic_solids)
             }
-            NodeKind::SmoothUnion { children, .. } => children.iter().all(analytic_solids),
+            NodeKind::Smooth { children, .. } => children.iter().all(analytic_solids),
             NodeKind::Repeat { child, .. } => analytic_solids(child),
         }
     }

@@ -42,7 +42,7 @@ use marchmesh_core::{
     TraceResult,
 };
 use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh};
-use marchmesh_scene::{MaterialId, Node, NodeKind, Scene};
+use marchmesh_scene::{MaterialId, Node, NodeKind, Scene, Shape};
 use obvhs::ray::Ray as ObRay;
 
 use blas::{Blas, BlasHit, BlasInput, Tree};
@@ -294,7 +294,7 @@ fn load_meshes(
     let mut meshes: HashMap<PathBuf, TriangleMesh> = HashMap::new();
     let mut load_error = None;
     scene.visit_nodes(|n| {
-        if let NodeKind::Mesh { path } = &n.kind
+        if let NodeKind::Leaf(Shape::Mesh { path }) = &n.kind
             && !meshes.contains_key(path)
             && load_error.is_none()
         {
@@ -609,7 +609,7 @@ impl ShapeInputs<'_> {
             }
         }
         for (node, m) in &walk.planes {
-            if let NodeKind::Plane { normal, offset } = node.kind {
+            if let NodeKind::Leaf(Shape::Plane { normal, offset }) = node.kind {
                 let quads =
                     flat.append_plane(normal, offset, m, scene.render.max_distance, node.material);
                 report.notes.push(format!(

@@ -16,7 +16,7 @@
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 
 use glam::DVec3;
-use marchmesh_scene::NodeKind;
+use marchmesh_scene::{NodeKind, Shape};
 
 /// An indexed triangle mesh in a shape's local frame (f64, converted to f32 once placed).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -545,12 +545,15 @@ pub fn tessellate_within(
     max_per_turn: u32,
     max_triangles: u64,
 ) -> Result<Option<LocalMesh>, TooManyTriangles> {
-    let mesh = match *kind {
-        NodeKind::Sphere { radius } => {
+    let NodeKind::Leaf(shape) = kind else {
+        return Ok(None);
+    };
+    let mesh = match *shape {
+        Shape::Sphere { radius } => {
             lat_long(DVec3::splat(radius), detail, max_per_turn, max_triangles)?
         }
-        NodeKind::Ellipsoid { radii } => lat_long(radii, detail, max_per_turn, max_triangles)?,
-        NodeKind::Cylinder {
+        Shape::Ellipsoid { radii } => lat_long(radii, detail, max_per_turn, max_triangles)?,
+        Shape::Cylinder {
             radius,
             half_height,
         } => {
@@ -589,7 +592,7 @@ pub fn tessellate_within(
             )?;
             m
         }
-        NodeKind::Torus {
+        Shape::Torus {
             major_radius,
             minor_radius,
         } => {
@@ -639,8 +642,8 @@ pub fn tessellate_within(
             revolve(&[(profile, true)], &phi, &mut m, max_triangles)?;
             m
         }
-        NodeKind::Box { half_extents } => box_mesh(half_extents),
-        NodeKind::Triangle { vertices } => LocalMesh {
+        Shape::Box { half_extents } => box_mesh(half_extents),
+        Shape::Triangle { vertices } => LocalMesh {
             positions: vertices.to_vec(),
             normals: None,
             triangles: vec![[0, 1, 2]],
@@ -648,13 +651,7 @@ pub fn tessellate_within(
             segments: Vec::new(),
             materials: None,
         },
-        NodeKind::Plane { .. }
-        | NodeKind::Mesh { .. }
-        | NodeKind::Union(_)
-        | NodeKind::SmoothUnion { .. }
-        | NodeKind::Intersection(_)
-        | NodeKind::Subtraction(_)
-        | NodeKind::Repeat { .. } => return Ok(None),
+        Shape::Plane { .. } | Shape::Mesh { .. } => return Ok(None),
     };
     Ok(Some(mesh))
 }

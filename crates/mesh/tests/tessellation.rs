@@ -6,36 +6,36 @@
 use glam::{DVec2, DVec3};
 use marchmesh_mesh::tessellate::{Detail, LocalMesh, tessellate};
 use marchmesh_meshio::{LoadReport, TriangleMesh};
-use marchmesh_scene::NodeKind;
+use marchmesh_scene::{NodeKind, Shape};
 
 fn shapes() -> Vec<(&'static str, NodeKind)> {
     vec![
-        ("sphere", NodeKind::Sphere { radius: 1.3 }),
+        ("sphere", NodeKind::Leaf(Shape::Sphere { radius: 1.3 })),
         (
             "ellipsoid",
-            NodeKind::Ellipsoid {
+            NodeKind::Leaf(Shape::Ellipsoid {
                 radii: DVec3::new(1.3, 0.6, 0.8),
-            },
+            }),
         ),
         (
             "box",
-            NodeKind::Box {
+            NodeKind::Leaf(Shape::Box {
                 half_extents: DVec3::new(0.8, 0.5, 0.6),
-            },
+            }),
         ),
         (
             "cylinder",
-            NodeKind::Cylinder {
+            NodeKind::Leaf(Shape::Cylinder {
                 radius: 0.7,
                 half_height: 0.8,
-            },
+            }),
         ),
         (
             "torus",
-            NodeKind::Torus {
+            NodeKind::Leaf(Shape::Torus {
                 major_radius: 1.1,
                 minor_radius: 0.35,
-            },
+            }),
         ),
     ]
 }
@@ -61,7 +61,7 @@ fn ellipsoid_distance(radii: DVec3, p: DVec3) -> f64 {
 
 fn distance(kind: &NodeKind, p: DVec3) -> f64 {
     match kind {
-        NodeKind::Ellipsoid { radii } => ellipsoid_distance(*radii, p),
+        NodeKind::Leaf(Shape::Ellipsoid { radii }) => ellipsoid_distance(*radii, p),
         k => exact_surface_distance(k, p).expect("exact distance"),
     }
 }
@@ -75,17 +75,17 @@ fn surface_samples(kind: &NodeKind, n: usize) -> Vec<DVec3> {
         let v = (i as f64 * golden).fract();
         let phi = v * std::f64::consts::TAU;
         match *kind {
-            NodeKind::Sphere { radius } => {
+            NodeKind::Leaf(Shape::Sphere { radius }) => {
                 let y = 1.0 - 2.0 * u;
                 let r = (1.0 - y * y).sqrt();
                 out.push(DVec3::new(r * phi.cos(), y, r * phi.sin()) * radius);
             }
-            NodeKind::Ellipsoid { radii } => {
+            NodeKind::Leaf(Shape::Ellipsoid { radii }) => {
                 let y = 1.0 - 2.0 * u;
                 let r = (1.0 - y * y).sqrt();
                 out.push(DVec3::new(r * phi.cos(), y, r * phi.sin()) * radii);
             }
-            NodeKind::Box { half_extents } => {
+            NodeKind::Leaf(Shape::Box { half_extents }) => {
                 let face = i % 6;
                 let axis = face / 2;
                 let sign = if face % 2 == 0 { 1.0 } else { -1.0 };
@@ -97,10 +97,10 @@ fn surface_samples(kind: &NodeKind, n: usize) -> Vec<DVec3> {
                 };
                 out.push(p * half_extents);
             }
-            NodeKind::Cylinder {
+            NodeKind::Leaf(Shape::Cylinder {
                 radius,
                 half_height,
-            } => {
+            }) => {
                 if i % 3 == 0 {
                     let r = radius * u.sqrt();
                     let y = if i % 2 == 0 {
@@ -117,10 +117,10 @@ fn surface_samples(kind: &NodeKind, n: usize) -> Vec<DVec3> {
                     ));
                 }
             }
-            NodeKind::Torus {
+            NodeKind::Leaf(Shape::Torus {
                 major_radius,
                 minor_radius,
-            } => {
+            }) => {
                 let theta = u * std::f64::consts::TAU * 7.0;
                 let ring = major_radius + minor_radius * theta.cos();
                 out.push(DVec3::new(
@@ -323,10 +323,10 @@ fn closed_shapes_are_watertight_and_outward() {
 
 #[test]
 fn fixed_levels_double_the_segments() {
-    let kind = NodeKind::Torus {
+    let kind = NodeKind::Leaf(Shape::Torus {
         major_radius: 1.0,
         minor_radius: 0.25,
-    };
+    });
     let a = tessellate(&kind, Detail::Level(1), 4096).expect("torus");
     let b = tessellate(&kind, Detail::Level(2), 4096).expect("torus");
     assert_eq!(a.segments, vec![16, 16]);
@@ -404,15 +404,15 @@ fn screen_budgets_hold_where_each_part_is_and_coarsen_far_away() {
 fn tessellate_within_refuses_exactly_above_the_cap() {
     use marchmesh_mesh::tessellate::tessellate_within;
     for kind in [
-        NodeKind::Sphere { radius: 1.0 },
-        NodeKind::Torus {
+        NodeKind::Leaf(Shape::Sphere { radius: 1.0 }),
+        NodeKind::Leaf(Shape::Torus {
             major_radius: 1.0,
             minor_radius: 0.25,
-        },
-        NodeKind::Cylinder {
+        }),
+        NodeKind::Leaf(Shape::Cylinder {
             radius: 0.5,
             half_height: 1.0,
-        },
+        }),
     ] {
         let full = tessellate(&kind, Detail::Level(3), 4096).expect("analytic");
         let count = full.triangles.len() as u64;
@@ -434,23 +434,23 @@ fn tessellate_within_refuses_exactly_above_the_cap() {
 /// tessellation error; `None` for shapes without one here (ellipsoid, plane, composites).
 fn exact_surface_distance(kind: &NodeKind, p: DVec3) -> Option<f64> {
     Some(match *kind {
-        NodeKind::Sphere { radius } => (p.length() - radius).abs(),
-        NodeKind::Box { half_extents } => {
+        NodeKind::Leaf(Shape::Sphere { radius }) => (p.length() - radius).abs(),
+        NodeKind::Leaf(Shape::Box { half_extents }) => {
             let q = p.abs() - half_extents;
             (q.max(DVec3::ZERO).length() + q.max_element().min(0.0)).abs()
         }
-        NodeKind::Cylinder {
+        NodeKind::Leaf(Shape::Cylinder {
             radius,
             half_height,
-        } => {
+        }) => {
             let d = DVec2::new(DVec2::new(p.x, p.z).length(), p.y).abs()
                 - DVec2::new(radius, half_height);
             (d.x.max(d.y).min(0.0) + d.max(DVec2::ZERO).length()).abs()
         }
-        NodeKind::Torus {
+        NodeKind::Leaf(Shape::Torus {
             major_radius,
             minor_radius,
-        } => {
+        }) => {
             let q = DVec2::new(DVec2::new(p.x, p.z).length() - major_radius, p.y);
             (q.length() - minor_radius).abs()
         }

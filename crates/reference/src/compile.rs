@@ -10,7 +10,7 @@ use glam::{DAffine3, DVec3};
 use marchmesh_field::{Field, FieldOptions};
 use marchmesh_meshio::load_mesh;
 use marchmesh_scene::bounds::{Aabb, LocalBounds, combine};
-use marchmesh_scene::{Node, NodeKind};
+use marchmesh_scene::{Node, NodeKind, Shape};
 
 use crate::meshbvh::MeshData;
 use crate::node::{CompiledKind, CompiledNode, MAX_COPIES_PER_CELL};
@@ -32,8 +32,8 @@ pub(crate) fn transform_bounds(m: &DAffine3, (lo, hi): (DVec3, DVec3)) -> (DVec3
 }
 
 /// A leaf shape's box in its own frame (the scene's one definition); `None` when unbounded.
-pub(crate) fn leaf_bounds(kind: &NodeKind) -> Option<(DVec3, DVec3)> {
-    match kind.local_bounds() {
+pub(crate) fn leaf_bounds(shape: &Shape) -> Option<(DVec3, DVec3)> {
+    match shape.local_bounds() {
         LocalBounds::Finite(b) => Some((b.lo, b.hi)),
         LocalBounds::Unbounded | LocalBounds::MeshFile(_) | LocalBounds::Composite => None,
     }
@@ -71,46 +71,7 @@ impl Compiler<'_> {
         let (kind, local_bounds, solid): (CompiledKind, Option<(DVec3, DVec3)>, bool) = match &node
             .kind
         {
-            NodeKind::Sphere { radius } => {
-                (CompiledKind::Sphere(*radius), leaf_bounds(&node.kind), true)
-            }
-            NodeKind::Ellipsoid { radii } => (
-                CompiledKind::Ellipsoid(*radii),
-                leaf_bounds(&node.kind),
-                true,
-            ),
-            NodeKind::Box { half_extents } => (
-                CompiledKind::Box(*half_extents),
-                leaf_bounds(&node.kind),
-                true,
-            ),
-            NodeKind::Cylinder {
-                radius,
-                half_height,
-            } => (
-                CompiledKind::Cylinder(*radius, *half_height),
-                leaf_bounds(&node.kind),
-                true,
-            ),
-            NodeKind::Torus {
-                major_radius,
-                minor_radius,
-            } => (
-                CompiledKind::Torus(*major_radius, *minor_radius),
-                leaf_bounds(&node.kind),
-                true,
-            ),
-            NodeKind::Plane { normal, offset } => (
-                CompiledKind::Plane(*normal, *offset),
-                leaf_bounds(&node.kind),
-                true,
-            ),
-            NodeKind::Triangle { vertices } => (
-                CompiledKind::Triangle(*vertices),
-                leaf_bounds(&node.kind),
-                false,
-            ),
-            NodeKind::Mesh { path } => {
+            NodeKind::Leaf(Shape::Mesh { path }) => {
                 let mesh = match self.meshes.get(path) {
                     Some(m) => m.clone(),
                     None => {
@@ -138,6 +99,13 @@ impl Compiler<'_> {
                 let closed = mesh.closed;
                 (CompiledKind::Mesh(mesh), Some(b), closed)
             }
+            // A triangle has no inside; every other shape bounds a solid (a plane: its
+            // half-space).
+            NodeKind::Leaf(shape) => (
+                CompiledKind::Shape(shape.clone()),
+                leaf_bounds(shape),
+                !matches!(shape, Shape::Triangle { .. }),
+            ),
             NodeKind::Union(children) => {
                 let c = self.children(children)?;
                 let b = combined_bounds(&node.kind, &c);
@@ -161,7 +129,7 @@ impl Compiler<'_> {
                 };
                 (kind, b, true)
             }
-            NodeKind::SmoothUnion { .. } => {
+            NodeKind::Smooth { .. } => {
                 let field =
                     Field::compile_node(node, node.transform.inverse(), &FieldOptions::default())
                         .map_err(|e| {

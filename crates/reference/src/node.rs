@@ -4,7 +4,7 @@
 use std::sync::Arc;
 
 use glam::{DAffine3, DMat3, DVec3};
-use marchmesh_scene::MaterialId;
+use marchmesh_scene::{MaterialId, Shape};
 
 use crate::meshbvh::MeshData;
 use crate::primitives;
@@ -27,13 +27,8 @@ pub(crate) struct Work {
 
 #[derive(Debug)]
 pub(crate) enum CompiledKind {
-    Sphere(f64),
-    Ellipsoid(DVec3),
-    Box(DVec3),
-    Cylinder(f64, f64),
-    Torus(f64, f64),
-    Plane(DVec3, f64),
-    Triangle([DVec3; 3]),
+    /// A shape intersected in closed form ([`primitives::spans`]; never a mesh file).
+    Shape(Shape),
     Mesh(Arc<MeshData>),
     Union(Vec<CompiledNode>),
     Intersection(Vec<CompiledNode>),
@@ -153,7 +148,7 @@ impl CompiledNode {
         let ol = self.to_local.transform_point3(o);
         let dl = self.to_local.transform_vector3(d);
         let local = match &self.kind {
-            CompiledKind::Triangle(v) => {
+            CompiledKind::Shape(Shape::Triangle { vertices: v }) => {
                 work.tests += 1;
                 primitives::triangle(ol, dl, v)
                     .filter(|h| h.0 >= t_min && h.0 <= t_max)
@@ -223,15 +218,8 @@ impl CompiledNode {
         work: &mut Work,
     ) -> Vec<Span> {
         work.tests += 1;
-        let one = |s: Option<Span>| s.into_iter().collect::<Vec<_>>();
         match &self.kind {
-            CompiledKind::Sphere(r) => one(primitives::sphere(o, d, *r)),
-            CompiledKind::Ellipsoid(r) => one(primitives::ellipsoid(o, d, *r)),
-            CompiledKind::Box(h) => one(primitives::aabox(o, d, *h)),
-            CompiledKind::Cylinder(r, hh) => one(primitives::cylinder(o, d, *r, *hh)),
-            CompiledKind::Torus(a, b) => primitives::torus(o, d, *a, *b),
-            CompiledKind::Plane(n, off) => one(primitives::half_space(o, d, *n, *off)),
-            CompiledKind::Triangle(_) => Vec::new(),
+            CompiledKind::Shape(shape) => primitives::spans(shape, o, d),
             CompiledKind::Mesh(mesh) => {
                 let (hits, n, k) = mesh.all_hits(o, d, f64::NEG_INFINITY, f64::INFINITY);
                 work.nodes += n;

@@ -5,9 +5,33 @@
 //! Solids return their spans along the whole line; normals point outward (unnormalised).
 
 use glam::DVec3;
+use marchmesh_scene::Shape;
 
 use crate::poly;
 use crate::spans::{Boundary, Span};
+
+/// The spans of `shape` (local frame) along the whole line `o + t d`: the reference's one
+/// dispatch over shapes, exhaustive so a new shape fails to compile here until it has an
+/// exact intersection. A triangle (no inside) has none: its hits come from [`triangle`];
+/// a mesh file has its own BVH and is never compiled to a shape.
+pub(crate) fn spans(shape: &Shape, o: DVec3, d: DVec3) -> Vec<Span> {
+    let one = |s: Option<Span>| s.into_iter().collect::<Vec<_>>();
+    match shape {
+        Shape::Sphere { radius } => one(sphere(o, d, *radius)),
+        Shape::Ellipsoid { radii } => one(ellipsoid(o, d, *radii)),
+        Shape::Box { half_extents } => one(aabox(o, d, *half_extents)),
+        Shape::Cylinder {
+            radius,
+            half_height,
+        } => one(cylinder(o, d, *radius, *half_height)),
+        Shape::Torus {
+            major_radius,
+            minor_radius,
+        } => torus(o, d, *major_radius, *minor_radius),
+        Shape::Plane { normal, offset } => one(half_space(o, d, *normal, *offset)),
+        Shape::Triangle { .. } | Shape::Mesh { .. } => Vec::new(),
+    }
+}
 
 fn b(t: f64, normal: DVec3) -> Boundary {
     Boundary {

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use glam::{DAffine3, DMat3, DVec3};
 
-use crate::resolved::{Node, NodeKind};
+use crate::resolved::{Node, NodeKind, Shape};
 
 /// An axis-aligned box in f64 that may be infinite along some axes (`lo = -inf`, `hi = +inf`
 /// on an axis nothing bounds, e.g. a plane or an infinite repetition).
@@ -135,35 +135,43 @@ pub enum LocalBounds<'a> {
     Composite,
 }
 
-impl NodeKind {
-    /// The node's bounds in its own frame (before its transform), as far as the node alone
-    /// decides them. Exhaustive over the variants: a new shape must say its box here.
+impl Shape {
+    /// The shape's bounds in its own frame. Exhaustive over the shapes: a new shape must
+    /// say its box here.
     pub fn local_bounds(&self) -> LocalBounds<'_> {
         match self {
-            NodeKind::Sphere { radius } => {
-                LocalBounds::Finite(Aabb::symmetric(DVec3::splat(*radius)))
-            }
-            NodeKind::Ellipsoid { radii } => LocalBounds::Finite(Aabb::symmetric(*radii)),
-            NodeKind::Box { half_extents } => LocalBounds::Finite(Aabb::symmetric(*half_extents)),
-            NodeKind::Cylinder {
+            Shape::Sphere { radius } => LocalBounds::Finite(Aabb::symmetric(DVec3::splat(*radius))),
+            Shape::Ellipsoid { radii } => LocalBounds::Finite(Aabb::symmetric(*radii)),
+            Shape::Box { half_extents } => LocalBounds::Finite(Aabb::symmetric(*half_extents)),
+            Shape::Cylinder {
                 radius,
                 half_height,
             } => LocalBounds::Finite(Aabb::symmetric(DVec3::new(*radius, *half_height, *radius))),
-            NodeKind::Torus {
+            Shape::Torus {
                 major_radius,
                 minor_radius,
             } => {
                 let outer = major_radius + minor_radius;
                 LocalBounds::Finite(Aabb::symmetric(DVec3::new(outer, *minor_radius, outer)))
             }
-            NodeKind::Triangle { vertices } => LocalBounds::Finite(Aabb {
+            Shape::Triangle { vertices } => LocalBounds::Finite(Aabb {
                 lo: vertices[0].min(vertices[1]).min(vertices[2]),
                 hi: vertices[0].max(vertices[1]).max(vertices[2]),
             }),
-            NodeKind::Plane { .. } => LocalBounds::Unbounded,
-            NodeKind::Mesh { path } => LocalBounds::MeshFile(path),
+            Shape::Plane { .. } => LocalBounds::Unbounded,
+            Shape::Mesh { path } => LocalBounds::MeshFile(path),
+        }
+    }
+}
+
+impl NodeKind {
+    /// The node's bounds in its own frame (before its transform), as far as the node alone
+    /// decides them: a leaf's [`Shape::local_bounds`], or [`LocalBounds::Composite`].
+    pub fn local_bounds(&self) -> LocalBounds<'_> {
+        match self {
+            NodeKind::Leaf(shape) => shape.local_bounds(),
             NodeKind::Union(_)
-            | NodeKind::SmoothUnion { .. }
+            | NodeKind::Smooth { .. }
             | NodeKind::Intersection(_)
             | NodeKind::Subtraction(_)
             | NodeKind::Repeat { .. } => LocalBounds::Composite,
@@ -185,7 +193,7 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
     };
     match kind {
         NodeKind::Union(_) => hull(),
-        NodeKind::SmoothUnion { blend_radius, .. } => {
+        NodeKind::Smooth { blend_radius, .. } => {
             let folds = children.len().saturating_sub(1) as f64;
             hull().map(|h| h.grown(blend_radius * 0.25 * folds))
         }
@@ -212,14 +220,7 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
             }
             Some(b)
         }
-        NodeKind::Sphere { .. }
-        | NodeKind::Ellipsoid { .. }
-        | NodeKind::Box { .. }
-        | NodeKind::Cylinder { .. }
-        | NodeKind::Torus { .. }
-        | NodeKind::Triangle { .. }
-        | NodeKind::Plane { .. }
-        | NodeKind::Mesh { .. } => None,
+        NodeKind::Leaf(_) => None,
     }
 }
 
@@ -344,8 +345,9 @@ mod tests {
 
     #[test]
     fn smooth_unions_grow_per_fold_and_repeats_spread_over_their_copies() {
-        let sphere = || leaf(NodeKind::Sphere { radius: 1.0 });
-        let smooth = leaf(NodeKind::SmoothUnion {
+        let sphere = || leaf(NodeKind::Leaf(Shape::Sphere { radius: 1.0 }));
+        let smooth = leaf(NodeKind::Smooth {
+            op: crate::SmoothOp::Union,
             children: vec![sphere(), sphere(), sphere()],
             blend_radius: 0.4,
         });
@@ -360,9 +362,9 @@ mod tests {
         assert_eq!((b.lo.x, b.hi.x), (-5.0, 5.0));
         assert_eq!((b.lo.y, b.hi.y), (-1.0, 1.0));
         assert!(b.lo.z.is_infinite() && b.hi.z.is_infinite());
-        let mesh = leaf(NodeKind::Mesh {
+        let mesh = leaf(NodeKind::Leaf(Shape::Mesh {
             path: "m.obj".into(),
-        });
+        }));
         assert_eq!(mesh.bounds_in_parent(&|_| None), None, "unknown mesh box");
     }
 }

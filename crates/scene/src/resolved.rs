@@ -259,9 +259,49 @@ pub struct Node {
     pub kind: NodeKind,
 }
 
-/// A node's shape, in the node's local frame.
+/// A node's shape, in the node's local frame: a leaf or a combinator of child nodes.
 #[derive(Debug, Clone, PartialEq)]
 pub enum NodeKind {
+    /// A primitive (analytic shape, triangle or mesh file).
+    Leaf(Shape),
+    /// Union of >= 1 children.
+    Union(Vec<Node>),
+    /// Intersection of >= 1 children.
+    Intersection(Vec<Node>),
+    /// First child minus the others.
+    Subtraction(Vec<Node>),
+    /// A smooth union, intersection or subtraction of >= 1 children: the children's values
+    /// folded left to right by the polynomial smooth minimum (or maximum) of `blend_radius`,
+    /// so a flat node gives the same value as a left-deep binary tree of the same operator.
+    Smooth {
+        /// Which boolean operation is blended.
+        op: SmoothOp,
+        /// Children.
+        children: Vec<Node>,
+        /// Blend radius > 0, local units.
+        blend_radius: f64,
+    },
+    /// Domain repetition.
+    Repeat {
+        /// The repeated node.
+        child: Box<Node>,
+        /// Period per axis; 0 = not repeated on that axis.
+        period: DVec3,
+        /// Copies per axis on repeated axes; `None` = infinite.
+        count: [Option<u32>; 3],
+    },
+}
+
+/// The boolean operation a [`NodeKind::Smooth`] node blends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SmoothOp {
+    /// `smin` fold: a union with rounded seams.
+    Union,
+}
+
+/// A primitive in its local frame, with validated parameters.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
     /// Sphere at the origin.
     Sphere {
         /// Radius > 0.
@@ -308,57 +348,30 @@ pub enum NodeKind {
         /// Path resolved against the scene file's folder.
         path: PathBuf,
     },
-    /// Union of >= 1 children.
-    Union(Vec<Node>),
-    /// Intersection of >= 1 children.
-    Intersection(Vec<Node>),
-    /// First child minus the others.
-    Subtraction(Vec<Node>),
-    /// Smooth union of >= 1 children.
-    SmoothUnion {
-        /// Children.
-        children: Vec<Node>,
-        /// Blend radius > 0.
-        blend_radius: f64,
-    },
-    /// Domain repetition.
-    Repeat {
-        /// The repeated node.
-        child: Box<Node>,
-        /// Period per axis; 0 = not repeated on that axis.
-        period: DVec3,
-        /// Copies per axis on repeated axes; `None` = infinite.
-        count: [Option<u32>; 3],
-    },
+}
+
+impl Shape {
+    /// Whether the shape is a bounded solid given by its parameters alone: everything but a
+    /// plane (unbounded), a triangle (no inside) and a mesh file.
+    pub fn is_analytic_solid(&self) -> bool {
+        !matches!(self, Shape::Triangle { .. })
+            && matches!(self.local_bounds(), crate::bounds::LocalBounds::Finite(_))
+    }
 }
 
 impl Node {
-    /// True for CSG, smooth union and repetition nodes.
+    /// True for CSG, smooth CSG and repetition nodes (everything but leaves).
     pub fn is_composite(&self) -> bool {
-        matches!(
-            self.kind,
-            NodeKind::Union(_)
-                | NodeKind::Intersection(_)
-                | NodeKind::Subtraction(_)
-                | NodeKind::SmoothUnion { .. }
-                | NodeKind::Repeat { .. }
-        )
+        !matches!(self.kind, NodeKind::Leaf(_))
     }
 
     /// Direct children (empty for leaves).
     pub fn children(&self) -> &[Node] {
         match &self.kind {
             NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => c,
-            NodeKind::SmoothUnion { children, .. } => children,
+            NodeKind::Smooth { children, .. } => children,
             NodeKind::Repeat { child, .. } => std::slice::from_ref(child),
-            NodeKind::Sphere { .. }
-            | NodeKind::Ellipsoid { .. }
-            | NodeKind::Box { .. }
-            | NodeKind::Cylinder { .. }
-            | NodeKind::Torus { .. }
-            | NodeKind::Triangle { .. }
-            | NodeKind::Plane { .. }
-            | NodeKind::Mesh { .. } => &[],
+            NodeKind::Leaf(_) => &[],
         }
     }
 
@@ -402,7 +415,7 @@ impl Scene {
     pub fn mesh_paths(&self) -> Vec<PathBuf> {
         let mut out: Vec<PathBuf> = Vec::new();
         self.visit_nodes(|n| {
-            if let NodeKind::Mesh { path } = &n.kind
+            if let NodeKind::Leaf(Shape::Mesh { path }) = &n.kind
                 && !out.contains(path)
             {
                 out.push(path.clone());

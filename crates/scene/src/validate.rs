@@ -256,13 +256,13 @@ impl Ctx<'_> {
         depth: usize,
     ) -> Option<NodeKind> {
         Some(match s {
-            ShapeSpec::Sphere(s) => NodeKind::Sphere {
+            ShapeSpec::Sphere(s) => NodeKind::Leaf(Shape::Sphere {
                 radius: self.positive(&format!("{path}.sphere.radius"), s.radius),
-            },
-            ShapeSpec::Plane(p) => NodeKind::Plane {
+            }),
+            ShapeSpec::Plane(p) => NodeKind::Leaf(Shape::Plane {
                 normal: self.unit(&format!("{path}.plane.normal"), p.normal),
                 offset: self.finite(&format!("{path}.plane.offset"), p.offset),
-            },
+            }),
             ShapeSpec::Triangle(t) => {
                 let p = format!("{path}.triangle.vertices");
                 let v = [
@@ -276,32 +276,32 @@ impl Ctx<'_> {
                 if !area_ok {
                     self.fail(&p, "the vertices are collinear or coincide (zero area)");
                 }
-                NodeKind::Triangle { vertices: v }
+                NodeKind::Leaf(Shape::Triangle { vertices: v })
             }
             ShapeSpec::Box(b) => {
                 let p = format!("{path}.box.half_extents");
-                NodeKind::Box {
+                NodeKind::Leaf(Shape::Box {
                     half_extents: DVec3::new(
                         self.positive(&format!("{p}[0]"), b.half_extents[0]),
                         self.positive(&format!("{p}[1]"), b.half_extents[1]),
                         self.positive(&format!("{p}[2]"), b.half_extents[2]),
                     ),
-                }
+                })
             }
             ShapeSpec::Ellipsoid(e) => {
                 let p = format!("{path}.ellipsoid.radii");
-                NodeKind::Ellipsoid {
+                NodeKind::Leaf(Shape::Ellipsoid {
                     radii: DVec3::new(
                         self.positive(&format!("{p}[0]"), e.radii[0]),
                         self.positive(&format!("{p}[1]"), e.radii[1]),
                         self.positive(&format!("{p}[2]"), e.radii[2]),
                     ),
-                }
+                })
             }
-            ShapeSpec::Cylinder(c) => NodeKind::Cylinder {
+            ShapeSpec::Cylinder(c) => NodeKind::Leaf(Shape::Cylinder {
                 radius: self.positive(&format!("{path}.cylinder.radius"), c.radius),
                 half_height: 0.5 * self.positive(&format!("{path}.cylinder.height"), c.height),
-            },
+            }),
             ShapeSpec::Torus(t) => {
                 let major = self.positive(&format!("{path}.torus.major_radius"), t.major_radius);
                 let minor = self.positive(&format!("{path}.torus.minor_radius"), t.minor_radius);
@@ -311,10 +311,10 @@ impl Ctx<'_> {
                         format!("must be <= major_radius ({major}), got {minor}"),
                     );
                 }
-                NodeKind::Torus {
+                NodeKind::Leaf(Shape::Torus {
                     major_radius: major,
                     minor_radius: minor,
-                }
+                })
             }
             ShapeSpec::Mesh(m) => {
                 let full = self.base_dir.join(&m.path);
@@ -326,7 +326,7 @@ impl Ctx<'_> {
                         format!("{}: {reason}", full.display()),
                     );
                 }
-                NodeKind::Mesh { path: full }
+                NodeKind::Leaf(Shape::Mesh { path: full })
             }
             ShapeSpec::Union(c) => NodeKind::Union(self.children(
                 &format!("{path}.union.children"),
@@ -346,7 +346,8 @@ impl Ctx<'_> {
                 material,
                 depth,
             )),
-            ShapeSpec::SmoothUnion(s) => NodeKind::SmoothUnion {
+            ShapeSpec::SmoothUnion(s) => NodeKind::Smooth {
+                op: SmoothOp::Union,
                 children: self.children(
                     &format!("{path}.smooth_union.children"),
                     &s.children,

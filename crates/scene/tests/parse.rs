@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use glam::DVec3;
-use marchmesh_scene::{Background, Light, NodeKind, SceneError, load, parse_scene};
+use marchmesh_scene::{Background, Light, NodeKind, SceneError, Shape, load, parse_scene};
 
 fn parse(json: &str) -> Result<marchmesh_scene::Scene, SceneError> {
     parse_scene(json, "test.json", Path::new("/scenes"))
@@ -64,15 +64,18 @@ fn shape_defaults_transforms_and_material_inheritance() {
     let NodeKind::Union(children) = &u.kind else {
         panic!("not a union")
     };
-    assert_eq!(children[0].kind, NodeKind::Sphere { radius: 1.0 });
+    assert_eq!(
+        children[0].kind,
+        NodeKind::Leaf(Shape::Sphere { radius: 1.0 })
+    );
     assert_eq!(children[0].material, u.material, "inherited");
     assert_ne!(children[1].material, u.material, "own material");
     assert_eq!(s.materials[u.material as usize].reflectivity, 0.5);
     assert_eq!(
         children[1].kind,
-        NodeKind::Box {
+        NodeKind::Leaf(Shape::Box {
             half_extents: DVec3::splat(0.5)
-        }
+        })
     );
     assert_eq!(s.objects[1].material, 0, "default material");
     assert_eq!(

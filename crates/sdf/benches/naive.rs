@@ -12,7 +12,7 @@ use marchmesh_core::{
 };
 use marchmesh_field::V3;
 use marchmesh_field::shapes;
-use marchmesh_scene::{Node, NodeKind, Scene};
+use marchmesh_scene::{Node, NodeKind, Scene, Shape, SmoothOp};
 
 enum Kind {
     Sphere(f32),
@@ -50,22 +50,25 @@ impl NNode {
             .min(m.z_axis.length()) as f32;
         let kids = |c: &[Node]| c.iter().map(|c| NNode::new(c, c.transform)).collect();
         let kind = match &n.kind {
-            NodeKind::Sphere { radius } => Kind::Sphere(*radius as f32),
-            NodeKind::Plane { normal, offset } => Kind::Plane(normal.as_vec3(), *offset as f32),
-            NodeKind::Box { half_extents } => Kind::Box(half_extents.as_vec3()),
-            NodeKind::Ellipsoid { radii } => Kind::Ellipsoid(radii.as_vec3()),
-            NodeKind::Cylinder {
+            NodeKind::Leaf(Shape::Sphere { radius }) => Kind::Sphere(*radius as f32),
+            NodeKind::Leaf(Shape::Plane { normal, offset }) => {
+                Kind::Plane(normal.as_vec3(), *offset as f32)
+            }
+            NodeKind::Leaf(Shape::Box { half_extents }) => Kind::Box(half_extents.as_vec3()),
+            NodeKind::Leaf(Shape::Ellipsoid { radii }) => Kind::Ellipsoid(radii.as_vec3()),
+            NodeKind::Leaf(Shape::Cylinder {
                 radius,
                 half_height,
-            } => Kind::Cylinder(*radius as f32, *half_height as f32),
-            NodeKind::Torus {
+            }) => Kind::Cylinder(*radius as f32, *half_height as f32),
+            NodeKind::Leaf(Shape::Torus {
                 major_radius,
                 minor_radius,
-            } => Kind::Torus(*major_radius as f32, *minor_radius as f32),
+            }) => Kind::Torus(*major_radius as f32, *minor_radius as f32),
             NodeKind::Union(c) => Kind::Union(kids(c)),
             NodeKind::Intersection(c) => Kind::Intersection(kids(c)),
             NodeKind::Subtraction(c) => Kind::Subtraction(kids(c)),
-            NodeKind::SmoothUnion {
+            NodeKind::Smooth {
+                op: SmoothOp::Union,
                 children,
                 blend_radius,
             } => Kind::Smooth(kids(children), *blend_radius as f32),

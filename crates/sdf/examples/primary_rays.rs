@@ -21,7 +21,7 @@ use std::time::Instant;
 use glam::DVec2;
 use marchmesh_core::camera::primary_ray_on;
 use marchmesh_core::{Geometry, Termination, TraceResult};
-use marchmesh_scene::{Node, NodeKind, Scene};
+use marchmesh_scene::{Node, NodeKind, Scene, Shape};
 use marchmesh_sdf::{SdfOptions, build};
 
 fn main() {
@@ -207,7 +207,7 @@ fn with_spheres(mut scene: Scene, n: u32) -> Scene {
             let y = -half + pitch * (f64::from(cy) + 0.5);
             let z = 7.0 + 3.0 * jitter();
             let mut node: Node = template.clone();
-            node.kind = NodeKind::Sphere { radius };
+            node.kind = NodeKind::Leaf(Shape::Sphere { radius });
             node.transform.matrix3 = glam::DMat3::IDENTITY;
             node.transform.translation = cam.position + right * x + up * y + fwd * z;
             node

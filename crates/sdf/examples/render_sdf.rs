@@ -8,7 +8,7 @@
 use std::path::Path;
 
 use marchmesh_core::{BackgroundSampler, Geometry, RenderOptions, RenderSpace, render};
-use marchmesh_scene::NodeKind;
+use marchmesh_scene::{NodeKind, Shape};
 use marchmesh_sdf::{SdfOptions, build};
 
 fn main() {
@@ -77,7 +77,7 @@ fn main() {
         .objects
         .iter()
         .filter_map(|o| match o.kind {
-            NodeKind::Sphere { radius } => {
+            NodeKind::Leaf(Shape::Sphere { radius }) => {
                 let s = o.transform.matrix3.x_axis.length();
                 Some((rs.point(o.transform.translation), radius * s))
             }

@@ -134,7 +134,7 @@ pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
 fn check_bake_memory(scene: &Scene, opts: &SdfOptions) -> Result<(), SdfError> {
     let mut paths = std::collections::HashSet::new();
     scene.visit_nodes(|n| {
-        if let marchmesh_scene::NodeKind::Mesh { path } = &n.kind {
+        if let marchmesh_scene::NodeKind::Leaf(marchmesh_scene::Shape::Mesh { path }) = &n.kind {
             paths.insert(path.clone());
         }
     });

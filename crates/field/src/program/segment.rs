@@ -30,6 +30,7 @@
 
 use super::{Ctx, GridSampler, Op, Program};
 use crate::lane::{Lane, Scalar, V3};
+use crate::leaf::Leaf;
 use crate::shapes;
 
 /// Relative and absolute (times `|d|`) margin added to every directional bound, so rounding
@@ -93,7 +94,9 @@ impl<S: Scalar> Program<S> {
         let q = || ins.to_local.apply(p);
         let dl = || ins.to_local.apply_linear(d);
         let dl = dl();
-        if let Some(lambda) = leaf_lambda(&ins.op, q, dl, len) {
+        if let Op::Leaf(leaf) = &ins.op
+            && let Some(lambda) = leaf_lambda(leaf, q, dl, len)
+        {
             let (v, _) = self.node::<S, false>(i, p, above, grids);
             return (v, leaf_step(v, lambda, dl.len(), len, d));
         }
@@ -252,32 +255,25 @@ pub(crate) fn bounded_step<T: Lane>(
     (T::select(skip, l, g), T::select(skip, enter, step))
 }
 
-/// The directional bound `lambda` of leaf `op` over the segment `[q, q + len d]` (local
+/// The directional bound `lambda` of `leaf` over the segment `[q, q + len d]` (local
 /// frame, `q` computed only for leaves that need it) and whether it holds only on the
-/// segment; `None` for leaves without a local bound (the global bound serves them) and for
+/// segment; `None` for leaves without a local bound (the global bound serves them).
 /// inner nodes.
 #[inline(always)]
 pub(crate) fn leaf_lambda<T: Lane>(
-    op: &Op<T::S>,
+    leaf: &Leaf<T::S>,
     q: impl FnOnce() -> V3<T>,
     d: V3<T>,
     len: T,
 ) -> Option<(T, bool)> {
-    Some(match op {
-        Op::Plane { n, .. } => (V3::splat3(*n).dot(d).abs(), false),
-        Op::Box { b } => (box_lambda(q(), d, len, *b), true),
-        Op::Cylinder { r, h } => (cylinder_lambda(q(), d, len, *r, *h), true),
-        Op::Sphere { .. } => (sphere_lambda(q(), d, len), true),
-        Op::SphereAt { c, .. } => (sphere_lambda(q() - V3::splat3(*c), d, len), true),
-        Op::Ellipsoid { .. }
-        | Op::Torus { .. }
-        | Op::Triangle(_)
-        | Op::Mesh { .. }
-        | Op::Union
-        | Op::Intersection
-        | Op::Subtraction
-        | Op::SmoothUnion { .. }
-        | Op::Repeat { .. } => return None,
+    Some(match leaf {
+        Leaf::Plane { n, .. } => (V3::splat3(*n).dot(d).abs(), false),
+        Leaf::Box { b } => (box_lambda(q(), d, len, *b), true),
+        Leaf::Cylinder { r, h } => (cylinder_lambda(q(), d, len, *r, *h), true),
+        Leaf::Sphere { .. } => (sphere_lambda(q(), d, len), true),
+        Leaf::SphereAt { c, .. } => (sphere_lambda(q() - V3::splat3(*c), d, len), true),
+        // Optional per shape: the others take the global bound.
+        _ => return None,
     })
 }
 

@@ -9,7 +9,7 @@ use glam::{DVec3, Vec3, Vec3A};
 use marchmesh_core::{Geometry, Ray};
 use marchmesh_mesh::tessellate::{Detail, tessellate};
 use marchmesh_mesh::{BvhKind, MeshOptions};
-use marchmesh_scene::{NodeKind, Scene};
+use marchmesh_scene::{NodeKind, Scene, Shape};
 use obvhs::{
     BvhBuildParams,
     bvh2::{Bvh2, builder::build_bvh2_from_tris},
@@ -81,7 +81,7 @@ pub fn sphere_case() -> Case {
     );
     let scene = marchmesh_scene::parse_scene(&json, "sphere_1m", &scenes_dir()).expect("scene");
     let local = tessellate(
-        &NodeKind::Sphere { radius: 1.0 },
+        &NodeKind::Leaf(Shape::Sphere { radius: 1.0 }),
         Detail::Level(SPHERE_LEVEL),
         1 << 16,
     )
