@@ -283,7 +283,7 @@ pub fn run_backend_case<B: Backend>(id: CaseId, settings: &B::Settings) -> CaseR
 
 /// Cases whose silhouette must match the reference to [`TWO_PIXEL_SILHOUETTE`] pixels on every
 /// backend, whatever its tolerance says: minimal scenes where any disagreement is a bug in
-/// what the scene means, not an approximation (issue 10's camera-inside and sdf-holes scenes).
+/// what the scene means, not an approximation (the camera-inside and sdf-holes scenes).
 pub const TWO_PIXEL_CASES: &[CaseId] = &[
     CaseId::camera_inside_one,
     CaseId::flat_ellipsoid_before_triangle,

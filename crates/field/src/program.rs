@@ -448,7 +448,7 @@ impl<S: Scalar> Program<S> {
     /// hierarchy ([`crate::compile`]'s median splits) is made of such pairs, so this turns its
     /// traversal front-to-back: a union of N separate objects then costs about `log N` box
     /// tests per evaluation near a surface instead of opening every box nearer than the
-    /// first leaf found (issue 14: 10000 spheres were ~100x slower per step than one).
+    /// first leaf found.
     #[inline(always)]
     fn nearer_second<T: Lane<S = S>>(&self, first: usize, end: usize, q: V3<T>) -> Option<usize> {
         let a = &self.instrs[first];

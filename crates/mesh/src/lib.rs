@@ -178,10 +178,7 @@ enum HitSource {
 /// Wide BVH size (nodes and triangle blocks, bytes) above which [`Geometry::closest_hits`]
 /// traces its batches as interleaved single rays ([`wide::WideBvh::closest_interleaved`])
 /// instead of packets or one ray after another. Interleaving hides the cache misses of a
-/// tree far larger than the caches but costs bookkeeping on a cached one. Measured, 1
-/// thread, single rays = 1 (in-process interleaved rounds, load 4-5): the 871k-triangle
-/// dragon (80 MB) 1.11-1.12, dragon_res3 (4.4 MB) 0.97-1.03, the bunny (0.3 MB) 0.85-0.94;
-/// 16 rays in turns 0.97 and 4 rays 1.00 on the dragon.
+/// tree far larger than the caches but costs bookkeeping on a cached one. Measured: `docs/decisions/0013`.
 const INTERLEAVE_MIN_BYTES: u64 = 16 << 20;
 
 /// The built mesh backend: a render-space BVH of everything placed once, plus instanced
@@ -1165,10 +1162,7 @@ impl MeshGeometry {
 
 impl Geometry for MeshGeometry {
     /// 64 columns: the same packets (8 consecutive pixels of a tile row start at multiples
-    /// of 8 either way) with an eighth of the integrator's fixed cost per tile. Measured
-    /// against 8 columns (1 thread, alternating processes, load 1.3-2.5):
-    /// `harness_overhead`'s stub render 0.86x (0.90 against 1.05 ms), the bunny render
-    /// 1.00x; the full dragon at 640x480 1.00x; images byte-identical.
+    /// of 8 either way) with an eighth of the integrator's fixed cost per tile. Measured: `docs/decisions/0013`.
     fn tile_width(&self) -> u32 {
         64
     }

@@ -44,10 +44,7 @@ pub enum BuildQuality {
     /// pass pairs nearest neighbours only (`search_depth_threshold: 1`) and reinsertion
     /// (Meister and Bittner 2018, "Parallel Reinsertion for Bounding Volume Hierarchy
     /// Optimization") visits half the nodes instead of 5% (`reinsertion_batch_ratio: 0.5`).
-    /// The wide BVH had 11% fewer bytes per triangle and its single rays ran 1.14-1.15x
-    /// (dragon_res3), 1.05x (bunny) and 1.02-1.06x (871k dragon) as fast as with `Medium`
-    /// (`anchor_rays`, 5-7 interleaved rounds, load 1.2-1.9), for 2.3-2.8x the build time
-    /// (871k dragon, 1 thread: 2.7 s against 1.0-1.2 s).
+    /// Measured against `Medium`: `docs/decisions/0007`.
     Tuned,
     /// `slow_build`: spatial pre-splits, wider PLOC search.
     Slow,
@@ -158,13 +155,7 @@ pub struct MeshOptions {
     pub preset: Option<MeshPreset>,
     /// BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2.
     ///
-    /// Default [`BvhKind::Wide`]: measured with `scripts/anchor_embree.py` (1 thread, 500x500
-    /// primary rays, interleaved rounds, thread CPU time, load ~12) it traced 1.8x (bunny),
-    /// 1.55x (dragon_res3) and 1.9x (871k-triangle dragon) as many rays per second as Bvh2,
-    /// for about 1.1x its memory then; its single rays now run 1.28x, 1.09x and 1.07-1.09x
-    /// Embree 4's `rtcIntersect1` called from C
-    /// (`bench-results/anchors/embree-20261127T010637Z`). Earlier, Bvh2 rendered seed-spheres
-    /// 1.84x and the bunny 1.24x faster than CwBvh (bench-results/20261122T222119Z-default).
+    /// Default [`BvhKind::Wide`] (measured against the other layouts and Embree: `docs/decisions/0007` and `0009`).
     pub bvh: Option<BvhKind>,
     /// BVH build preset: an obvhs preset, or tuned (medium, more reinsertion; the default).
     ///
@@ -190,11 +181,7 @@ pub struct MeshOptions {
     ///
     /// Interval culling (`crate::packet`) when the BVH is [`BvhKind::Wide`], nothing is
     /// instanced and the tree is below the interleaving size (above it batches are
-    /// interleaved single rays either way); same hits as single rays. Default `true`: renders
-    /// with packets took 0.75x (bunny), 0.77x (dragon_res3), 0.79x (seed-spheres), 0.72x (csg)
-    /// and 0.87x (bunny with soft shadows) of the time without (CLI, 1 thread, 6-8
-    /// alternating rounds, load 2.4-2.9, images byte-identical). It was `false` until the
-    /// packets were vectorised (they measured 1.03x on the bunny then).
+    /// interleaved single rays either way); same hits as single rays. Default `true` (measured: `docs/decisions/0013`).
     pub packets: Option<bool>,
     /// Instance repeated shapes under a TLAS (false = flatten into one BVH).
     ///

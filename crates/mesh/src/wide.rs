@@ -407,10 +407,7 @@ impl WideBvh {
 /// Cost of testing one node's 8 child boxes, per unit of the node's surface area.
 const COST_NODE: f32 = 1.0;
 /// Cost of testing one triangle block, per unit of the leaf's surface area: half a node
-/// test. With leaves of up to 8 triangles, against the earlier 1.0 and 4 (`anchor_rays`
-/// single rays, 5 interleaved rounds, load 1.5-1.9): 1.02x on dragon_res3 alone; on the
-/// tuned build 0.4-0.7 measured within 2% of each other on dragon_res3 and 3-5% faster
-/// than 1.0 on the 871k dragon, and 1.5 was slower.
+/// test. Measured: `docs/decisions/0013`.
 const COST_BLOCK: f32 = 0.5;
 /// Most triangles a collapsed leaf may hold: two blocks (see [`COST_BLOCK`]).
 const MAX_LEAF_TRIS: u32 = 8;
@@ -552,9 +549,7 @@ impl Collapse {
 }
 
 /// Node and block bytes from which single-ray traversal prefetches each entered child.
-/// Interleaved A/B of `anchor_rays wide1` (load 0.8-1.2): without prefetching the full
-/// dragon (80 MB) ran 0.95x, dragon_res3 (4 MB, in the L3 cache) 1.03x: below this size the
-/// prefetch instructions cost more than the latency they hide.
+/// Below this size the prefetch instructions cost more than the latency they hide (measured: `docs/decisions/0013`).
 const PREFETCH_MIN_BYTES: usize = 16 << 20;
 
 impl WideBvh {
@@ -917,10 +912,7 @@ pub(crate) enum Isa {
     /// The same code compiled with AVX-512 F, VL, BW and DQ enabled as well: the compiler
     /// then keeps comparison results in mask registers instead of vector masks and
     /// `movemask`s (the source, and so every rounded operation, stays the same: no fused
-    /// multiply-add). Measured against [`Isa::Avx`] with `anchor_rays` (processes
-    /// alternated, 10-14 rounds, load 1.1-1.2): single rays 1.033x on dragon_res3, 1.048x
-    /// on the bunny, 1.032x on the full dragon; 4x2 packets 1.099x on dragon_res3, 1.181x
-    /// on the bunny; full-dragon interleaved batches 1.004x.
+    /// multiply-add). Measured against [`Isa::Avx`]: `docs/decisions/0013`.
     Avx512,
 }
 

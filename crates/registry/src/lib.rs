@@ -632,7 +632,7 @@ mod tests {
             Some("123".into()),
             "a path key keeps digits as text"
         );
-        // Issue 11 item 16: a preset given after an option no longer drops that option.
+        // A preset given after an option no longer drops that option.
         let late = mesh(&[("bvh", "cwbvh"), ("preset", "fast")]).unwrap();
         assert_eq!(late.bvh(), BvhKind::CwBvh);
         let m = mesh(&[

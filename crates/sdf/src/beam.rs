@@ -35,11 +35,7 @@ pub(crate) const BEAM_RAYS: usize = 4;
 pub(crate) const BEAM_STEPS: u32 = 24;
 
 /// The beams of a batch stop together once no more than this many still advance: each
-/// cone step evaluates all eight lanes, and beams that stopped leave theirs idle. Measured
-/// (512x512 camera rays, 1 thread, load 1.2-1.3, time ratio without beams / with, 0 / 4 / 6):
-/// seed-slab 1.00 / 1.01 / 1.03, seed-spheres 1.04 / 1.06 / 1.05, csg 0.98 / 0.99 / 0.99,
-/// the fidget anchor's 1000 spheres (3.7 evaluations a ray: little empty space to skip, and
-/// costly evaluations of many leaves) 0.93 / 0.98 / 0.98.
+/// cone step evaluates all eight lanes, and beams that stopped leave theirs idle. Measured: `docs/decisions/0013`.
 pub(crate) const BEAM_MIN_ACTIVE: usize = 4;
 
 /// Rays per call of [`advance_by_beams`]: the groups of eight beams, one per lane.

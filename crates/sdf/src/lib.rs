@@ -92,15 +92,11 @@ pub const BAKE_BYTES_PER_CELL: u64 = 12;
 /// bundle is an 8x4-pixel block (the pruning, and so the last bits of a hit, depend on how
 /// rays are batched; the per-ray result is deterministic for a given batching). Smaller bundles
 /// have narrower wedges (fewer objects kept) but more restriction work and more idle lanes
-/// at the end of each bundle. Measured at 512x512 on 10000 separate spheres (ns per
-/// ray-step, one thread, load ~6 on 2 cores, with row batches): 16: 235, 32: 236, 64: 279-310, 128: 332;
-/// `seed-spheres` the same within noise at every size (55-67).
+/// at the end of each bundle. Measured: `docs/decisions/0013`.
 pub const CULL_BUNDLE: usize = 32;
 
 /// Fields of fewer nodes are never restricted: there is too little to drop for the work of
-/// a bundle's wedge to pay off. Measured (256x256, alternating rounds, load ~6): one sphere
-/// (2 nodes, 0.9 steps per ray) ran 1.27x slower restricted; 10 spheres (11 nodes) 1.21x
-/// faster, 100: 1.55x, 1000: 2.4x, 10000: 2.7x.
+/// a bundle's wedge to pay off. Measured: `docs/decisions/0013`.
 pub const CULL_MIN_NODES: usize = 8;
 
 /// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read: dense,

@@ -91,11 +91,7 @@ pub(crate) struct Params {
 
 /// Evaluations between two receding checks of a ray ([`Params::recede_checks`]). A check
 /// takes the ray out of the 8-lane fast path for a scalar pass over the tape's leaves, and
-/// the checks of a ray still passing objects fail. Measured on the default suite's sdf
-/// levels (1 thread, load 1.3-1.8, render time with checks every 4 / 8 / 16 evaluations / at
-/// powers of two from 8, against none): primitives 0.74 / 0.75 / 0.83 / 0.76, seed-spheres
-/// 0.91 / 0.90 / 0.93 / 0.89 (0.64 / 0.44 / 0.25 / 0.43 of the checks fail there), csg no
-/// tape.
+/// the checks of a ray still passing objects fail. Measured: `docs/decisions/0013`.
 pub(crate) const RECEDE_EVERY: u32 = 8;
 
 /// Whether a ray that has made `evals` evaluations is due a receding check.
@@ -106,12 +102,7 @@ pub(crate) fn recede_checkpoint(evals: u32) -> bool {
 
 /// Field evaluations one visit to the shell may spend deciding hit or near miss (a visit
 /// that runs out ends as a hit unless its closest approach is clear,
-/// [`March::passes_clear`]). Measured on the default suite's sdf default level (1 thread,
-/// load 1.1-1.3), 24 / 48 / 96: primitives PSNR 54.35 / 55.21 / 55.71 dB (shadow
-/// rays skimming the torus within the shell were called blocked), csg 58.17 and
-/// seed-spheres 57.05 dB throughout, render times and mean evaluations per ray unchanged
-/// (few rays spend it). At 96 plain sphere tracing (`segment=false`) over a box top at 1
-/// degree ran out of steps on 0.5% of its rays (degraded in the stability study), so 48.
+/// [`March::passes_clear`]). Measured (24, 48 and 96): `docs/decisions/0013`.
 const FINE_BUDGET: u32 = 48;
 
 /// Field evaluations one sweep of a gap before a prediction may spend. A sweep out of
@@ -123,13 +114,7 @@ const SWEEP_BUDGET: u32 = 32;
 /// Evaluations a ray spends sphere tracing before slow progress switches it to segment
 /// tracing (and the wait after a switch that gained nothing): rays that hit or leave within
 /// that many pay nothing for the mechanism, and a segment step (the bounds on top of the
-/// distance, then a scalar decision) costs more than a plain 8-lane step. Measured on the
-/// default suite's scenes (256x256 primary rays, time ratio plain / segment, alternating
-/// rounds, load ~11.7 on 2 cores): 8 with ratio 0.9: seed-spheres 0.86, csg 1.00,
-/// primitives 0.98; 16 with 0.95 and the wait: 0.91, 1.15, 0.95; 32 with 0.95: 0.97, 0.99,
-/// 1.04 (within noise of plain; 13-18% fewer steps). Since segment samples of taped fields
-/// are 8-lane queries (`Tape::segment`), 16 and 8 were still 1.10x and 1.07x slower than 32
-/// on seed-spheres (the default suite's sdf levels, 1 thread, load 1.2-1.8).
+/// distance, then a scalar decision) costs more than a plain 8-lane step. Measured (8, 16 and 32): `docs/decisions/0013`.
 pub(crate) const SEGMENT_MIN_EVALS: u32 = 32;
 
 /// Slow progress: a distance staying within this factor of the previous one, shrinking or

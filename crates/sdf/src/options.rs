@@ -51,15 +51,7 @@ pub struct SdfOptions {
     /// miss (see the crate docs and [`HitEpsilon`]); default 0.05. Hits are then refined to
     /// 1e-3 of it; it sets what is merged: features thinner than half of it may be stepped
     /// over, and near misses closer than it are decided by the (scalar) shell logic. Larger:
-    /// fewer steps near surfaces; smaller: more steps for grazing rays. Measured on the
-    /// default suite's scenes at their resolutions (`marchmesh bench`, all cores, CPU time, 5
-    /// interleaved rounds with the naive level, load 3.0-3.5; time ratio naive / this, median
-    /// of rounds, and PSNR; naive: csg 53.7 dB, primitives 55.4, seed-spheres 54.7) at 0.25 /
-    /// 0.1 / 0.05 / 0.02 px: csg 11.1x 53.0 dB / 10.4x 57.4 / 11.0x 58.0 / 12.3x 58.1,
-    /// primitives 6.7x 53.2 / 6.2x 53.9 / 7.0x 54.5 / 6.7x 54.3, seed-spheres 3.5x 57.05 /
-    /// 3.5x / 4.2x / 3.7x (the same image). 0.05 is the fastest or within noise of it on every
-    /// scene and more accurate than 0.25 (the old default) on each: at 0.25 the shell called
-    /// some grazing near passes hits.
+    /// fewer steps near surfaces; smaller: more steps for grazing rays. The default was measured against 0.25, 0.1 and 0.02 px: `docs/decisions/0013`.
     pub eps_px: f64,
     /// Absolute hit epsilon, world units; replaces eps_px when given.
     ///
@@ -127,17 +119,7 @@ pub struct SdfOptions {
     /// The rays start at least two hit shells from every surface (`beam.rs`; default true):
     /// the empty space in front of the first surface is crossed once per four rays instead of
     /// once per ray. Hits agree with unbeamed tracing to the refinement threshold (the steps
-    /// differ, so not bit for bit). Needs `bounds` (the naive level has neither). Measured at
-    /// 1 thread (load 1.2-1.5, alternating rounds, time ratio without / with): 512x512 camera
-    /// rays (`examples/primary_rays.rs`, image rows) seed-slab 1.01-1.04 (10.88 -> 8.16
-    /// evaluations per ray, the beams' own included), seed-spheres 1.06-1.12, csg 1.07,
-    /// primitives 1.06; whole renders of the default suite (shadow and reflection rays have
-    /// no common origin and gain nothing) csg 1.04, primitives 1.02, seed-spheres 1.04. The
-    /// evaluations saved are cheap 8-lane plain steps through empty space, which is why
-    /// the time gains less than the evaluation count. Only for cameras inside the scene's
-    /// box: from outside, the rays start clipped next to what it bounds and preparing beams
-    /// cost more than they saved (the fidget anchor's 1 / 10 / 1000 spheres, 1.7-3.5
-    /// evaluations a ray: 15% / 8% / 5% slower).
+    /// differ, so not bit for bit). Needs `bounds` (the naive level has neither). Only for cameras inside the scene's box (measured: `docs/decisions/0013`).
     pub beams: bool,
     /// End rays that recede from every surface (convex leaves growing, other leaves' boxes
     /// behind) instead of marching them to the end of their range.
