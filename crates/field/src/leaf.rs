@@ -1,13 +1,13 @@
 //! The field's leaves: every primitive a program evaluates (analytic shapes and mesh grids),
-//! and the one entry that computes a leaf's distance, [`Leaf::distance`], which the
+//! and the one entry that computes a leaf's distance, `Leaf::distance`, which the
 //! interpreter ([`crate::program::Program::eval`]) and the tape ([`crate::tape::Tape`]) both
 //! call, so their values agree bit for bit by construction. The formulas themselves live in
 //! [`crate::shapes`].
 //!
-//! A new shape: a variant here, its arm in [`Leaf::distance`] and [`Leaf::cast`] (the
+//! A new shape: a variant here, its arm in `Leaf::distance` and [`Leaf::cast`] (the
 //! compiler flags both), and its arm in [`crate::compile`]. Optional: a directional
 //! Lipschitz bound (`program::segment::leaf_lambda`) and a receding test
-//! ([`Leaf::outward`]) for convex shapes.
+//! (`Leaf::outward`) for convex shapes.
 
 use crate::lane::{Lane, Scalar, V3};
 use crate::program::GridSampler;

@@ -80,7 +80,7 @@ impl<S: Scalar> Affine<S> {
     }
 }
 
-/// What a node computes: a leaf ([`Leaf`], its distance in [`Leaf::distance`]) or a
+/// What a node computes: a leaf ([`Leaf`], its distance in `Leaf::distance`) or a
 /// combinator of the nodes of its subtree.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Op<S> {
@@ -142,7 +142,7 @@ pub struct Instr<S> {
 impl Program<f32> {
     /// The normal a baked mesh stores at the surface point `p` (root's parent frame), when
     /// the surface there is a mesh grid's: the nearest child is followed down through plain
-    /// unions to a [`Op::Leaf(Leaf::Mesh)`] leaf, whose [`GridSampler::stored_normal`] is carried back
+    /// unions to a mesh-grid leaf ([`Leaf::Mesh`]), whose [`GridSampler::stored_normal`] is carried back
     /// up through the nodes' frames (a gradient maps by the transpose of `to_local`'s
     /// linear part). `None` when the path meets any other operation (CSG, smooth blends,
     /// repetition, an analytic leaf) or the grid has no normal there: the caller then

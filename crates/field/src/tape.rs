@@ -173,7 +173,7 @@ impl Tape {
 
     /// The value of the program at `p` (and the material when `M`), bit for bit
     /// [`Program::eval`]'s with the same `grids` (the field's mesh grids, indexed by the
-    /// program's [`Op::Leaf(Leaf::Mesh)`] leaves; panics on an index past them, as the interpreter).
+    /// program's [`Leaf::Mesh`] leaves; panics on an index past them, as the interpreter).
     #[inline]
     pub fn eval<T: Lane<S = f32>, const M: bool>(
         &self,
