@@ -388,9 +388,17 @@ fn measure(
             .any(|p| e.starts_with(&format!("{}: already exists", p.display())))
     });
     results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
-    let plots = report::write_run(&results, dir)
-        .map_err(anyhow::Error::msg)
-        .with_context(|| format!("writing results into {}", dir.display()))?;
+    // A report file that cannot be written (a full disk) is one more write error: the
+    // summary below still names every failure and the run still exits nonzero.
+    let plots = match report::write_run(&results, dir) {
+        Ok(plots) => plots,
+        Err(e) => {
+            results
+                .write_errors
+                .push(format!("writing results into {}: {e}", dir.display()));
+            Vec::new()
+        }
+    };
     out!(
         "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
         dir.display(),

@@ -54,6 +54,8 @@ fn png_declaring(width: u32, height: u32) -> Vec<u8> {
     ihdr.extend(height.to_be_bytes());
     ihdr.extend([8, 2, 0, 0, 0]);
     chunk(b"IHDR", &ihdr);
+    // An empty zlib stream: a decoder reads the header up to the first image data chunk.
+    chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]);
     chunk(b"IEND", &[]);
     png
 }
@@ -132,8 +134,8 @@ fn view_refuses_a_nonsense_step_before_opening_anything() {
                 script.to_str().unwrap(),
                 "--frames",
                 "frames",
-                "--step",
-                step,
+                // `--step=-1`: as a separate word, clap would take `-1` for a flag.
+                &format!("--step={step}"),
             ],
             &dir,
         );
