@@ -18,6 +18,9 @@ marker="# written by marchmesh scripts/slurm_local.sh"
 
 die() { echo "error: $*" >&2; exit 1; }
 
+# Whether a live process is named $1 (zombies left by a killed daemon do not count).
+running() { ps -C "$1" -o stat= 2>/dev/null | grep -qv '^Z'; }
+
 need_root() { [ "$(id -u)" = 0 ] || die "run as root (it configures and starts slurmctld, slurmd and munged)"; }
 
 install() {
@@ -76,7 +79,9 @@ EOF
 }
 
 start_munge() {
-  if pgrep -x munged >/dev/null; then return; fi
+  if running munged && [ -S /run/munge/munge.socket.2 ]; then return; fi
+  pkill -x munged 2>/dev/null || true
+  for _ in $(seq 1 50); do running munged || break; sleep 0.1; done
   mkdir -p /etc/munge /run/munge /var/log/munge /var/lib/munge
   if [ ! -s /etc/munge/munge.key ]; then
     dd if=/dev/urandom of=/etc/munge/munge.key bs=1 count=1024 status=none
@@ -92,6 +97,8 @@ start_munge() {
   else
     runuser -u munge -- munged
   fi
+  for _ in $(seq 1 100); do [ -S /run/munge/munge.socket.2 ] && return; sleep 0.1; done
+  die "munged did not open /run/munge/munge.socket.2 within 10 s"
 }
 
 node_ready() {
@@ -105,8 +112,9 @@ start() {
   install
   write_conf
   start_munge
-  pgrep -x slurmctld >/dev/null || slurmctld
-  pgrep -x slurmd >/dev/null || slurmd
+  # -c: a fresh controller state (this is a test cluster; jobs of an earlier run are gone).
+  running slurmctld || slurmctld -c
+  running slurmd || slurmd
   for _ in $(seq 1 60); do
     if node_ready; then
       echo "slurm: node $(hostname -s) is up ($(nproc) cores, partition debug)"
@@ -123,6 +131,10 @@ stop() {
   need_root
   pkill -x slurmd 2>/dev/null || true
   pkill -x slurmctld 2>/dev/null || true
+  for _ in $(seq 1 100); do
+    running slurmd || running slurmctld || return 0
+    sleep 0.1
+  done
 }
 
 case ${1:-} in
