@@ -85,6 +85,14 @@ pub struct SdfOptions {
     /// with the unrestricted field to the refinement threshold (the steps differ, so not
     /// bit for bit); false traces every ray through the whole field.
     pub cull: bool,
+    /// Prune the field per region of space (`marchmesh_field::prune`, Barbier, Sanchez et al.
+    /// 2025): an octree of `2^prune_depth` finest cells per axis over the scene's box, each
+    /// holding only the nodes that can matter in it, smooth unions included, or a far bound
+    /// where no surface is (default 6; 0 = off). Built for fields holding a smooth union, of
+    /// at least [`crate::PRUNE_MIN_NODES`] nodes, with a finite box and no mesh grid; when built, point
+    /// queries read their cell's program (the whole program's value bit for bit) and
+    /// bundles are not culled ([`SdfOptions::cull`]).
+    pub prune_depth: u32,
     /// In lockstep batches, march one cone per run of four rays sharing an origin (camera
     /// rays) and start the rays where it stops, at least two hit shells from every surface
     /// (`beam.rs`; default true): the empty space in front of the first surface is crossed
@@ -163,6 +171,7 @@ impl SdfOptions {
         normal_step: 0.02,
         lockstep: true,
         cull: true,
+        prune_depth: 6,
         beams: true,
         recede: true,
         segment: true,

@@ -38,6 +38,9 @@ pub struct SdfSettings {
     /// In lockstep batches, trace bundles of primary rays through only the objects their
     /// cone can reach (false: the whole field for every ray).
     pub cull: bool,
+    /// Prune the field per region: octree of 2^prune_depth finest cells per axis, each cell
+    /// holding only the nodes that matter in it (0 = off; pruned fields are not culled).
+    pub prune_depth: u32,
     /// In lockstep batches, march one cone per run of four camera rays and start the rays
     /// where it stops (false: every ray from its origin).
     pub beams: bool,
@@ -154,6 +157,7 @@ impl SdfSettings {
             normal_step: o.normal_step,
             lockstep: o.lockstep,
             cull: o.cull,
+            prune_depth: o.prune_depth,
             beams: o.beams,
             recede: o.recede,
             segment: o.segment,
@@ -194,6 +198,7 @@ impl SdfSettings {
             normal_step: self.normal_step,
             lockstep: self.lockstep,
             cull: self.cull,
+            prune_depth: self.prune_depth,
             beams: self.beams,
             recede: self.recede,
             segment: self.segment,
