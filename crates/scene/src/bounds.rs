@@ -376,7 +376,10 @@ mod tests {
             assert!(d > last && d < k, "n = {n}: {d}");
             // 1 - D/k behaves like 4/n: within a factor 2 of it for large n.
             let rest = 1.0 - d / k;
-            assert!(rest < 8.0 / n as f64 && rest > 2.0 / n as f64, "n = {n}: {rest}");
+            assert!(
+                rest < 8.0 / n as f64 && rest > 2.0 / n as f64,
+                "n = {n}: {rest}"
+            );
             last = d;
         }
         assert_eq!(smooth_fold_deficit(k, 1 << 20), k);
@@ -400,7 +403,10 @@ mod tests {
             blend_radius: 0.4,
         });
         let three = smooth.bounds_in_own_frame(&|_| None).expect("bounded");
-        assert!((three.hi.x - (1.0 + 0.4 * 25.0 / 64.0)).abs() < 1e-9, "{three:?}");
+        assert!(
+            (three.hi.x - (1.0 + 0.4 * 25.0 / 64.0)).abs() < 1e-9,
+            "{three:?}"
+        );
         let repeat = leaf(NodeKind::Repeat {
             child: Box::new(sphere()),
             period: DVec3::new(4.0, 0.0, 3.0),
