@@ -301,6 +301,15 @@ impl<S: Scalar> Program<S> {
         self.child::<T, M>(0, p, Ctx::Plain, grids)
     }
 
+    /// The value node `i` contributes to its parent at `p` (its parent's frame), bound logic
+    /// included: what the pruner ([`crate::prune`]) brackets over a region.
+    pub(crate) fn node_value(&self, i: usize, p: V3<S>, grids: &[Box<dyn GridSampler>]) -> S
+    where
+        S: Lane<S = S>,
+    {
+        self.child::<S, false>(i, p, Ctx::Plain, grids).0
+    }
+
     /// Node `i` including its bound logic, `p` in its parent's frame.
     #[inline(always)]
     fn child<T: Lane<S = S>, const M: bool>(

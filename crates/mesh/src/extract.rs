@@ -16,6 +16,9 @@ use crate::tessellate::LocalMesh;
 /// about 0.5 GB of f32.
 pub const MAX_SURFACE_RESOLUTION: u32 = 512;
 
+/// Composites whose field has fewer nodes are sampled without pruning per region.
+const PRUNE_MIN_NODES: usize = 16;
+
 /// Extracts the surface of a composite node in its local frame (the frame before
 /// `node.transform`) from the shared distance field (`marchmesh-field`).
 ///
@@ -29,7 +32,7 @@ pub(crate) fn extract(
     resolution: u32,
     field_options: &FieldOptions,
 ) -> Result<LocalMesh, MeshError> {
-    let field =
+    let mut field =
         Field::compile_node(node, node.transform.inverse(), field_options).map_err(|e| {
             MeshError::Unsupported {
                 json_path: node.json_path.clone(),
@@ -43,8 +46,20 @@ pub(crate) fn extract(
             json_path: node.json_path.clone(),
             reason: "the CSG result is unbounded (e.g. a plane or an infinite repetition survives), so it has no finite surface to extract".into(),
         })?;
+    // Pruned per region: a sample reads only the children that matter near it, and a
+    // sample in a cell without surface reads that cell's far bound. A far cell's field is at
+    // least half its bounding radius, so at least a quarter of its longest edge; with that
+    // edge at least eight extraction cells long, no corner of an extraction cell the surface
+    // crosses (whose field is below a cell diagonal, sqrt(3) cells) reads a far bound: the
+    // mesh is the one the whole field gives.
+    if field.node_count() >= PRUNE_MIN_NODES {
+        let depth = (resolution.clamp(8, MAX_SURFACE_RESOLUTION) / 8)
+            .ilog2()
+            .min(6);
+        field.build_cells(depth);
+    }
     Ok(extract_surface(
-        |p| field.distance_f64(p) as f32,
+        |p| field.distance_bound_f64(p) as f32,
         |p| field.distance_material_f64(p).1,
         bounds,
         resolution,

@@ -18,6 +18,12 @@ use crate::repeat::Repeat;
 use crate::smooth::Smooth;
 use crate::{ReferenceError, ReferenceOptions};
 
+/// Smooth unions of at least this many field nodes get their field pruned per region.
+const SMOOTH_PRUNE_MIN_NODES: usize = 16;
+
+/// Octree depth of a smooth union's pruned field (`2^6` finest cells per axis).
+const SMOOTH_PRUNE_DEPTH: u32 = 6;
+
 /// Loads each mesh file once.
 pub(crate) struct Compiler<'a> {
     pub options: &'a ReferenceOptions,
@@ -130,11 +136,17 @@ impl Compiler<'_> {
                 (kind, b, true)
             }
             NodeKind::Smooth { .. } => {
-                let field =
+                let mut field =
                     Field::compile_node(node, node.transform.inverse(), &FieldOptions::default())
                         .map_err(|e| {
                         unsupported(&format!("its distance field could not be built: {e}"))
                     })?;
+                // Pruned per region: the root finding then reads, at each point, only the
+                // children that can change the blend there (the same values bit for bit)
+                // and crosses empty cells in one step each.
+                if field.node_count() >= SMOOTH_PRUNE_MIN_NODES {
+                    field.build_cells(SMOOTH_PRUNE_DEPTH);
+                }
                 let bounds = field.bounds();
                 let size = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length().max(1e-300));
                 let smooth = Smooth {

@@ -54,7 +54,9 @@ impl Smooth {
             None => (t_min, t_max),
         };
         let len = d.length();
-        let f = |t: f64| self.field.distance_f64(o + t * d);
+        // A bound with the field's sign: exact where a surface may be, the far cells'
+        // bound elsewhere (see `Field::distance_bound_f64`).
+        let f = |t: f64| self.field.distance_bound_f64(o + t * d);
         let mut g = f(t);
         let mut inside = g < 0.0;
         let mut open = inside.then(|| Boundary::infinite(f64::NEG_INFINITY));

@@ -99,6 +99,15 @@ pub const CULL_BUNDLE: usize = 32;
 /// a bundle's wedge to pay off. Measured: `docs/decisions/0013`.
 pub const CULL_MIN_NODES: usize = 8;
 
+/// Fields of fewer nodes are not pruned per region ([`SdfOptions::prune_depth`]); nor are
+/// fields without smooth unions, whose hard unions the per-bundle culling already restricts
+/// to a tape (see the decision record on pruning per region).
+pub const PRUNE_MIN_NODES: usize = 16;
+
+/// Deepest octree [`SdfOptions::prune_depth`] accepts (`2^8` finest cells per axis: a 64 MiB
+/// index).
+pub const MAX_PRUNE_DEPTH: u32 = 8;
+
 /// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read: dense,
 /// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper bound
 /// of [`marchmesh_field::bake::SparseOptions::max_bake_bytes`] (every brick cell holding a
@@ -257,11 +266,19 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         mesh_grid: opts.mesh_grid(),
     };
     let field = Field::compile_scene(scene, &field_opts)?;
-    let field = if opts.bounds {
+    let mut field = if opts.bounds {
         field
     } else {
         field.without_bounds()
     };
+    check(
+        opts.prune_depth <= MAX_PRUNE_DEPTH,
+        "prune_depth",
+        &format!("must be in 0..={MAX_PRUNE_DEPTH}"),
+    )?;
+    if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
+        field.build_cells(opts.prune_depth);
+    }
     let inside = Inside::build(scene, &field, &field_opts)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bounds = field.bounds().map(|(lo, hi)| {
@@ -322,7 +339,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
         // Without bounds (the naive level) nothing is culled either.
-        cull: opts.cull && opts.bounds,
+        cull: opts.cull && opts.bounds && !field.has_cells(),
         beams: opts.beams && opts.bounds,
         shortcuts: Shortcuts {
             cone_shadows: opts.cone_shadows,
