@@ -422,20 +422,36 @@ impl<S: Scalar> Program<S> {
                 }
                 (best, bm)
             }
-            Op::Smooth {
-                op: SmoothOp::Union,
-                k,
-                inv_k,
-            } => {
+            Op::Smooth { op, k, inv_k } => {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);
                 let mut j = i + 1;
                 let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best + k), grids);
-                    let take = T::lt(d, best);
-                    best = shapes::smin(best, d, k, inv_k);
+                    let (m, take) = match op {
+                        SmoothOp::Union => {
+                            // A child at least k above the running value leaves it unchanged.
+                            let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best + k), grids);
+                            let take = T::lt(d, best);
+                            best = shapes::smin(best, d, k, inv_k);
+                            (m, take)
+                        }
+                        SmoothOp::Intersection => {
+                            let (d, m) = self.child::<T, M>(j, q, Ctx::Plain, grids);
+                            let take = T::lt(best, d);
+                            best = shapes::smax(best, d, k, inv_k);
+                            (m, take)
+                        }
+                        SmoothOp::Subtraction => {
+                            // Skipped exactly when it cannot come within k of cutting.
+                            let (d, m) = self.subtrahend::<T, M>(j, q, best - k, grids);
+                            let nd = -d;
+                            let take = T::lt(best, nd);
+                            best = shapes::smax(best, nd, k, inv_k);
+                            (m, take)
+                        }
+                    };
                     bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }

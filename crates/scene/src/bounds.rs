@@ -158,6 +158,25 @@ impl Shape {
                 lo: vertices[0].min(vertices[1]).min(vertices[2]),
                 hi: vertices[0].max(vertices[1]).max(vertices[2]),
             }),
+            Shape::RoundedBox { half_extents, .. } => {
+                LocalBounds::Finite(Aabb::symmetric(*half_extents))
+            }
+            Shape::Capsule {
+                radius,
+                half_height,
+            } => LocalBounds::Finite(Aabb::symmetric(DVec3::new(
+                *radius,
+                half_height + radius,
+                *radius,
+            ))),
+            Shape::CappedCone {
+                half_height,
+                bottom_radius,
+                top_radius,
+            } => {
+                let r = bottom_radius.max(*top_radius);
+                LocalBounds::Finite(Aabb::symmetric(DVec3::new(r, *half_height, r)))
+            }
             Shape::Plane { .. } => LocalBounds::Unbounded,
             Shape::Mesh { path } => LocalBounds::MeshFile(path),
         }
