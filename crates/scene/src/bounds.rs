@@ -233,8 +233,8 @@ pub fn smooth_fold_deficit(blend_radius: f64, children: usize) -> f64 {
 /// Union: the hull. Smooth union: the hull grown by [`smooth_fold_deficit`] (at most the blend
 /// radius, whatever the child count): every child is at least its box's distance away from
 /// a point outside the hull grown by that much, so the fold is positive there (children
-/// whose values are bounds of this kind, as every composite's box makes them). Intersection:
-/// the common part. Subtraction: the first child. Repetition: the child's box spread over the
+/// whose values are bounds of this kind, as every composite's box makes them). Intersection
+/// (hard or smooth): the common part. Subtraction (hard or smooth): the first child. Repetition: the child's box spread over the
 /// copies, infinite along an axis repeated without end.
 pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
     let hull = || {
@@ -250,6 +250,14 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
                 let deficit = smooth_fold_deficit(*blend_radius, children.len());
                 hull().map(|h| h.grown(deficit))
             }
+            // A smooth maximum never lies below either argument, so the fold is at least
+            // every child (intersection) or at least the first child (subtraction): no growth.
+            crate::SmoothOp::Intersection => {
+                children.iter().fold(None, |acc: Option<Aabb>, b| {
+                    Some(acc.map_or(*b, |a| a.intersect(b)))
+                })
+            }
+            crate::SmoothOp::Subtraction => children.first().copied(),
         },
         NodeKind::Intersection(_) => children.iter().fold(None, |acc: Option<Aabb>, b| {
             Some(acc.map_or(*b, |a| a.intersect(b)))
