@@ -54,6 +54,9 @@ pub struct Pruned {
     pub lo: f64,
     /// Upper bound of the value over the ball (`+inf` when unknown).
     pub hi: f64,
+    /// Index in the whole program of each node of [`Pruned::program`]: equal lists mean
+    /// equal programs (cells share them).
+    pub source: Vec<u32>,
 }
 
 /// `prog` restricted to the ball of radius `radius` around `centre` (in the frame the program
@@ -69,12 +72,14 @@ pub fn prune(
             program: Program::default(),
             lo: f64::INFINITY,
             hi: f64::INFINITY,
+            source: Vec::new(),
         };
     }
     let mut p = Pruner {
         prog,
         grids,
         out: Vec::with_capacity(prog.instrs.len().min(1024)),
+        source: Vec::with_capacity(prog.instrs.len().min(1024)),
     };
     let c = V3::new(centre.x, centre.y, centre.z);
     let (lo, hi) = p.interval(0, c, radius);
@@ -83,6 +88,7 @@ pub fn prune(
         program: Program { instrs: p.out },
         lo,
         hi,
+        source: p.source,
     }
 }
 
@@ -90,6 +96,8 @@ struct Pruner<'a> {
     prog: &'a Program<f64>,
     grids: &'a [Box<dyn GridSampler>],
     out: Vec<Instr<f64>>,
+    /// Index in `prog` of each node of `out`.
+    source: Vec<u32>,
 }
 
 /// An upper bound of the stretch of `a`'s linear part (its Frobenius norm; 1 for none).
@@ -132,6 +140,7 @@ impl Pruner<'_> {
             n.end = (n.end as usize - i + base) as u32;
             self.out.push(n);
         }
+        self.source.extend(i as u32..end as u32);
     }
 
     /// Emits node `i` (kept) restricted to the ball `(c, r)` in its parent's frame.
@@ -214,6 +223,7 @@ impl Pruner<'_> {
         };
         let start = self.out.len();
         self.out.push(ins.clone());
+        self.source.push(i as u32);
         for j in keep {
             self.emit(j, q, rq, depth + 1);
         }
@@ -262,6 +272,9 @@ pub struct Cells {
     /// surface from outside the box, added to the distance to the box).
     pad: f32,
     stats: CellStats,
+    /// While building: the cell holding each distinct program, by its nodes' indices in the
+    /// whole program (neighbouring cells often keep the same children; they share one).
+    by_source: std::collections::HashMap<Vec<u32>, u32>,
 }
 
 /// Counts of a [`Cells`] build, for reports.
@@ -275,6 +288,9 @@ pub struct CellStats {
     pub program_nodes: usize,
     /// Largest program of any cell (nodes).
     pub max_program_nodes: usize,
+    /// Program cells that share the program of an earlier cell (counted in
+    /// `program_cells`, not in `program_nodes`).
+    pub shared_cells: usize,
 }
 
 /// Cells with at most this many nodes are not subdivided further.
@@ -321,11 +337,13 @@ impl Cells {
             cells: Vec::new(),
             pad: pad as f32,
             stats: CellStats::default(),
+            by_source: std::collections::HashMap::new(),
         };
         let budget = Self::max_nodes(prog.instrs.len());
-        cells
-            .build_cell(prog, grids, lo, hi, [0; 3], res, budget)
-            .then_some(cells)
+        let whole: Vec<u32> = (0..prog.instrs.len() as u32).collect();
+        let built = cells.build_cell(prog, &whole, grids, lo, hi, [0; 3], res, budget);
+        cells.by_source = std::collections::HashMap::new();
+        built.then_some(cells)
     }
 
     /// The most program nodes all cells of a program of `nodes` nodes may hold together:
@@ -338,6 +356,7 @@ impl Cells {
     fn build_cell(
         &mut self,
         prog: &Program<f64>,
+        prog_source: &[u32],
         grids: &[Box<dyn GridSampler>],
         lo: DVec3,
         hi: DVec3,
@@ -346,7 +365,10 @@ impl Cells {
         budget: usize,
     ) -> bool {
         let radius = 0.5 * (hi - lo).length();
-        let pruned = prune(prog, grids, 0.5 * (lo + hi), radius);
+        let mut pruned = prune(prog, grids, 0.5 * (lo + hi), radius);
+        for s in &mut pruned.source {
+            *s = prog_source[*s as usize];
+        }
         let nodes = pruned.program.instrs.len();
         let far = if pruned.lo >= FAR_FRACTION * radius {
             Some(pruned.lo)
@@ -363,9 +385,17 @@ impl Cells {
                 hi: hi.as_vec3().to_array(),
             }
         } else if span == 1 || nodes <= LEAF_NODES {
+            if let Some(&id) = self.by_source.get(&pruned.source) {
+                self.stats.program_cells += 1;
+                self.stats.shared_cells += 1;
+                self.fill_index(at, span, id);
+                return true;
+            }
             if self.stats.program_nodes + nodes > budget {
                 return false;
             }
+            self.by_source
+                .insert(pruned.source.clone(), self.cells.len() as u32);
             self.stats.program_cells += 1;
             self.stats.program_nodes += nodes;
             self.stats.max_program_nodes = self.stats.max_program_nodes.max(nodes);
@@ -386,6 +416,7 @@ impl Cells {
                 let sub = [0, 1, 2].map(|a| at[a] + ((o >> a) & 1) * half);
                 if !self.build_cell(
                     &pruned.program,
+                    &pruned.source,
                     grids,
                     DVec3::new(x0, y0, z0),
                     DVec3::new(x1, y1, z1),
@@ -400,6 +431,12 @@ impl Cells {
         };
         let id = self.cells.len() as u32;
         self.cells.push(cell);
+        self.fill_index(at, span, id);
+        true
+    }
+
+    /// Points the finest cells of the `span`^3 block at `at` to cell `id`.
+    fn fill_index(&mut self, at: [u32; 3], span: u32, id: u32) {
         let res = self.res as usize;
         for z in at[2]..at[2] + span {
             for y in at[1]..at[1] + span {
@@ -407,7 +444,6 @@ impl Cells {
                 self.index[row + at[0] as usize..row + (at[0] + span) as usize].fill(id);
             }
         }
-        true
     }
 
     /// Counts of the build.

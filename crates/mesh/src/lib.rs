@@ -388,14 +388,40 @@ impl ShapeInputs<'_> {
             || format!("{placement_count} placements"),
             "max_instances",
         )?;
-        for (key, placements) in groups {
-            let node = placements[0].node;
-            // Triangles are stored once per placement unless instanced.
-            let copies = if options.instancing() && placements.len() > 1 {
+        // Every extraction's output estimated before the first one runs (each can take
+        // seconds): a build over the limit is refused before any work.
+        // Triangles are stored once per placement unless instanced.
+        let copies_of = |placements: &[&Placement]| {
+            if options.instancing() && placements.len() > 1 {
                 1
             } else {
                 placements.len() as u64
-            };
+            }
+        };
+        let extractions: Vec<(&str, u64)> = groups
+            .iter()
+            .filter(|(key, _)| matches!(key, ShapeKey::Composite(_)))
+            .map(|(_, placements)| (placements[0].node.json_path.as_str(), copies_of(placements)))
+            .collect();
+        if let Some((first, _)) = extractions.first() {
+            let per_extraction = extracted_triangles_estimate(options.surface_resolution());
+            let copies: u64 = extractions.iter().map(|(_, c)| c).sum();
+            let bytes = triangle_bytes(per_extraction, copies);
+            if budget.planned_bytes.saturating_add(bytes) > budget.limit_bytes {
+                return Err(budget.refusal(
+                    bytes,
+                    first,
+                    format!(
+                        "{} surface extractions ({copies} copies in all) of about {per_extraction} triangles each",
+                        extractions.len()
+                    ),
+                    "the extraction grid (--opt surface_res)",
+                ));
+            }
+        }
+        for (key, placements) in groups {
+            let node = placements[0].node;
+            let copies = copies_of(placements);
             let mesh = match key {
                 ShapeKey::Analytic(..) => {
                     Some(self.tessellate(node, placements, copies, &mut budget, report)?)
@@ -645,6 +671,16 @@ impl ShapeInputs<'_> {
 }
 
 /// Peak build bytes of `triangles` stored `copies` times.
+/// Triangles expected from extracting a surface on a grid of `resolution` cells along its
+/// longest side, for the estimate made before any extraction: a sphere filling the grid
+/// (surface nets emit two triangles per grid face the surface crosses: `2 pi res^2`). A
+/// surface with more area in the same box (many small parts) gives more; the exact count is
+/// charged after each extraction.
+fn extracted_triangles_estimate(resolution: u32) -> u64 {
+    let r = u64::from(resolution);
+    (r * r).saturating_mul(2 * 314) / 100
+}
+
 fn triangle_bytes(triangles: u64, copies: u64) -> u64 {
     triangles
         .saturating_mul(copies)

@@ -252,11 +252,9 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
             }
             // A smooth maximum never lies below either argument, so the fold is at least
             // every child (intersection) or at least the first child (subtraction): no growth.
-            crate::SmoothOp::Intersection => {
-                children.iter().fold(None, |acc: Option<Aabb>, b| {
-                    Some(acc.map_or(*b, |a| a.intersect(b)))
-                })
-            }
+            crate::SmoothOp::Intersection => children.iter().fold(None, |acc: Option<Aabb>, b| {
+                Some(acc.map_or(*b, |a| a.intersect(b)))
+            }),
             crate::SmoothOp::Subtraction => children.first().copied(),
         },
         NodeKind::Intersection(_) => children.iter().fold(None, |acc: Option<Aabb>, b| {
