@@ -219,6 +219,30 @@ impl Pruner<'_> {
                 }
                 kept
             }
+            // A smooth maximum fold `f_j = smax(f_{j-1}, b_j)` (`b_j` the child, negated for a
+            // subtraction): a child at least `k` below the prefix's lower bound leaves it
+            // unchanged (`h` is exactly 0) and is dropped; nothing else is (the prefix interval
+            // is folded by interval arithmetic: `smax` is non-decreasing in both arguments).
+            Op::Smooth {
+                op: op @ (SmoothOp::Intersection | SmoothOp::Subtraction),
+                k,
+                inv_k,
+            } => {
+                let (k, inv_k) = (*k, *inv_k);
+                let subtract = matches!(op, SmoothOp::Subtraction);
+                let mut kept = vec![kids[0].0];
+                let (mut plo, mut phi) = (kids[0].1, kids[0].2);
+                for &(j, lo, hi) in &kids[1..] {
+                    let (blo, bhi) = if subtract { (-hi, -lo) } else { (lo, hi) };
+                    if bhi <= plo - k {
+                        continue;
+                    }
+                    kept.push(j);
+                    plo = shapes::smax(plo, blo, k, inv_k);
+                    phi = shapes::smax(phi, bhi, k, inv_k);
+                }
+                kept
+            }
             _ => unreachable!("composite checked above"),
         };
         let start = self.out.len();

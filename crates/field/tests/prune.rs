@@ -200,7 +200,7 @@ fn arb_tree() -> impl Strategy<Value = Node> {
         .prop_map(|(r, x, y, z)| sphere(r, DVec3::new(x, y, z)));
     leaf.prop_recursive(4, 48, 8, |inner| {
         (
-            0u8..4,
+            0u8..6,
             proptest::collection::vec(inner, 2..8),
             0.005f64..0.2,
             -0.1f64..0.1,
@@ -210,6 +210,16 @@ fn arb_tree() -> impl Strategy<Value = Node> {
                     0 => NodeKind::Union(children),
                     1 => NodeKind::Intersection(children),
                     2 => NodeKind::Subtraction(children),
+                    3 => NodeKind::Smooth {
+                        op: SmoothOp::Intersection,
+                        children,
+                        blend_radius: k,
+                    },
+                    4 => NodeKind::Smooth {
+                        op: SmoothOp::Subtraction,
+                        children,
+                        blend_radius: k,
+                    },
                     _ => NodeKind::Smooth {
                         op: SmoothOp::Union,
                         children,
