@@ -310,7 +310,7 @@ fn checked_loads_ask_before_reading_and_before_decoding_with_the_counts() {
     let obj = dir.join("quad.obj");
     std::fs::write(
         &obj,
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\nf 1 2 \\\n 4\n",
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\nf 1//1 2//1 4//1\n",
     )
     .unwrap();
     let size = std::fs::metadata(&obj).unwrap().len();
@@ -325,7 +325,7 @@ fn checked_loads_ask_before_reading_and_before_decoding_with_the_counts() {
             ..Default::default()
         }
     );
-    // Before decoding: 5 records, 7 corners, 3 triangles (a continued face line counts once).
+    // Before decoding: 5 records, 7 corners, 3 triangles.
     assert_eq!(
         seen[1],
         marchmesh_meshio::LoadBound {
