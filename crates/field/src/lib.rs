@@ -100,15 +100,59 @@ pub struct FieldOptions {
     pub cache_dir: Option<PathBuf>,
     /// The representation of mesh distance fields (default [`MeshGrid::Dense`]).
     pub mesh_grid: MeshGrid,
+    /// What baking mesh grids may take (default unlimited): before a mesh file is read, and
+    /// again before it is decoded, the grids already baked, the load's bound
+    /// ([`marchmesh_meshio::LoadBound`]), the bake's working set
+    /// ([`BAKE_BYTES_PER_TRIANGLE`] per triangle) and the grid's bound
+    /// ([`FieldOptions::mesh_grid_bytes_bound`]) must fit, else [`FieldError::MeshBake`]
+    /// refuses the mesh. A grid found in the cache is counted as if baked.
+    pub memory_limit_bytes: u64,
 }
 
+/// Bytes per cell of a baked dense mesh grid for the memory estimate: the f32 sample plus
+/// the bake's per-cell working data (nearest-triangle search and sign).
+pub const BAKE_BYTES_PER_CELL: u64 = 12;
+
+/// Bytes per triangle of a bake's working set for the memory estimate: the triangles copied
+/// by value twice (input and leaf order), centroids, order, nodes and winding moments of the
+/// bake's BVH, and the closedness test's edge map.
+pub const BAKE_BYTES_PER_TRIANGLE: u64 = 192;
+
 impl FieldOptions {
-    /// The defaults: dense, resolution 64, no cache.
+    /// The defaults: dense, resolution 64, no cache, no memory limit.
     pub const DEFAULT: FieldOptions = FieldOptions {
         mesh_grid_resolution: 64,
         cache_dir: None,
         mesh_grid: MeshGrid::Dense,
+        memory_limit_bytes: u64::MAX,
     };
+
+    /// Estimated peak bytes of baking one mesh grid, before any mesh is read: dense,
+    /// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper
+    /// bound of [`marchmesh_bake::SparseOptions::max_bake_bytes`] (every brick cell holding
+    /// a brick, which a surface cannot reach: the real grid is proportional to its area).
+    pub fn mesh_grid_bytes_bound(&self) -> u64 {
+        match self.mesh_grid {
+            MeshGrid::Dense => {
+                // Cells on the longest side, plus the apron of one sample each side.
+                u64::from(self.mesh_grid_resolution.saturating_add(3))
+                    .pow(3)
+                    .saturating_mul(BAKE_BYTES_PER_CELL)
+            }
+            MeshGrid::Sparse {
+                band_voxels,
+                quantization,
+                reconstruction,
+            } => marchmesh_bake::SparseOptions {
+                resolution: self.mesh_grid_resolution,
+                band_voxels,
+                quantization,
+                reconstruction,
+                cache_dir: None,
+            }
+            .max_bake_bytes(),
+        }
+    }
 }
 
 impl Default for FieldOptions {
@@ -242,7 +286,34 @@ impl MeshResolver for Meshes<'_> {
             reason,
         };
         let t0 = Instant::now();
-        let mesh = marchmesh_meshio::load_mesh(path).map_err(|e| err(e.to_string()))?;
+        let limit = self.opts.memory_limit_bytes;
+        let held: u64 = self.grids.iter().map(|g| g.memory_bytes()).sum();
+        let grid = self.opts.mesh_grid_bytes_bound();
+        let mut check = |b: &marchmesh_meshio::LoadBound| {
+            let bake = b.triangles.saturating_mul(BAKE_BYTES_PER_TRIANGLE);
+            let needed = held
+                .saturating_add(grid)
+                .saturating_add(b.load_bytes())
+                .saturating_add(bake);
+            if needed <= limit {
+                return Ok(());
+            }
+            Err(format!(
+                "loading and baking it would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles, {} MiB for its grid, {} MiB of grids already baked), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
+                needed.div_ceil(1 << 20),
+                b.file_bytes.div_ceil(1 << 20),
+                b.records,
+                b.vertices,
+                b.triangles,
+                grid.div_ceil(1 << 20),
+                held.div_ceil(1 << 20),
+                limit >> 20
+            ))
+        };
+        let mesh = marchmesh_meshio::load_mesh_checked(path, &mut check).map_err(|e| match e {
+            marchmesh_meshio::MeshLoadError::OverBudget { reason, .. } => err(reason),
+            other => err(other.to_string()),
+        })?;
         let open_note = if mesh.is_closed() {
             ""
         } else {

@@ -33,8 +33,9 @@ use crate::shapes::{self, TriData};
 
 pub mod segment;
 
-/// Most copies evaluated per repeated axis.
-pub const MAX_WINDOW: usize = 5;
+/// Most copies evaluated per repeated axis: the scene's
+/// [`marchmesh_scene::validate::REPEAT_WINDOW`], which its limit on nested repetitions counts.
+pub const MAX_WINDOW: usize = marchmesh_scene::validate::REPEAT_WINDOW as usize;
 
 /// An affine map `p -> lin * p + trans` (`lin` row-major, `None` = identity).
 #[derive(Debug, Clone, PartialEq)]

@@ -74,9 +74,13 @@ pub enum MeshError {
         /// Why.
         reason: String,
     },
-    /// An infinite repetition reaches more cells than `MeshOptions::max_instances`.
+    /// A repetition places more copies than `MeshOptions::max_instances`: a finite one by its
+    /// counts, an infinite one by the cells within `max_distance` of the camera.
     #[error(
-        "{json_path}: infinite repetition would need {cells} cells within max_distance (limit {limit}); lower render.max_distance or raise max_instances"
+        "{json_path}: {} would need {cells} cells{} (limit {limit}); {} or raise max_instances",
+        if *infinite { "infinite repetition" } else { "finite repetition" },
+        if *infinite { " within max_distance" } else { " by its counts" },
+        if *infinite { "lower render.max_distance" } else { "lower its counts" }
     )]
     TooManyInstances {
         /// The repeat node.
@@ -85,6 +89,8 @@ pub enum MeshError {
         cells: u64,
         /// The limit.
         limit: u64,
+        /// Whether some repeated axis has no count (cells counted within `max_distance`).
+        infinite: bool,
     },
     /// The build would need more memory than [`MeshOptions::memory_limit_bytes`]; refused
     /// before allocating it.

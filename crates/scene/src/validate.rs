@@ -35,13 +35,19 @@ pub const MAX_JSON_PATH_CHARS: usize = 256;
 pub const MAX_NODES: usize = 100_000;
 /// Largest accepted finite repetition count on one axis.
 pub const MAX_REPEAT_COUNT_PER_AXIS: u32 = 1_000_000;
-/// Largest accepted product, over a chain of nested repeat nodes, of each node's work factor:
-/// 2 per repeated axis (a count of 1 counts 1). Evaluating a repetition visits at least two
-/// neighbouring copies per repeated axis and nested repetitions multiply, so 23 nested
-/// count-2 repeats cost 2^23 evaluations per query on every backend; 1024 keeps the worst
-/// accepted scene to about a thousand child evaluations per query (e.g. three nested 3-axis
-/// repeats plus one single-axis repeat).
+/// Largest accepted product, over a chain of nested repeat nodes, of the copies of each
+/// node's child evaluated per query ([`repeat_copies_per_query`]): nested repetitions
+/// multiply, so ten nested infinite repeats along one axis of a small child cost `2 * 5^9`
+/// (3.9 million) child evaluations per query on the sdf backend. 1024 keeps the worst
+/// accepted scene to about a thousand child evaluations per query (e.g. two nested 3-axis
+/// repeats whose children fit their periods, the inner one finite: 27 x 27 = 729).
 pub const MAX_NESTED_REPEAT_FACTOR: u64 = 1024;
+/// Most copies of a repeated child the sdf backend evaluates per repeated axis and query:
+/// the copies whose box overlaps a window around the point at most a period wide, so 3 for a
+/// child that fits its period, more for a wider one, this many for a child wider than
+/// `REPEAT_WINDOW - 1` periods or unbounded along the axis (another infinite repetition along
+/// it, a plane, a mesh whose box is not known before loading). The field compiler's window.
+pub const REPEAT_WINDOW: u64 = 5;
 /// Largest accepted magnitude of any coordinate or length (world units).
 pub const MAX_COORDINATE: f64 = 1e12;
 /// Most samples per pixel for the Whitted integrator (all samples of a row are traced as one
@@ -100,8 +106,6 @@ struct Ctx<'a> {
     problems: Vec<Problem>,
     materials: Vec<Material>,
     nodes: usize,
-    /// Product of the work factors of the repeat nodes enclosing the node being checked.
-    repeat_factor: u64,
 }
 
 impl Ctx<'_> {
@@ -486,25 +490,24 @@ impl Ctx<'_> {
                         "at least one axis needs a period > 0",
                     );
                 }
-                let factor: u64 = (0..3)
-                    .filter(|&axis| period[axis] > 0.0 && r.count[axis] != Some(1))
-                    .map(|_| 2u64)
-                    .product();
-                let enclosing = self.repeat_factor;
-                self.repeat_factor = enclosing.saturating_mul(factor);
-                if self.repeat_factor > MAX_NESTED_REPEAT_FACTOR
-                    && enclosing <= MAX_NESTED_REPEAT_FACTOR
-                {
-                    self.fail(
-                        &p,
-                        format!(
-                            "nested repetitions multiply the work per query to {} (2 per repeated axis at every nesting level), over the limit of {MAX_NESTED_REPEAT_FACTOR}: nest fewer repeats or repeat fewer axes",
-                            self.repeat_factor
-                        ),
-                    );
-                }
                 let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1);
-                self.repeat_factor = enclosing;
+                if let Some(child) = &child {
+                    // Counted from the innermost repeat out: the first (innermost) repeat whose
+                    // chain crosses the limit is the one reported.
+                    let below = nested_repeat_work(child);
+                    let copies =
+                        repeat_copies_per_query(period, r.count, child.bounds_in_parent(&|_| None));
+                    let work = below.saturating_mul(copies);
+                    if work > MAX_NESTED_REPEAT_FACTOR && below <= MAX_NESTED_REPEAT_FACTOR {
+                        self.fail(
+                            &p,
+                            format!(
+                                "nested repetitions evaluate {work} copies of the innermost child per query ({copies} copies of this repeat's child times {below} below it), over the limit of {MAX_NESTED_REPEAT_FACTOR}: the sdf backend evaluates up to 3 copies per repeated axis of a child that fits its period and {REPEAT_WINDOW} of one wider than {} periods or unbounded along the axis (such as another infinite repetition along it); nest fewer repeats, repeat fewer axes or give them counts",
+                                REPEAT_WINDOW - 1
+                            ),
+                        );
+                    }
+                }
                 let child = child?;
                 NodeKind::Repeat {
                     child: Box::new(child),
@@ -516,6 +519,7 @@ impl Ctx<'_> {
     }
 }
 
+<<<<<<< HEAD
 /// The JSON path of child `i` of the child list at `list` (`...children`): `list[i]`,
 /// with a trailing run of one repeated object step kept as `(step){n}` and long paths cut,
 /// so that paths stay short however deep the tree ([`MAX_JSON_PATH_CHARS`]).
@@ -621,6 +625,60 @@ fn deepest_beyond(objects: &[Node], max: usize) -> Option<&Node> {
         stack.extend(n.children().iter().map(|c| (c, depth + 1)));
     }
     None
+=======
+/// Copies of a repeat node's child the sdf backend evaluates per query (the most of any
+/// backend: the reference walks cells with its own bound on work per query, the mesh backend
+/// places instances under `max_instances`): per repeated axis, the copies whose box
+/// (`child_box`, in the repeat's frame; `None` when unknown, e.g. a mesh file) overlaps a
+/// window at most as wide as the smallest period, at most [`REPEAT_WINDOW`], and at most the
+/// axis's count.
+pub fn repeat_copies_per_query(
+    period: DVec3,
+    count: [Option<u32>; 3],
+    child_box: Option<crate::bounds::Aabb>,
+) -> u64 {
+    let smallest = (0..3)
+        .filter(|&a| period[a] > 0.0)
+        .map(|a| period[a])
+        .fold(f64::INFINITY, f64::min);
+    (0..3)
+        .filter(|&a| period[a] > 0.0)
+        .map(|a| {
+            let p = period[a];
+            let width = child_box.map_or(f64::INFINITY, |b| b.hi[a] - b.lo[a]);
+            let window = if width.is_finite() && width < (REPEAT_WINDOW - 1) as f64 * p {
+                // Lattice points in an interval of length `smallest + width`.
+                (((smallest + width) / p).floor() as u64 + 1).min(REPEAT_WINDOW)
+            } else {
+                REPEAT_WINDOW
+            };
+            count[a].map_or(window, |n| window.min(u64::from(n)))
+        })
+        .fold(1u64, u64::saturating_mul)
+}
+
+/// The largest product of [`repeat_copies_per_query`] over the chains of repeat nodes in
+/// `node`'s subtree (1 without repeats).
+fn nested_repeat_work(node: &Node) -> u64 {
+    let below = node
+        .children()
+        .iter()
+        .map(nested_repeat_work)
+        .max()
+        .unwrap_or(1);
+    match &node.kind {
+        NodeKind::Repeat {
+            child,
+            period,
+            count,
+        } => below.saturating_mul(repeat_copies_per_query(
+            *period,
+            *count,
+            child.bounds_in_parent(&|_| None),
+        )),
+        _ => below,
+    }
+>>>>>>> hostile2
 }
 
 /// Why an existing `path` cannot be a mesh or image file (a folder, a device or FIFO), or
@@ -648,7 +706,6 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
             reflectivity: 0.0,
         }],
         nodes: 0,
-        repeat_factor: 1,
     };
 
     let c = &file.camera;

@@ -208,8 +208,10 @@ pub struct SdfOptions {
     pub ao_taps: u32,
     /// The build refuses, before baking, grids whose estimated memory
     /// ([`crate::BAKE_BYTES_PER_CELL`] per cell of every distinct mesh's grid) exceeds this
-    /// ([`crate::SdfError::OverMemoryLimit`]). Not a `key=value` option: the registry sets it
-    /// from `--memory-limit-mib`. Default 4 GiB.
+    /// ([`crate::SdfError::OverMemoryLimit`]), and each mesh file whose load and bake would
+    /// exceed it with the grids (checked before the file is read and again before it is
+    /// decoded: `marchmesh_field::FieldOptions::memory_limit_bytes`). Not a `key=value`
+    /// option: the registry sets it from `--memory-limit-mib`. Default 4 GiB.
     #[serde(skip)]
     #[schemars(skip)]
     pub memory_limit_bytes: u64,
