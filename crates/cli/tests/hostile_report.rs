@@ -4,7 +4,6 @@
 //! the commands fail instead of passing silently, names cannot inject Markdown or spreadsheet
 //! formulas, and a closed stdout ends them quietly.
 
-use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 use marchmesh_harness::results::{Failure, Results};

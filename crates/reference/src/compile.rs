@@ -165,20 +165,7 @@ impl Compiler<'_> {
                 (kind, b, true)
             }
             NodeKind::Smooth { .. } => {
-<<<<<<< HEAD
-                let mut field =
-                    Field::compile_node(node, node.transform.inverse(), &FieldOptions::default())
-                        .map_err(|e| {
-                        unsupported(&format!("its distance field could not be built: {e}"))
-                    })?;
-                // Pruned per region: the root finding then reads, at each point, only the
-                // children that can change the blend there (the same values bit for bit)
-                // and crosses empty cells in one step each.
-                if field.node_count() >= SMOOTH_PRUNE_MIN_NODES {
-                    field.build_cells(SMOOTH_PRUNE_DEPTH);
-                }
-=======
-                let field = Field::compile_node(
+                let mut field = Field::compile_node(
                     node,
                     node.transform.inverse(),
                     &FieldOptions {
@@ -190,7 +177,12 @@ impl Compiler<'_> {
                     },
                 )
                 .map_err(|e| unsupported(&format!("its distance field could not be built: {e}")))?;
->>>>>>> hostile2
+                // Pruned per region: the root finding then reads, at each point, only the
+                // children that can change the blend there (the same values bit for bit)
+                // and crosses empty cells in one step each.
+                if field.node_count() >= SMOOTH_PRUNE_MIN_NODES {
+                    field.build_cells(SMOOTH_PRUNE_DEPTH);
+                }
                 let bounds = field.bounds();
                 let size = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length().max(1e-300));
                 let smooth = Smooth {

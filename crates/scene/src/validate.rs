@@ -519,7 +519,6 @@ impl Ctx<'_> {
     }
 }
 
-<<<<<<< HEAD
 /// The JSON path of child `i` of the child list at `list` (`...children`): `list[i]`,
 /// with a trailing run of one repeated object step kept as `(step){n}` and long paths cut,
 /// so that paths stay short however deep the tree ([`MAX_JSON_PATH_CHARS`]).
@@ -625,7 +624,8 @@ fn deepest_beyond(objects: &[Node], max: usize) -> Option<&Node> {
         stack.extend(n.children().iter().map(|c| (c, depth + 1)));
     }
     None
-=======
+}
+
 /// Copies of a repeat node's child the sdf backend evaluates per query (the most of any
 /// backend: the reference walks cells with its own bound on work per query, the mesh backend
 /// places instances under `max_instances`): per repeated axis, the copies whose box
@@ -660,12 +660,14 @@ pub fn repeat_copies_per_query(
 /// The largest product of [`repeat_copies_per_query`] over the chains of repeat nodes in
 /// `node`'s subtree (1 without repeats).
 fn nested_repeat_work(node: &Node) -> u64 {
-    let below = node
-        .children()
-        .iter()
-        .map(nested_repeat_work)
-        .max()
-        .unwrap_or(1);
+    // One guarded level per node: trees nest as deep as their files.
+    let below = crate::deep::guard(|| {
+        node.children()
+            .iter()
+            .map(nested_repeat_work)
+            .max()
+            .unwrap_or(1)
+    });
     match &node.kind {
         NodeKind::Repeat {
             child,
@@ -678,7 +680,6 @@ fn nested_repeat_work(node: &Node) -> u64 {
         )),
         _ => below,
     }
->>>>>>> hostile2
 }
 
 /// Why an existing `path` cannot be a mesh or image file (a folder, a device or FIFO), or

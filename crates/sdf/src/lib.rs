@@ -98,7 +98,6 @@ pub const CULL_BUNDLE: usize = 32;
 /// a bundle's wedge to pay off. Measured: `docs/decisions/0013`.
 pub const CULL_MIN_NODES: usize = 8;
 
-<<<<<<< HEAD
 /// Fields of fewer nodes are not pruned per region ([`SdfOptions::prune_depth`]); nor are
 /// fields without smooth unions, whose hard unions the per-bundle culling already restricts
 /// to a tape (see the decision record on pruning per region).
@@ -108,14 +107,8 @@ pub const PRUNE_MIN_NODES: usize = 16;
 /// index).
 pub const MAX_PRUNE_DEPTH: u32 = 8;
 
-/// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read: dense,
-/// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper bound
-/// of [`marchmesh_field::bake::SparseOptions::max_bake_bytes`] (every brick cell holding a
-/// brick, which a surface cannot reach: the real grid is proportional to its area).
-=======
 /// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read
 /// ([`FieldOptions::mesh_grid_bytes_bound`]).
->>>>>>> hostile2
 pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
     field_options(opts).mesh_grid_bytes_bound()
 }
