@@ -79,14 +79,7 @@ def molecule(centres):
     return {
         "description": f"Sculpted series: a molecule of {n} spheres (radius {RADIUS}) in one smooth "
         f"union (blend radius {BLEND}), a random walk of step {STEP} (scripts/gen_sculpted.py).",
-        "camera": {
-            "position": [r5(v) for v in eye],
-            "look_at": [r5(v) for v in centroid],
-            "up": [0, 1, 0],
-            "vfov_deg": 40,
-            "width": 256,
-            "height": 256,
-        },
+        "camera": camera(eye, centroid),
         "background": {"color": [0.6, 0.75, 0.9]},
         "lights": LIGHTS,
         "objects": [
