@@ -203,14 +203,17 @@ fn revolve(
     let (sin, cos): (Vec<f64>, Vec<f64>) = phi.iter().map(|a| a.sin_cos()).unzip();
     let normals = mesh.normals.get_or_insert_with(Vec::new);
     for (profile, closed) in pieces {
-        // First vertex index of each profile row.
-        let mut rows: Vec<(u32, bool)> = Vec::with_capacity(profile.len());
+        // First vertex index of each profile row, whether it is a pole (one triangle per
+        // segment meets it) and whether it is a ring of vertices at an apex.
+        let mut rows: Vec<(u32, bool, bool)> = Vec::with_capacity(profile.len());
         for p in profile {
             let start = mesh.positions.len() as u32;
-            if p.pole {
+            if p.pole && p.normal.0 == 0.0 {
                 mesh.positions.push(DVec3::new(0.0, p.y, 0.0));
                 normals.push(DVec3::new(0.0, p.normal.1.signum(), 0.0));
             } else {
+                // A ring of vertices; at an apex (a pole with a slanted normal, a cone's tip)
+                // they share the point, so each triangle meeting there keeps its own normal.
                 for j in 0..n as usize {
                     mesh.positions
                         .push(DVec3::new(p.radial * cos[j], p.y, p.radial * sin[j]));
@@ -221,7 +224,7 @@ fn revolve(
                     ));
                 }
             }
-            rows.push((start, p.pole));
+            rows.push((start, p.pole, p.pole && p.normal.0 != 0.0));
         }
         let count = rows.len();
         let bands = if *closed {
@@ -230,14 +233,16 @@ fn revolve(
             count.saturating_sub(1)
         };
         for k in 0..bands {
-            let (top, top_pole) = rows[k];
-            let (bottom, bottom_pole) = rows[(k + 1) % count];
-            let at = |start: u32, pole: bool, j: u32| if pole { start } else { start + j % n };
+            let (top, top_pole, top_ring) = rows[k];
+            let (bottom, bottom_pole, bottom_ring) = rows[(k + 1) % count];
+            let at = |start: u32, pole: bool, ring: bool, j: u32| {
+                if pole && !ring { start } else { start + j % n }
+            };
             for j in 0..n {
-                let a = at(top, top_pole, j);
-                let b = at(top, top_pole, j + 1);
-                let c = at(bottom, bottom_pole, j);
-                let d = at(bottom, bottom_pole, j + 1);
+                let a = at(top, top_pole, top_ring, j);
+                let b = at(top, top_pole, top_ring, j + 1);
+                let c = at(bottom, bottom_pole, bottom_ring, j);
+                let d = at(bottom, bottom_pole, bottom_ring, j + 1);
                 if !top_pole {
                     mesh.triangles.push([a, b, c]);
                 }
