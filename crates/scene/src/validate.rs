@@ -524,31 +524,28 @@ impl Ctx<'_> {
 /// so that paths stay short however deep the tree ([`MAX_JSON_PATH_CHARS`]).
 fn child_path(list: &str, i: usize) -> String {
     let full = format!("{list}[{i}]");
-    if full.len() <= MAX_JSON_PATH_CHARS {
-        return full;
-    }
     // The step from the parent object to this child: `.shape.<op>.children[i]`.
-    let Some(at) = list.rfind(".shape.") else {
-        return elide(&full);
-    };
-    let (parent, op_list) = list.split_at(at);
-    let step = format!("{op_list}[{i}]");
-    let run = format!("({step}){{");
-    if let Some(open) = parent.rfind(&run)
-        && let Some(n) = parent[open + run.len()..]
-            .strip_suffix('}')
-            .and_then(|n| n.parse::<u64>().ok())
-    {
-        return format!("{}{run}{}}}", &parent[..open], n + 1);
-    }
-    let mut head = parent;
-    let mut n = 1u64;
-    while let Some(h) = head.strip_suffix(step.as_str()) {
-        head = h;
-        n += 1;
-    }
-    if n > 1 {
-        return format!("{head}{run}{n}}}");
+    if let Some(at) = list.rfind(".shape.") {
+        let (parent, op_list) = list.split_at(at);
+        let step = format!("{op_list}[{i}]");
+        let run = format!("({step}){{");
+        let mut head = parent;
+        let mut n = 1u64;
+        while let Some(h) = head.strip_suffix(step.as_str()) {
+            head = h;
+            n += 1;
+        }
+        // Steps that follow a run of the same step join it.
+        if let Some(open) = head.rfind(&run)
+            && let Some(m) = head[open + run.len()..]
+                .strip_suffix('}')
+                .and_then(|m| m.parse::<u64>().ok())
+        {
+            return format!("{}{run}{}}}", &head[..open], m + n);
+        }
+        if n > 1 && full.len() > MAX_JSON_PATH_CHARS {
+            return format!("{head}{run}{n}}}");
+        }
     }
     elide(&full)
 }
