@@ -474,7 +474,7 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
             return Err(fmt_err(
                 path,
                 format!(
-                    "need 1 <= min_count <= max_count <= {MAX_REPEATS} and 0 <= min_time_s <= {MAX_REPEAT_SECONDS}, got min_count {}, max_count {}, min_time_s {}",
+                    "need 1 <= min_count <= max_count <= {MAX_REPEATS} and 0 <= min_time_s <= {MAX_REPEAT_SECONDS}, got min_count {}, max_count {}, min_time_s {:?}",
                     p.min_count, p.max_count, p.min_time_s
                 ),
             ));
