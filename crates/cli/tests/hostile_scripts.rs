@@ -113,11 +113,13 @@ fn runs_in_the_same_second_get_distinct_output_names() {
 /// from the world origin (where a world-space foot point left the visible ground uncovered).
 #[test]
 fn the_mitsuba_crosscheck_places_planes_in_render_space() {
-    if Command::new("python3").arg("--version").output().is_err() {
-        eprintln!("skipped: no python3");
+    let Some(python) = marchmesh_testkit::tools::require(
+        marchmesh_testkit::tools::Tool::Python,
+        "the_mitsuba_crosscheck_places_planes_in_render_space",
+    ) else {
         return;
-    }
-    let o = Command::new("python3")
+    };
+    let o = Command::new(python)
         .args([
             "-m",
             "unittest",
@@ -129,8 +131,11 @@ fn the_mitsuba_crosscheck_places_planes_in_render_space() {
         .unwrap();
     let out = text(&o.stderr);
     assert!(o.status.success(), "{out}");
+    // unittest -v prints `name ... ok` or, from Python 3.11, `name (module.Class.name) ... ok`.
     assert!(
-        out.contains("test_the_square_is_centred_below_a_camera_far_from_the_origin ... ok"),
+        out.lines().any(|l| l
+            .starts_with("test_the_square_is_centred_below_a_camera_far_from_the_origin")
+            && l.ends_with("... ok")),
         "{out}"
     );
     assert!(out.contains("Ran 2 tests"), "{out}");

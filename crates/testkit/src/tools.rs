@@ -26,11 +26,19 @@ pub enum Tool {
     Xvfb,
     /// Slurm (`sbatch`, `squeue`; a running controller): the cluster script's test.
     Slurm,
+    /// Python 3: the tests of the Python scripts (the Mitsuba cross-check's geometry).
+    Python,
 }
 
 impl Tool {
     /// Every tool, in the order the README lists them.
-    pub const ALL: [Tool; 4] = [Tool::GnuParallel, Tool::Chromium, Tool::Xvfb, Tool::Slurm];
+    pub const ALL: [Tool; 5] = [
+        Tool::GnuParallel,
+        Tool::Chromium,
+        Tool::Xvfb,
+        Tool::Slurm,
+        Tool::Python,
+    ];
 
     /// A short name for messages.
     pub const fn name(self) -> &'static str {
@@ -39,6 +47,7 @@ impl Tool {
             Tool::Chromium => "Chromium",
             Tool::Xvfb => "Xvfb",
             Tool::Slurm => "Slurm",
+            Tool::Python => "Python 3",
         }
     }
 
@@ -49,6 +58,7 @@ impl Tool {
             Tool::Chromium => &["chromium", "chromium-browser"],
             Tool::Xvfb => &["Xvfb"],
             Tool::Slurm => &["sbatch"],
+            Tool::Python => &["python3"],
         }
     }
 
@@ -59,6 +69,7 @@ impl Tool {
             Tool::Chromium => "bash scripts/install_chromium.sh",
             Tool::Xvfb => "apt-get install xvfb",
             Tool::Slurm => "bash scripts/slurm_local.sh start (installs and starts slurm-wlm)",
+            Tool::Python => "apt-get install python3",
         }
     }
 
