@@ -418,8 +418,9 @@ impl ShapeInputs<'_> {
                     bytes,
                     first,
                     format!(
-                        "{} surface extractions ({copies} copies in all) of about {per_extraction} triangles each",
-                        extractions.len()
+                        "{} surface extractions ({copies} copies in all) of about {per_extraction} triangles each on grids of {} cells a side",
+                        extractions.len(),
+                        options.surface_resolution()
                     ),
                     "the extraction grid (--opt surface_res)",
                 ));
