@@ -217,6 +217,13 @@ cases! {
             "objects": [{"shape": {"subtraction": {"children": [
                 {"shape": {"box": {"half_extents": [3, 3, 4]}}},
                 {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0.3, 0, 2.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
+    // The camera inside a box minus a sphere, looking at the exit surface across the seam
+    // where the removed sphere meets the box's face (sphere tracing once left holes along it).
+    camera_inside_subtraction_seam => r#"{"camera": {"position": [0.2, 0.1, -0.3], "look_at": [0.5, -0.2, 3], "vfov_deg": 70, "width": 256, "height": 192},
+            "objects": [{"shape": {"subtraction": {"children": [
+                {"shape": {"box": {"half_extents": [1.5, 1.0, 1.5]}}},
+                {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [0.6, 0.2, 1.6]}}]}},
+              "transform": {"translate": [0, 0, 0.5]}}]}"#,
     camera_inside_union => r#"{"camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 70},
             "objects": [{"shape": {"union": {"children": [
                 {"shape": {"sphere": {"radius": 2}}, "transform": {"translate": [0, 0, 0.5]}},
@@ -321,6 +328,7 @@ pub fn run_backend_case<B: Backend>(id: CaseId, settings: &B::Settings) -> CaseR
 /// what the scene means, not an approximation (the camera-inside and sdf-holes scenes).
 pub const TWO_PIXEL_CASES: &[CaseId] = &[
     CaseId::camera_inside_one,
+    CaseId::camera_inside_subtraction_seam,
     CaseId::flat_ellipsoid_before_triangle,
 ];
 
@@ -381,7 +389,7 @@ macro_rules! conformance_suite {
              smooth_intersection, smooth_subtraction, rounded_box, capsule, capped_cone,
              repeat_finite,
              repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin,
-             camera_inside_subtraction, bunny],
+             camera_inside_subtraction, camera_inside_subtraction_seam, bunny],
             [camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat],
             [flat_ellipsoid_before_triangle]);
     };

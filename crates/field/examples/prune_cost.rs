@@ -7,7 +7,7 @@
 //! whether both variants agree on every ray's hit or miss.
 //!
 //! `cargo run --release -p marchmesh-field --example prune_cost -- SCENE.json... [--side N]
-//! [--rounds R] [--depth D]`
+//! [--rounds R] [--depth D] [--exact]` (`--exact`: prune without cutting smooth folds)
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -77,6 +77,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut scenes, mut side, mut rounds, mut depth) = (Vec::new(), 128u32, 3usize, 6u32);
+    // The sdf backend's default (`marchmesh_sdf::PRUNE_MAX_ERROR_REL`); `--exact` for 0.
+    let mut max_error_rel = 1.0 / 16_777_216.0;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut num = || -> Result<u32, Box<dyn std::error::Error>> {
@@ -86,6 +88,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--side" => side = num()?,
             "--rounds" => rounds = num()? as usize,
             "--depth" => depth = num()?,
+            "--exact" => max_error_rel = 0.0,
             _ => scenes.push(PathBuf::from(a)),
         }
     }
@@ -94,7 +97,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let whole = Field::compile_scene(&scene, &FieldOptions::default())?;
         let mut pruned = Field::compile_scene(&scene, &FieldOptions::default())?;
         let t0 = Instant::now();
-        let stats = pruned.build_cells(depth);
+        let stats = pruned.build_cells(depth, max_error_rel);
         let build_ms = t0.elapsed().as_secs_f64() * 1e3;
         let cam = &scene.camera;
         let half = (0.5 * cam.vfov_rad).tan();

@@ -510,20 +510,22 @@ impl Field {
     /// Prunes the program per region ([`prune::Cells`]): an octree of `2^depth` finest cells
     /// per axis over the field's box, each cell holding the program restricted to the nodes
     /// that can matter in it, or a far bound where no surface is. Point queries then evaluate
-    /// the cell's program (the same value as the whole program's, bit for bit) or the far
+    /// the cell's program (within `max_error_rel` times the box's longest side of the whole
+    /// program's value; bit for bit with `0`: see [`prune::prune`]) or the far
     /// bound (a safe bound of the distance to any surface with the field's sign, at least half
     /// the cell's radius: never mistaken for a hit). An octree over its node budget
     /// ([`prune::Cells::max_nodes`]) is retried one level shallower. Does nothing and returns
     /// `None` when the field is unbounded, has mesh grids or was built
     /// [`Field::without_bounds`].
-    pub fn build_cells(&mut self, depth: u32) -> Option<prune::CellStats> {
+    pub fn build_cells(&mut self, depth: u32, max_error_rel: f64) -> Option<prune::CellStats> {
         let (lo, hi) = self.bounds?;
+        let max_error = max_error_rel * (hi - lo).max_element();
         let t0 = Instant::now();
         // Over its node budget an octree is retried one level shallower.
         let cells = (1..=depth.min(8)).rev().find_map(|depth| {
             // Half a finest cell of margin around the surfaces' box.
             let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
-            prune::Cells::build(&self.p64, &self.grids, (lo, hi), pad, depth)
+            prune::Cells::build(&self.p64, &self.grids, (lo, hi), pad, depth, max_error)
         })?;
         let stats = cells.stats();
         self.report

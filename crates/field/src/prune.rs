@@ -48,7 +48,8 @@ const SLACK_REL: f64 = 2e-5;
 /// A program restricted to a ball, and the interval of its value there.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Pruned {
-    /// The restricted program: equal to the whole program at every point of the ball.
+    /// The restricted program: within the `max_error` given to [`prune`] of the whole
+    /// program at every point of the ball (equal to it for `0`).
     pub program: Program<f64>,
     /// Lower bound of the value over the ball (`-inf` when unknown).
     pub lo: f64,
@@ -60,12 +61,16 @@ pub struct Pruned {
 }
 
 /// `prog` restricted to the ball of radius `radius` around `centre` (in the frame the program
-/// is evaluated in). Exact inside the ball; never fails (an empty program stays empty).
+/// is evaluated in), within `max_error` inside the ball: `0` keeps the whole program's value
+/// bit for bit, a positive `max_error` lets smooth unions drop the start of their fold where
+/// it changes the value by less than that (see `Pruner::smooth_union_keep`). Never fails
+/// (an empty program stays empty).
 pub fn prune(
     prog: &Program<f64>,
     grids: &[Box<dyn GridSampler>],
     centre: DVec3,
     radius: f64,
+    max_error: f64,
 ) -> Pruned {
     if prog.instrs.is_empty() {
         return Pruned {
@@ -80,6 +85,12 @@ pub fn prune(
         grids,
         out: Vec::with_capacity(prog.instrs.len().min(1024)),
         source: Vec::with_capacity(prog.instrs.len().min(1024)),
+        // Errors of nested cuts add along a path of at most MAX_PRUNE_DEPTH + 1 nodes.
+        cut_error: if max_error.is_finite() && max_error > 0.0 {
+            max_error / (MAX_PRUNE_DEPTH + 1) as f64
+        } else {
+            0.0
+        },
     };
     let c = V3::new(centre.x, centre.y, centre.z);
     let (lo, hi) = p.interval(0, c, radius);
@@ -98,6 +109,8 @@ struct Pruner<'a> {
     out: Vec<Instr<f64>>,
     /// Index in `prog` of each node of `out`.
     source: Vec<u32>,
+    /// Largest change of one smooth union's value its prefix cut may make (0: exact).
+    cut_error: f64,
 }
 
 /// An upper bound of the stretch of `a`'s linear part (its Frobenius norm; 1 for none).
@@ -141,6 +154,72 @@ impl Pruner<'_> {
             self.out.push(n);
         }
         self.source.extend(i as u32..end as u32);
+    }
+
+    /// The children of a smooth union (a left fold `f_j = smin(f_{j-1}, a_j)`) to keep, from
+    /// each child's interval `(index, lo, hi)` over the ball.
+    ///
+    /// Exact rules: a child with `a_j >= P.hi + k` (`P` the prefix's interval, folded by
+    /// interval arithmetic: `smin` is non-decreasing in both arguments) leaves the fold
+    /// unchanged and is dropped; a child with `a_j <= P.lo - k` replaces it (`smin = a_j`), so
+    /// every child before it is dropped.
+    ///
+    /// Cut within `self.cut_error`: starting the fold at child `c` instead (dropping the
+    /// children before it) changes `f_c` by at most `k h^2 / 4` where the child lies below the
+    /// prefix over the whole ball (`h = max(k - (P.lo - a.hi), 0) / k`), and a change of the
+    /// prefix reaches the result through `d smin(x, a) / dx`, which is `h / 2 <= 1/2` where
+    /// the child is below `x` and at most 1 anywhere (so later steps never amplify it, and
+    /// a dropped no-op child passes it unchanged). The latest `c` whose change, times the
+    /// product of the later steps' derivative bounds, is within the budget is taken: in an
+    /// approach chain (each child nearer than the running blend) the prefix's influence
+    /// halves at least with every step, so a few dozen children remain instead of the whole
+    /// chain.
+    fn smooth_union_keep(&self, kids: &[(usize, f64, f64)], k: f64, inv_k: f64) -> Vec<usize> {
+        // Kept children with the prefix interval before each.
+        let mut chain: Vec<(usize, f64, f64, f64, f64)> = Vec::new();
+        let mut fold: Option<(f64, f64)> = None;
+        for &(j, lo, hi) in kids {
+            match fold {
+                None => {
+                    chain.push((j, lo, hi, f64::INFINITY, f64::INFINITY));
+                    fold = Some((lo, hi));
+                }
+                Some((plo, phi)) => {
+                    if lo >= phi + k {
+                        // smin(f, a_j) = f exactly: a no-op.
+                        continue;
+                    }
+                    if plo >= hi + k {
+                        // smin(f, a_j) = a_j exactly: the prefix no longer matters.
+                        chain.clear();
+                        chain.push((j, lo, hi, f64::INFINITY, f64::INFINITY));
+                        fold = Some((lo, hi));
+                        continue;
+                    }
+                    chain.push((j, lo, hi, plo, phi));
+                    fold = Some((
+                        shapes::smin(plo, lo, k, inv_k),
+                        shapes::smin(phi, hi, k, inv_k),
+                    ));
+                }
+            }
+        }
+        let mut start = 0;
+        if self.cut_error > 0.0 && chain.len() > 1 {
+            // `after`: the product of the derivative bounds of the steps after `c`.
+            let mut after = 1.0f64;
+            for c in (1..chain.len()).rev() {
+                let (_, _, hi, plo, _) = chain[c];
+                let below = plo >= hi;
+                let h = ((k - (plo - hi)) * inv_k).clamp(0.0, 1.0);
+                if below && 0.25 * k * h * h * after <= self.cut_error {
+                    start = c;
+                    break;
+                }
+                after *= if below { 0.5 * h } else { 1.0 };
+            }
+        }
+        chain[start..].iter().map(|c| c.0).collect()
     }
 
     /// Emits node `i` (kept) restricted to the ball `(c, r)` in its parent's frame.
@@ -187,38 +266,7 @@ impl Pruner<'_> {
                 op: SmoothOp::Union,
                 k,
                 inv_k,
-            } => {
-                let (k, inv_k) = (*k, *inv_k);
-                let mut kept = Vec::new();
-                let mut fold: Option<(f64, f64)> = None;
-                for &(j, lo, hi) in &kids {
-                    match fold {
-                        None => {
-                            kept.push(j);
-                            fold = Some((lo, hi));
-                        }
-                        Some((plo, phi)) => {
-                            if lo >= phi + k {
-                                // smin(f, a_j) = f exactly: a no-op.
-                                continue;
-                            }
-                            if plo >= hi + k {
-                                // smin(f, a_j) = a_j exactly: the prefix no longer matters.
-                                kept.clear();
-                                kept.push(j);
-                                fold = Some((lo, hi));
-                                continue;
-                            }
-                            kept.push(j);
-                            fold = Some((
-                                shapes::smin(plo, lo, k, inv_k),
-                                shapes::smin(phi, hi, k, inv_k),
-                            ));
-                        }
-                    }
-                }
-                kept
-            }
+            } => self.smooth_union_keep(&kids, *k, *inv_k),
             // A smooth maximum fold `f_j = smax(f_{j-1}, b_j)` (`b_j` the child, negated for a
             // subtraction): a child at least `k` below the prefix's lower bound leaves it
             // unchanged (`h` is exactly 0) and is dropped; nothing else is (the prefix interval
@@ -331,15 +379,19 @@ impl Cells {
     /// axis (`depth` at most 8). `None` when the box is not finite, the program holds a
     /// mesh grid (grids are not Lipschitz bounds, see the module docs), or the cells'
     /// programs would hold more than [`Cells::max_nodes`] nodes in all (the build stops there:
-    /// memory and time stay bounded).
+    /// memory and time stay bounded). Every cell's program is within `max_error` of the
+    /// whole program in the cell (each level of the octree prunes within its share), and far
+    /// bounds are lowered by it: `0` keeps values bit for bit.
     pub fn build(
         prog: &Program<f64>,
         grids: &[Box<dyn GridSampler>],
         bounds: (DVec3, DVec3),
         pad: f64,
         depth: u32,
+        max_error: f64,
     ) -> Option<Cells> {
         let depth = depth.min(8);
+        let max_error = if max_error.is_finite() { max_error.max(0.0) } else { 0.0 };
         if !(bounds.0.is_finite() && bounds.1.is_finite() && pad > 0.0)
             || prog
                 .instrs
@@ -365,7 +417,17 @@ impl Cells {
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let whole: Vec<u32> = (0..prog.instrs.len() as u32).collect();
-        let built = cells.build_cell(prog, &whole, grids, lo, hi, [0; 3], res, budget);
+        let level_error = max_error / f64::from(depth + 1);
+        let built = cells.build_cell(
+            prog,
+            &whole,
+            grids,
+            (lo, hi),
+            [0; 3],
+            res,
+            budget,
+            (level_error, max_error),
+        );
         cells.by_source = std::collections::HashMap::new();
         built.then_some(cells)
     }
@@ -382,22 +444,23 @@ impl Cells {
         prog: &Program<f64>,
         prog_source: &[u32],
         grids: &[Box<dyn GridSampler>],
-        lo: DVec3,
-        hi: DVec3,
+        (lo, hi): (DVec3, DVec3),
         at: [u32; 3],
         span: u32,
         budget: usize,
+        (level_error, max_error): (f64, f64),
     ) -> bool {
         let radius = 0.5 * (hi - lo).length();
-        let mut pruned = prune(prog, grids, 0.5 * (lo + hi), radius);
+        let mut pruned = prune(prog, grids, 0.5 * (lo + hi), radius, level_error);
         for s in &mut pruned.source {
             *s = prog_source[*s as usize];
         }
         let nodes = pruned.program.instrs.len();
-        let far = if pruned.lo >= FAR_FRACTION * radius {
-            Some(pruned.lo)
-        } else if pruned.hi <= -FAR_FRACTION * radius {
-            Some(pruned.hi)
+        // The parent's program may be up to `max_error` off the whole field's value.
+        let far = if pruned.lo >= FAR_FRACTION * radius + max_error {
+            Some(pruned.lo - max_error)
+        } else if pruned.hi <= -FAR_FRACTION * radius - max_error {
+            Some(pruned.hi + max_error)
         } else {
             None
         };
@@ -442,11 +505,11 @@ impl Cells {
                     &pruned.program,
                     &pruned.source,
                     grids,
-                    DVec3::new(x0, y0, z0),
-                    DVec3::new(x1, y1, z1),
+                    (DVec3::new(x0, y0, z0), DVec3::new(x1, y1, z1)),
                     sub,
                     half,
                     budget,
+                    (level_error, max_error),
                 ) {
                     return false;
                 }

@@ -1,6 +1,7 @@
 //! Pruning per region (`marchmesh_field::prune`): the pruned cells give the whole program's
-//! value bit for bit wherever they hold a program, and elsewhere a positive lower bound of the
-//! distance to the surfaces; on random trees of every operator.
+//! value bit for bit wherever they hold a program (within the stated error when a smooth
+//! union's fold may be cut), and elsewhere a positive lower bound of the distance to the
+//! surfaces; on random trees of every operator.
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::prune::prune;
@@ -70,7 +71,7 @@ fn probes(n: usize) -> Vec<DVec3> {
 fn check_cells(n: &Node, depth: u32) {
     let whole = compile(n);
     let mut cells = compile(n);
-    let stats = cells.build_cells(depth).expect("bounded, no meshes");
+    let stats = cells.build_cells(depth, 0.0).expect("bounded, no meshes");
     assert!(stats.program_cells > 0);
     let mut exact = 0;
     for p in probes(24) {
@@ -138,7 +139,7 @@ fn the_hard_true_distance_bounds_the_far_cells() {
     let centres: Vec<DVec3> = children.iter().map(|c| c.transform.translation).collect();
     let hard = node(NodeKind::Union(children), DVec3::ZERO);
     let mut f = compile(&hard);
-    f.build_cells(5).expect("cells");
+    f.build_cells(5, 0.0).expect("cells");
     for p in probes(20) {
         let exact = centres
             .iter()
@@ -179,7 +180,7 @@ fn a_smooth_fold_keeps_what_comes_before_a_near_child() {
     let prog = whole_program(&n);
     for r in [0.01, 0.1, 0.5] {
         let p = DVec3::new(0.1, 0.0, 0.0);
-        let pruned = prune(&prog, &[], p, r);
+        let pruned = prune(&prog, &[], p, r, 0.0);
         let got = eval64(&pruned.program, p);
         assert_eq!(got.to_bits(), whole.distance_f64(p).to_bits(), "r = {r}");
         assert!(pruned.lo <= got && got <= pruned.hi);
@@ -238,7 +239,7 @@ proptest! {
     fn random_trees_prune_exactly(tree in arb_tree(), depth in 1u32..5) {
         let whole = compile(&tree);
         let mut cells = compile(&tree);
-        if cells.build_cells(depth).is_none() {
+        if cells.build_cells(depth, 0.0).is_none() {
             return Ok(());
         }
         for p in probes(10) {
@@ -246,5 +247,64 @@ proptest! {
             let (w, c) = (whole.distance(p.as_vec3()), cells.distance(p.as_vec3()));
             prop_assert!(w.to_bits() == c.to_bits() || (c != 0.0 && (c > 0.0) == (w > 0.0)), "{} vs {}", w, c);
         }
+    }
+}
+
+/// Largest `|cells - whole|` (f64) over the probes where the cells hold a program, and
+/// whether every far answer has the whole field's sign.
+fn deviation(whole: &Field, cells: &Field, points: &[DVec3]) -> f64 {
+    let mut worst = 0.0f64;
+    for &p in points {
+        let (w, c) = (whole.distance_f64(p), cells.distance_f64(p));
+        worst = worst.max((w - c).abs());
+        let b = cells.distance_bound_f64(p);
+        assert!(
+            b == c || (b != 0.0 && (b > 0.0) == (w > 0.0) && b.abs() <= w.abs() + 1e-6),
+            "{p}: far bound {b}, whole {w}"
+        );
+    }
+    worst
+}
+
+#[test]
+fn a_cut_fold_stays_within_its_error_and_keeps_few_children() {
+    // The molecule's approach chains: an exact pruner keeps every sphere whose blend still
+    // reaches a cell; cutting the fold where its start changes the value by less than the
+    // error keeps far fewer, and the values stay within the error.
+    let m = molecule(600, 11, 0.026);
+    let whole = compile(&m);
+    let mut exact = compile(&m);
+    let exact_stats = exact.build_cells(5, 0.0).expect("cells");
+    let mut cut = compile(&m);
+    let rel = 1e-7;
+    let cut_stats = cut.build_cells(5, rel).expect("cells");
+    let (lo, hi) = whole.bounds().expect("bounded");
+    let max_error = rel * (hi - lo).max_element();
+    let worst = deviation(&whole, &cut, &probes(24));
+    assert!(worst <= max_error, "deviation {worst} over {max_error}");
+    let mean = |s: marchmesh_field::prune::CellStats| {
+        s.program_nodes as f64 / (s.program_cells - s.shared_cells).max(1) as f64
+    };
+    assert!(
+        mean(cut_stats) * 2.0 < mean(exact_stats),
+        "cut {cut_stats:?} against exact {exact_stats:?}"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_trees_prune_within_the_error(tree in arb_tree(), depth in 1u32..5, exp in 3i32..9) {
+        let whole = compile(&tree);
+        let mut cells = compile(&tree);
+        let rel = 10f64.powi(-exp);
+        if cells.build_cells(depth, rel).is_none() {
+            return Ok(());
+        }
+        let (lo, hi) = whole.bounds().expect("bounded");
+        let max_error = rel * (hi - lo).max_element();
+        let worst = deviation(&whole, &cells, &probes(10));
+        prop_assert!(worst <= max_error * (1.0 + 1e-9) + 1e-15, "{} over {}", worst, max_error);
     }
 }

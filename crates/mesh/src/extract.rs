@@ -19,6 +19,10 @@ pub const MAX_SURFACE_RESOLUTION: u32 = 512;
 /// Composites whose field has fewer nodes are sampled without pruning per region.
 const PRUNE_MIN_NODES: usize = 16;
 
+/// Largest change the pruning per region may make to the sampled field, as a fraction of the
+/// field's box: 2^-24, below the f32 rounding of the samples.
+const PRUNE_MAX_ERROR_REL: f64 = 1.0 / 16_777_216.0;
+
 /// Extracts the surface of a composite node in its local frame (the frame before
 /// `node.transform`) from the shared distance field (`marchmesh-field`).
 ///
@@ -56,7 +60,7 @@ pub(crate) fn extract(
         let depth = (resolution.clamp(8, MAX_SURFACE_RESOLUTION) / 8)
             .ilog2()
             .min(6);
-        field.build_cells(depth);
+        field.build_cells(depth, PRUNE_MAX_ERROR_REL);
     }
     Ok(extract_surface(
         |p| field.distance_bound_f64(p) as f32,

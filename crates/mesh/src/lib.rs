@@ -49,9 +49,10 @@ use blas::{Blas, BlasHit, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
 pub use options::{
-    BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, MAX_SEGMENTS_PER_TURN, MAX_TESS_LEVEL,
-    MeshOptions, MeshPreset, Tessellation,
+    BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, Extraction, MAX_SEGMENTS_PER_TURN,
+    MAX_TESS_LEVEL, MeshOptions, MeshPreset, Tessellation,
 };
+pub use extract::MAX_SURFACE_RESOLUTION;
 pub use settings::MeshBackend;
 use tessellate::{Detail, LocalMesh, ScreenBudget};
 
@@ -404,25 +405,32 @@ impl ShapeInputs<'_> {
                 placements.len() as u64
             }
         };
-        let extractions: Vec<(&str, u64)> = groups
-            .iter()
-            .filter(|(key, _)| matches!(key, ShapeKey::Composite(_)))
-            .map(|(_, placements)| (placements[0].node.json_path.as_str(), copies_of(placements)))
-            .collect();
-        if let Some((first, _)) = extractions.first() {
-            let per_extraction = extracted_triangles_estimate(options.surface_resolution());
-            let copies: u64 = extractions.iter().map(|(_, c)| c).sum();
-            let bytes = triangle_bytes(per_extraction, copies);
+        let mut extractions: Vec<(&str, u64, u32)> = Vec::new();
+        for (key, placements) in groups {
+            if matches!(key, ShapeKey::Composite(_)) {
+                extractions.push((
+                    placements[0].node.json_path.as_str(),
+                    copies_of(placements),
+                    self.extraction_resolution(placements)?,
+                ));
+            }
+        }
+        if let Some((first, ..)) = extractions.first() {
+            let bytes = extractions
+                .iter()
+                .map(|&(_, copies, res)| triangle_bytes(extracted_triangles_estimate(res), copies))
+                .fold(0u64, u64::saturating_add);
             if budget.planned_bytes.saturating_add(bytes) > budget.limit_bytes {
+                let copies: u64 = extractions.iter().map(|e| e.1).sum();
+                let finest = extractions.iter().map(|e| e.2).max().unwrap_or(0);
                 return Err(budget.refusal(
                     bytes,
                     first,
                     format!(
-                        "{} surface extractions ({copies} copies in all) of about {per_extraction} triangles each on grids of {} cells a side",
-                        extractions.len(),
-                        options.surface_resolution()
+                        "{} surface extractions ({copies} copies in all) on grids of up to {finest} cells a side",
+                        extractions.len()
                     ),
-                    "the extraction grid (--opt surface_res)",
+                    EXTRACTION_KNOB,
                 ));
             }
         }
@@ -434,7 +442,15 @@ impl ShapeInputs<'_> {
                     Some(self.tessellate(node, placements, copies, &mut budget, report)?)
                 }
                 ShapeKey::Composite(_) => {
-                    Some(self.extract(node, copies, &mut budget, &mut extract_time, report)?)
+                    let resolution = self.extraction_resolution(placements)?;
+                    Some(self.extract(
+                        node,
+                        resolution,
+                        copies,
+                        &mut budget,
+                        &mut extract_time,
+                        report,
+                    )?)
                 }
                 ShapeKey::Mesh(path) => {
                     let triangles = self
@@ -542,26 +558,59 @@ impl ShapeInputs<'_> {
         Ok(mesh)
     }
 
-    /// A CSG node's surface extracted from its distance field.
+    /// The extraction grid's cells along the longest side of a composite's bounds: by
+    /// [`MeshOptions::extraction`], on screen from the nearest placement (one mesh serves
+    /// every placement, so the finest need wins), clamped to `8..=MAX_SURFACE_RESOLUTION`.
+    fn extraction_resolution(&self, placements: &[&Placement]) -> Result<u32, MeshError> {
+        let pixels = match self.options.extraction()? {
+            Extraction::Cells(cells) => return Ok(cells),
+            Extraction::ScreenCell { pixels } => pixels,
+        };
+        let Some(local) = build::local_bounds(placements[0].node, self.mesh_bounds) else {
+            // Unbounded: the extraction refuses it, naming the node.
+            return Ok(8);
+        };
+        let cell_per_distance = pixels * self.scene.camera.pixel_angle();
+        let finest = placements
+            .iter()
+            .map(|p| {
+                let world = build::transform_bounds(&p.to_render, local);
+                let size = (world.1 - world.0).max_element();
+                // A camera on or inside the bounds sees it at most a thousandth of its size
+                // away (as the tessellation's screen budget assumes).
+                let distance = build::distance_to_box(world).max(1e-3 * size);
+                size / (cell_per_distance * distance)
+            })
+            .fold(0.0f64, f64::max);
+        let max = f64::from(extract::MAX_SURFACE_RESOLUTION);
+        Ok(if finest.is_nan() {
+            extract::MAX_SURFACE_RESOLUTION
+        } else {
+            finest.ceil().clamp(8.0, max) as u32
+        })
+    }
+
+    /// A CSG node's surface extracted from its distance field on a grid of `resolution`
+    /// cells along its longest side.
     fn extract(
         &self,
         node: &Node,
+        resolution: u32,
         copies: u64,
         budget: &mut BuildBudget,
         extract_time: &mut Duration,
         report: &mut GeometryReport,
     ) -> Result<LocalMesh, MeshError> {
-        let (options, mesh_bounds) = (self.options, self.mesh_bounds);
         let te = Instant::now();
-        let local = build::local_bounds(node, mesh_bounds);
+        let local = build::local_bounds(node, self.mesh_bounds);
         // Meshes inside a CSG node are baked to distance grids as fine as the
         // extraction grid: a finer bake would not show, a coarser one would.
         let field_options = marchmesh_field::FieldOptions {
-            mesh_grid_resolution: options.surface_resolution(),
+            mesh_grid_resolution: resolution,
             cache_dir: None,
             ..marchmesh_field::FieldOptions::DEFAULT
         };
-        let cells = u64::from(options.surface_resolution() + 1).pow(3);
+        let cells = u64::from(resolution + 1).pow(3);
         budget.take(
             cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
             false,
@@ -569,24 +618,24 @@ impl ShapeInputs<'_> {
             || {
                 format!(
                     "a surface-extraction grid of {}^3 cells",
-                    options.surface_resolution()
+                    resolution
                 )
             },
-            "the extraction grid (--opt surface_res)",
+            EXTRACTION_KNOB,
         )?;
-        let mesh = extract::extract(node, local, options.surface_resolution(), &field_options)?;
+        let mesh = extract::extract(node, local, resolution, &field_options)?;
         budget.take(
             triangle_bytes(mesh.triangles.len() as u64, copies),
             true,
             &node.json_path,
             || format!("{} extracted triangles", mesh.triangles.len()),
-            "the extraction grid (--opt surface_res)",
+            EXTRACTION_KNOB,
         )?;
         report.notes.push(format!(
             "{}: surface extracted from the distance field, {} triangles at resolution {}",
             node.json_path,
             mesh.triangles.len(),
-            options.surface_resolution()
+            resolution
         ));
 
         *extract_time += te.elapsed();
@@ -683,6 +732,9 @@ impl ShapeInputs<'_> {
 /// (surface nets emit two triangles per grid face the surface crosses: `2 pi res^2`). A
 /// surface with more area in the same box (many small parts) gives more; the exact count is
 /// charged after each extraction.
+/// What to change when extraction is over the memory limit.
+const EXTRACTION_KNOB: &str = "the extraction grid (--opt surface_px or surface_res)";
+
 fn extracted_triangles_estimate(resolution: u32) -> u64 {
     let r = u64::from(resolution);
     (r * r).saturating_mul(2 * 314) / 100
@@ -812,12 +864,19 @@ fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
         }
         _ => {}
     }
-    if o.surface_resolution() < 8 || o.surface_resolution() > extract::MAX_SURFACE_RESOLUTION {
-        return Err(MeshError::InvalidOption(format!(
-            "surface_resolution must be in 8..={}, got {}",
-            extract::MAX_SURFACE_RESOLUTION,
-            o.surface_resolution()
-        )));
+    match o.extraction()? {
+        Extraction::Cells(cells) if !(8..=extract::MAX_SURFACE_RESOLUTION).contains(&cells) => {
+            return Err(MeshError::InvalidOption(format!(
+                "surface_res must be in 8..={}, got {cells}",
+                extract::MAX_SURFACE_RESOLUTION,
+            )));
+        }
+        Extraction::ScreenCell { pixels } if !(pixels.is_finite() && pixels > 0.0) => {
+            return Err(MeshError::InvalidOption(format!(
+                "surface_px must be > 0, got {pixels}"
+            )));
+        }
+        _ => {}
     }
     if !(8..=MAX_SEGMENTS_PER_TURN).contains(&o.max_segments_per_turn()) {
         return Err(MeshError::InvalidOption(format!(

@@ -71,6 +71,22 @@ impl BuildQuality {
     }
 }
 
+/// How finely CSG and smooth-blend objects are extracted from their distance field.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Extraction {
+    /// An extraction cell, projected on screen from the object's nearest distance to the
+    /// camera, spans at most `pixels` pixels: cell `pixels * camera.pixel_angle() * distance`
+    /// (the grid clamped to `8..=`[`crate::MAX_SURFACE_RESOLUTION`] cells on the longest
+    /// side). Features thinner than a cell can vanish, so this is what keeps blended content
+    /// right on screen. `pixels` must be > 0.
+    ScreenCell {
+        /// Cell size on screen in pixels (e.g. 1).
+        pixels: f64,
+    },
+    /// A fixed grid: this many cells along the longest side of the object's bounds.
+    Cells(u32),
+}
+
 /// How finely analytic shapes are tessellated.
 ///
 /// The chord error is the largest distance between the exact surface and its triangles.
@@ -97,12 +113,13 @@ pub enum Tessellation {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum MeshPreset {
-    /// [`MeshOptions::fast`]: Bvh2, fast build, 1-pixel tessellation, 64-cell extraction.
+    /// [`MeshOptions::fast`]: Bvh2, fast build, 1-pixel tessellation, 2-pixel extraction cells.
     Fast,
     /// [`MeshOptions::DEFAULT`].
     #[default]
     Default,
-    /// [`MeshOptions::quality`]: CwBvh, slow build, 0.1-pixel tessellation, 256 cells.
+    /// [`MeshOptions::quality`]: CwBvh, slow build, 0.1-pixel tessellation, half-pixel
+    /// extraction cells.
     Quality,
 }
 
@@ -118,7 +135,8 @@ impl MeshPreset {
             tess_px: Some(0.25),
             tess_chord: None,
             tess_level: None,
-            surface_res: Some(128),
+            surface_px: Some(1.0),
+            surface_res: None,
             packets: Some(true),
             instancing: Some(true),
             max_instances: Some(1 << 22),
@@ -131,14 +149,14 @@ impl MeshPreset {
                 bvh: Some(BvhKind::Bvh2),
                 build: Some(BuildQuality::Fast),
                 tess_px: Some(1.0),
-                surface_res: Some(64),
+                surface_px: Some(2.0),
                 ..DEFAULT
             },
             MeshPreset::Quality => MeshOptions {
                 bvh: Some(BvhKind::CwBvh),
                 build: Some(BuildQuality::Slow),
                 tess_px: Some(0.1),
-                surface_res: Some(256),
+                surface_px: Some(0.5),
                 ..DEFAULT
             },
         }
@@ -173,9 +191,15 @@ pub struct MeshOptions {
     ///
     /// [`Tessellation::FixedLevel`], at most [`MAX_TESS_LEVEL`].
     pub tess_level: Option<u32>,
-    /// Surface-nets cells on the longest side of CSG / smooth-union objects (8..=512).
+    /// Surface-extraction cell on screen, pixels, at the object's nearest point.
     ///
-    /// Grid cells along the longest side of the object's bounds. Default 128.
+    /// [`Extraction::ScreenCell`]: CSG and smooth-blend objects are meshed (surface nets)
+    /// on a grid whose cells project to at most this many pixels; default 1.
+    pub surface_px: Option<f64>,
+    /// Fixed surface-nets cells on the longest side of CSG objects, 8..=512 (instead of surface_px).
+    ///
+    /// [`Extraction::Cells`]: grid cells along the longest side of the object's bounds,
+    /// whatever the camera.
     pub surface_res: Option<u32>,
     /// Trace 8 rays of a batch as one packet (bvh=wide, no instances).
     ///
@@ -229,6 +253,7 @@ impl MeshOptions {
         tess_px: None,
         tess_chord: None,
         tess_level: None,
+        surface_px: None,
         surface_res: None,
         packets: None,
         instancing: None,
@@ -237,8 +262,8 @@ impl MeshOptions {
         memory_limit_bytes: 4 << 30,
     };
 
-    /// The fast preset: Bvh2, `fast_build`, 1-pixel tessellation error, 64-cell surface
-    /// extraction. For previews and tests.
+    /// The fast preset: Bvh2, `fast_build`, 1-pixel tessellation error, 2-pixel surface
+    /// extraction cells. For previews and tests.
     pub const fn fast() -> Self {
         Self {
             preset: Some(MeshPreset::Fast),
@@ -246,8 +271,8 @@ impl MeshOptions {
         }
     }
 
-    /// The quality preset: CwBvh, `slow_build`, 0.1-pixel tessellation error, 256-cell
-    /// surface extraction.
+    /// The quality preset: CwBvh, `slow_build`, 0.1-pixel tessellation error, half-pixel
+    /// surface extraction cells.
     pub const fn quality() -> Self {
         Self {
             preset: Some(MeshPreset::Quality),
@@ -292,9 +317,21 @@ impl MeshOptions {
         })
     }
 
-    /// Surface-nets cells on the longest side (`surface_res`).
-    pub fn surface_resolution(&self) -> u32 {
-        self.pick(|o| o.surface_res)
+    /// The extraction grid: by `surface_px` or `surface_res` if given, else the preset's.
+    /// Errors: both are given.
+    pub fn extraction(&self) -> Result<Extraction, crate::MeshError> {
+        Ok(match (self.surface_px, self.surface_res) {
+            (None, None) => Extraction::ScreenCell {
+                pixels: self.pick(|o| o.surface_px),
+            },
+            (Some(pixels), None) => Extraction::ScreenCell { pixels },
+            (None, Some(cells)) => Extraction::Cells(cells),
+            (Some(_), Some(_)) => {
+                return Err(crate::MeshError::InvalidOption(
+                    "give one of surface_px, surface_res".into(),
+                ));
+            }
+        })
     }
 
     /// Whether batches are traced as packets (`packets`).
@@ -337,11 +374,13 @@ mod tests {
             };
             let v = preset.values();
             assert_eq!(
-                (o.bvh(), o.build_quality(), o.surface_resolution()),
+                (o.bvh(), o.build_quality(), o.extraction().expect("valid")),
                 (
                     v.bvh.expect("set"),
                     v.build.expect("set"),
-                    v.surface_res.expect("set")
+                    Extraction::ScreenCell {
+                        pixels: v.surface_px.expect("set")
+                    }
                 )
             );
             assert_eq!(
@@ -365,7 +404,20 @@ mod tests {
             ..MeshOptions::fast()
         };
         assert_eq!(o.bvh(), BvhKind::CwBvh);
-        assert_eq!(o.surface_resolution(), 64);
+        assert_eq!(
+            o.extraction().expect("valid"),
+            Extraction::ScreenCell { pixels: 2.0 }
+        );
+        let fixed = MeshOptions {
+            surface_res: Some(96),
+            ..MeshOptions::fast()
+        };
+        assert_eq!(fixed.extraction().expect("valid"), Extraction::Cells(96));
+        let both = MeshOptions {
+            surface_px: Some(1.0),
+            ..fixed
+        };
+        assert!(both.extraction().is_err());
         assert_eq!(MeshOptions::DEFAULT.bvh(), BvhKind::Wide);
         let both = MeshOptions {
             tess_px: Some(1.0),

@@ -24,6 +24,11 @@ const SMOOTH_PRUNE_MIN_NODES: usize = 16;
 /// Octree depth of a smooth union's pruned field (`2^6` finest cells per axis).
 const SMOOTH_PRUNE_DEPTH: u32 = 6;
 
+/// Largest change the pruning may make to a smooth union's f64 field, as a fraction of its
+/// box's longest side: near f64's resolution, so the roots found are the whole field's to
+/// within far less than the root finder's tolerance (`smooth_union_tolerance`).
+const SMOOTH_PRUNE_MAX_ERROR_REL: f64 = 1e-13;
+
 /// Loads each mesh file once.
 pub(crate) struct Compiler<'a> {
     pub options: &'a ReferenceOptions,
@@ -178,10 +183,11 @@ impl Compiler<'_> {
                 )
                 .map_err(|e| unsupported(&format!("its distance field could not be built: {e}")))?;
                 // Pruned per region: the root finding then reads, at each point, only the
-                // children that can change the blend there (the same values bit for bit)
-                // and crosses empty cells in one step each.
+                // children that can change the blend there (values within
+                // SMOOTH_PRUNE_MAX_ERROR_REL of the whole field's) and crosses empty cells in
+                // one step each.
                 if field.node_count() >= SMOOTH_PRUNE_MIN_NODES {
-                    field.build_cells(SMOOTH_PRUNE_DEPTH);
+                    field.build_cells(SMOOTH_PRUNE_DEPTH, SMOOTH_PRUNE_MAX_ERROR_REL);
                 }
                 let bounds = field.bounds();
                 let size = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length().max(1e-300));

@@ -524,7 +524,9 @@ fn build_as<B: Backend>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use marchmesh_mesh::{BuildQuality, BvhKind, MeshBackend, MeshOptions, Tessellation};
+    use marchmesh_mesh::{
+        BuildQuality, BvhKind, Extraction, MeshBackend, MeshOptions, Tessellation,
+    };
     use marchmesh_reference::ReferenceBackend;
     use marchmesh_sdf::{HitEpsilon, SdfBackend, SdfOptions};
 
@@ -556,7 +558,7 @@ mod tests {
                 o.build_quality(),
                 o.tessellation().expect("consistent"),
             ),
-            (o.surface_resolution(), o.packets(), o.instancing()),
+            (o.extraction().expect("consistent"), o.packets(), o.instancing()),
             (
                 o.max_instances(),
                 o.max_segments_per_turn(),
@@ -647,7 +649,7 @@ mod tests {
         assert_eq!(m.bvh(), BvhKind::CwBvh);
         assert_eq!(m.build_quality(), BuildQuality::VerySlow);
         assert_eq!(m.tessellation().ok(), Some(Tessellation::FixedLevel(5)));
-        assert_eq!(m.surface_resolution(), 48);
+        assert_eq!(m.extraction().ok(), Some(Extraction::Cells(48)));
         assert!(!m.instancing());
         let e = mesh(&[("tess_level", "5"), ("tess_px", "2")]).unwrap_err();
         assert!(e.contains("one of tess_px, tess_chord, tess_level"), "{e}");

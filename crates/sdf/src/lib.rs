@@ -103,6 +103,10 @@ pub const CULL_MIN_NODES: usize = 8;
 /// to a tape (see the decision record on pruning per region).
 pub const PRUNE_MIN_NODES: usize = 16;
 
+/// Largest change pruning per region may make to the field, as a fraction of the field's
+/// box: 2^-24, below the f32 rounding of a point in the box, so the tracer cannot tell.
+pub const PRUNE_MAX_ERROR_REL: f64 = 1.0 / 16_777_216.0;
+
 /// Deepest octree [`SdfOptions::prune_depth`] accepts (`2^8` finest cells per axis: a 64 MiB
 /// index).
 pub const MAX_PRUNE_DEPTH: u32 = 8;
@@ -261,7 +265,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         &format!("must be in 0..={MAX_PRUNE_DEPTH}"),
     )?;
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
-        field.build_cells(opts.prune_depth);
+        field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
     }
     let inside = Inside::build(scene, &field, &field_opts)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
