@@ -11,7 +11,7 @@ Mitsuba depth, and normal angle errors.
     python3 scripts/crosscheck_mitsuba.py scenes/primitives.json /tmp/aov
 
 Mitsuba expresses: sphere (uniform scale), box, cylinder with caps (uniform scale), plane
-(a square of side 2 * render.max_distance around the camera's foot point), triangle, OBJ
+(a square of side 2 * render.max_distance around the camera's foot point, in render space), triangle, OBJ
 mesh, union (its children), repeat with finite counts (the union of whole copies), and
 every transform. Anything else (ellipsoid, torus, intersection, subtraction, smooth_union,
 infinite repetition, glTF, non-uniformly scaled spheres and cylinders) is declined with
@@ -92,6 +92,50 @@ def uniform_scale(m, path):
     return math.sqrt(s2)
 
 
+# --- planes (pure Python: testable without numpy or Mitsuba) ----------------------------
+
+def _dot(a, b):
+    return sum(x * y for x, y in zip(a, b))
+
+
+def _cross(a, b):
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _unit(v):
+    n = math.sqrt(_dot(v, v))
+    return [x / n for x in v]
+
+
+def plane_square(m, normal, offset):
+    """The frame of the square that stands for a plane: `(x, y, z, foot)`, lists of 3 floats.
+
+    `m` (a 4x4 matrix as nested sequences) maps the plane's frame to render space, where the
+    camera is at the origin; the plane is `dot(normal, p) = offset * |normal|` in its frame.
+    `z` is the render-space unit normal, `foot` the camera's foot point on the plane (the
+    square, of side 2 * max_distance, is centred there, so it covers every point of the plane
+    within max_distance of the camera), `x` and `y` complete a right-handed frame.
+    """
+    nl = _unit([float(v) for v in normal])
+    a = [[float(m[i][j]) for j in range(3)] for i in range(3)]
+    # Normals map by the inverse transpose of the linear part: its cofactor matrix (the
+    # determinant only scales, and the result is normalised).
+    cof = [[a[(i + 1) % 3][(j + 1) % 3] * a[(i + 2) % 3][(j + 2) % 3]
+            - a[(i + 1) % 3][(j + 2) % 3] * a[(i + 2) % 3][(j + 1) % 3] for j in range(3)]
+           for i in range(3)]
+    det = _dot(a[0], cof[0])
+    z = _unit([_dot(cof[i], nl) * (1.0 if det > 0 else -1.0) for i in range(3)])
+    local = [offset * v for v in nl]
+    point = [_dot(a[i], local) + float(m[i][3]) for i in range(3)]
+    # The camera is the render-space origin: its foot point is the plane point nearest to it.
+    along = _dot(point, z)
+    foot = [along * v for v in z]
+    helper = [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0]
+    x = _unit(_cross(helper, z))
+    y = _cross(z, x)
+    return x, y, z, foot
+
+
 # --- scene translation -------------------------------------------------------------------
 
 class Translator:
@@ -157,22 +201,7 @@ class Translator:
             self.add({"type": "obj", "filename": full, "to_world": self.xf(m),
                       "face_normals": not has_normals})
         elif kind == "plane":
-            n = np.array(p.get("normal", [0, 1, 0]), dtype=float)
-            off = p.get("offset", 0.0)
-            # World-space plane: the local plane mapped by m.
-            nl = n / np.linalg.norm(n)
-            inv_t = np.linalg.inv(m[:3, :3]).T
-            nw = inv_t @ nl
-            pw = (m @ np.append(off * nl, 1.0))[:3]
-            nw_len = np.linalg.norm(nw)
-            nw = nw / nw_len
-            # Square of side 2 * max_distance centred on the camera's foot point (render space).
-            foot = self.eye - np.dot(self.eye - pw, nw) * nw
-            z = nw
-            helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-            x = np.cross(helper, z)
-            x /= np.linalg.norm(x)
-            y = np.cross(z, x)
+            x, y, z, foot = plane_square(m.tolist(), p.get("normal", [0, 1, 0]), p.get("offset", 0.0))
             frame = np.eye(4)
             frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, y, z, foot
             self.add({"type": "rectangle",
@@ -231,6 +260,7 @@ def pixel_directions(cam, w, h):
 def render_mitsuba(mi, scene, scene_dir, w, h):
     cam = scene.get("camera", {})
     pos, forward, right, true_up = camera_frame(cam)
+    max_distance = float(scene.get("render", {}).get("max_distance", 1000.0))
     shapes = Translator(mi, scene, scene_dir, pos).build()
     # Mitsuba's camera looks along +z of its frame with +x to the image's left, as marchmesh's
     # right = cross(forward, up) is: look_at from the render-space origin.
@@ -243,7 +273,8 @@ def render_mitsuba(mi, scene, scene_dir, w, h):
             "fov_axis": "y",
             "fov": cam.get("vfov_deg", 60.0),
             "near_clip": NEAR_CLIP,
-            "far_clip": float(scene.get("render", {}).get("max_distance", 1000.0)) * 1.01,
+            # Along the view axis: covers every point within max_distance along a ray.
+            "far_clip": max_distance * 1.01,
             "to_world": to_world,
             "film": {"type": "hdrfilm", "width": w, "height": h, "rfilter": {"type": "box"}},
             "sampler": {"type": "stratified", "sample_count": 1, "jitter": False},
@@ -257,9 +288,12 @@ def render_mitsuba(mi, scene, scene_dir, w, h):
         raise ValueError(f"unexpected Mitsuba AOV layout {names}, image {img.shape}")
     depth, normal = img[..., 0], img[..., 1:4]
     d = pixel_directions(cam, w, h)
-    hit = depth > 0
     # Mitsuba measures depth from the near plane: add the near-clip distance along the ray.
-    depth = np.where(hit, depth + NEAR_CLIP / np.einsum("ijk,k->ij", d, forward), np.inf)
+    depth = np.where(depth > 0, depth + NEAR_CLIP / np.einsum("ijk,k->ij", d, forward), np.inf)
+    # The far clip plane cuts by distance along the view axis; marchmesh stops rays at
+    # max_distance along the ray, so off-axis hits between the two are misses.
+    hit = depth <= max_distance
+    depth = np.where(hit, depth, np.inf)
     return depth, normal, hit, d
 
 

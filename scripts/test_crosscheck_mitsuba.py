@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """Tests of scripts/crosscheck_mitsuba.py: `python3 -m unittest scripts/test_crosscheck_mitsuba.py`.
 
-Skipped when Mitsuba 3 or numpy is absent (`pip install mitsuba numpy`). The end-to-end test
-also needs a built `marchmesh` binary (`cargo build --release -p marchmesh-cli`, or set
-MARCHMESH_BIN) and is skipped without one.
+The plane geometry (`PlaneSquare`) is pure Python and always runs (`cargo test --test
+hostile_scripts` runs this file); the rest is skipped when Mitsuba 3 or numpy is absent
+(`pip install mitsuba numpy`). The end-to-end tests also need a built `marchmesh` binary
+(`cargo build --release -p marchmesh-cli`, or set MARCHMESH_BIN) and are skipped without one.
 """
 
 import json
@@ -37,6 +38,53 @@ SCENE = {
     ],
     "render": {"max_distance": 100},
 }
+
+
+def render_space(eye, translate=(0, 0, 0)):
+    """The 4x4 map from an object's frame (translated by `translate`) to render space."""
+    return [[1, 0, 0, translate[0] - eye[0]], [0, 1, 0, translate[1] - eye[1]],
+            [0, 0, 1, translate[2] - eye[2]], [0, 0, 0, 1]]
+
+
+class PlaneSquare(unittest.TestCase):
+    """The square standing for a plane, in pure Python (runs without numpy or Mitsuba)."""
+
+    def assert_close(self, a, b, tol=1e-9):
+        self.assertEqual(len(a), len(b))
+        for x, y in zip(a, b):
+            self.assertLess(abs(x - y), tol, f"{a} != {b}")
+
+    def test_the_square_is_centred_below_a_camera_far_from_the_origin(self):
+        # A ground plane seen by a camera 3,000 units from the world origin: the square's
+        # centre must be the camera's foot point in render space, 1 unit below it, not a point
+        # computed from the world-space camera position (3,000 units away, which left most of
+        # the visible ground uncovered).
+        x, y, z, foot = cm.plane_square(render_space([3000, 1, 0]), [0, 1, 0], 0.0)
+        self.assert_close(z, [0, 1, 0])
+        self.assert_close(foot, [0, -1, 0])
+        for a, b in ((x, y), (y, z), (z, x)):
+            self.assertLess(abs(sum(p * q for p, q in zip(a, b))), 1e-12)
+
+    def test_offset_normal_length_scale_and_rotation_follow_the_scene_format(self):
+        # offset is along the unit normal whatever the normal's length: y = -0.8.
+        _, _, z, foot = cm.plane_square(render_space([0.7, 1.2, -5]), [0, 3, 0], -0.8)
+        self.assert_close(z, [0, 1, 0])
+        self.assert_close(foot, [0, -2.0, 0])
+        # A translated plane, the camera anywhere: the foot is the nearest plane point.
+        eye = [1e4, 250.0, -3e3]
+        _, _, z, foot = cm.plane_square(render_space(eye, (5, 7, 9)), [0, 0, -2], 1.5)
+        self.assert_close(z, [0, 0, -1])
+        self.assert_close(foot, [0, 0, 9 - 1.5 - eye[2]], 1e-6)
+        # A non-uniform scale maps normals by the inverse transpose: the plane x + y = 0
+        # scaled by (2, 1, 1) is x / 2 + y = 0, normal (1, 2, 0) / sqrt(5).
+        m = [[2, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+        _, _, z, foot = cm.plane_square(m, [1, 1, 0], 0.0)
+        self.assert_close(z, [1 / math.sqrt(5), 2 / math.sqrt(5), 0])
+        self.assert_close(foot, [0, 0, 0])
+        # A mirroring transform keeps the solid side: the normal flips with the mirror.
+        m = [[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]
+        _, _, z, _ = cm.plane_square(m, [1, 0, 0], 0.0)
+        self.assert_close(z, [-1, 0, 0])
 
 
 @unittest.skipUnless(HAVE_MITSUBA, "Mitsuba 3 / numpy not installed: pip install mitsuba numpy")
@@ -79,19 +127,30 @@ class Crosscheck(unittest.TestCase):
                 f.write(b"Pf\n2 2\n-1.0\n" + rows_bottom_up.tobytes())
             np.testing.assert_array_equal(cm.read_pfm(p), [[1, 2], [3, 4]])
 
+    def test_end_to_end_far_from_the_origin_has_no_mismatch(self):
+        far = {
+            "camera": {"position": [3000, 1, 0], "look_at": [3000, 0.5, 5], "vfov_deg": 50, "width": 64, "height": 64},
+            "objects": [{"shape": {"plane": {"normal": [0, 1, 0], "offset": 0}}},
+                        {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [3000, 0.5, 4]}}],
+        }
+        self.end_to_end(far, 64, 64)
+
     def test_end_to_end_reference_has_no_mismatch(self):
+        self.end_to_end(SCENE, 48, 36)
+
+    def end_to_end(self, scene_json, w, h):
         exe = os.environ.get("MARCHMESH_BIN", os.path.join(REPO, "target", "release", "marchmesh"))
         if not os.path.exists(exe):
             self.skipTest(f"no marchmesh binary at {exe}")
         with tempfile.TemporaryDirectory() as tmp:
             scene = os.path.join(tmp, "s.json")
             with open(scene, "w") as f:
-                json.dump(SCENE, f)
+                json.dump(scene_json, f)
             aov = os.path.join(tmp, "aov")
             subprocess.run([exe, "render", scene, "--backend", "reference", "--aov", aov,
                             "--out", os.path.join(tmp, "o.png"), "--force"],
                            check=True, capture_output=True)
-            res = cm.compare(*cm.render_mitsuba(mi, SCENE, tmp, 48, 36), aov)
+            res = cm.compare(*cm.render_mitsuba(mi, scene_json, tmp, w, h), aov)
             self.assertLessEqual(res["hit_miss_mismatch"], 1)
             self.assertLess(res["depth_rel_max"], 5e-5)
             self.assertLess(res["normal_deg_max"], 0.05)

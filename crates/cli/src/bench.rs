@@ -308,6 +308,52 @@ pub fn bench(args: BenchArgs) -> Result<()> {
     measure(&configs, &options, &template, &dir, &Default::default())
 }
 
+/// Refuses to resume a run whose `results.json` no interrupted run writes (a configuration
+/// with two rows, listed twice as missing, or both measured and missing: resuming it would
+/// leave duplicate rows), or whose `images/` is not a folder of its own (a symbolic link would
+/// send the resumed images elsewhere).
+fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
+    let mut rows = std::collections::HashSet::new();
+    if let Some(id) = previous
+        .rows
+        .iter()
+        .map(|r| r.config_id.as_str())
+        .find(|id| !rows.insert(*id))
+    {
+        bail!(
+            "{}: configuration {id} has more than one row: not a file an interrupted run writes, nothing was measured",
+            json.display()
+        );
+    }
+    let mut missing = std::collections::HashSet::new();
+    if let Some(id) = previous
+        .missing
+        .iter()
+        .map(String::as_str)
+        .find(|id| rows.contains(id) || !missing.insert(*id))
+    {
+        bail!(
+            "{}: configuration {id} is listed as missing twice or also has a row: not a file an interrupted run writes, nothing was measured",
+            json.display()
+        );
+    }
+    let images = run.join("images");
+    if let Ok(meta) = std::fs::symlink_metadata(&images)
+        && !meta.is_dir()
+    {
+        bail!(
+            "{}: not a folder ({}): a resumed run writes its images only into its own folder, nothing was measured",
+            images.display(),
+            if meta.file_type().is_symlink() {
+                "a symbolic link"
+            } else {
+                "a file or special file"
+            }
+        );
+    }
+    Ok(())
+}
+
 /// `bench --resume RUN`: the configurations RUN's results.json lists as missing, measured
 /// into RUN on top of what it holds.
 fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
@@ -319,6 +365,7 @@ fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
             run.display()
         );
     }
+    check_resumable(&previous, &json, run)?;
     let suite_path = PathBuf::from(&previous.suite_file);
     let suite =
         suite::load(&suite_path).with_context(|| format!("the suite of {}", json.display()))?;

@@ -7,27 +7,13 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-fn tmp(name: &str) -> PathBuf {
-    marchmesh_testkit::temp_dir(&format!("hostile-bench-{name}"))
-}
+mod support;
+use support::{marchmesh, results, row, run_dir, stderr, tmp};
 
 fn repo() -> PathBuf {
     marchmesh_testkit::repo_root()
         .canonicalize()
         .expect("repository root")
-}
-
-fn marchmesh(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
-        .args(args)
-        .current_dir(cwd)
-        .env_remove("MARCHMESH_ROOT")
-        .output()
-        .expect("run marchmesh")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 /// A suite file `dir/name` with one group made of `group_body` (JSON members).
@@ -50,7 +36,7 @@ fn csg() -> String {
 
 #[test]
 fn labels_whose_file_names_collide_are_refused_at_load() {
-    let dir = tmp("labels");
+    let dir = tmp("bench-labels");
     let s = suite(
         &dir,
         "s.json",
@@ -88,7 +74,7 @@ fn labels_whose_file_names_collide_are_refused_at_load() {
 
 #[test]
 fn two_scenes_of_one_file_name_in_different_folders_are_refused_at_load() {
-    let dir = tmp("scenes");
+    let dir = tmp("bench-scenes");
     for sub in ["a", "b"] {
         std::fs::create_dir_all(dir.join(sub)).unwrap();
         std::fs::copy(repo().join("scenes/csg.json"), dir.join(sub).join("x.json")).unwrap();
@@ -106,7 +92,7 @@ fn two_scenes_of_one_file_name_in_different_folders_are_refused_at_load() {
 
 #[test]
 fn shard_counts_beyond_the_configurations_are_refused_not_allocated() {
-    let dir = tmp("shard");
+    let dir = tmp("bench-shard");
     for shard in ["1/1000000000000", "1/18446744073709551615", "1/3"] {
         let o = marchmesh(
             &[
@@ -126,7 +112,7 @@ fn shard_counts_beyond_the_configurations_are_refused_not_allocated() {
 
 #[test]
 fn suites_expanding_beyond_the_maximum_are_refused_at_load() {
-    let dir = tmp("expand");
+    let dir = tmp("bench-expand");
     let resolutions: Vec<String> = (1..=400)
         .map(|k| format!(r#"{{"width": {k}, "height": {k}}}"#))
         .collect();
@@ -176,7 +162,7 @@ fn within_seconds(args: &[&str], cwd: &Path) -> Output {
 
 #[test]
 fn fifos_and_devices_as_suites_scenes_and_anchors_are_refused_without_blocking() {
-    let dir = tmp("fifo");
+    let dir = tmp("bench-fifo");
     let fifo = dir.join("f.json");
     assert!(
         Command::new("mkfifo")
@@ -229,7 +215,7 @@ fn fifos_and_devices_as_suites_scenes_and_anchors_are_refused_without_blocking()
 
 #[test]
 fn suite_files_must_use_objects_where_the_format_has_objects() {
-    let dir = tmp("arrays");
+    let dir = tmp("bench-arrays");
     let s = dir.join("a.json");
     std::fs::write(&s, r#"["x", "", {}, false, [{"name": "g"}]]"#).unwrap();
     let o = marchmesh(&["bench", "--suite", s.to_str().unwrap(), "--list"], &dir);
@@ -258,7 +244,7 @@ fn suite_files_must_use_objects_where_the_format_has_objects() {
 
 #[test]
 fn a_full_disk_leaves_no_partial_image_and_lists_the_failed_writes() {
-    let dir = tmp("full");
+    let dir = tmp("bench-full");
     let s = suite(
         &dir,
         "s.json",
@@ -313,7 +299,7 @@ fn a_full_disk_leaves_no_partial_image_and_lists_the_failed_writes() {
 
 #[test]
 fn stability_leaves_no_partial_generated_folder_and_bounds_its_images() {
-    let dir = tmp("stability");
+    let dir = tmp("bench-stability");
     let out = dir.join("st");
     let o = Command::new("bash")
         .arg("-c")
@@ -360,7 +346,7 @@ fn list_builtin(cwd: &Path, env: &[(&str, &str)]) -> Output {
 
 #[test]
 fn the_built_in_scene_cache_is_private_and_verified() {
-    let dir = tmp("cache");
+    let dir = tmp("bench-cache");
     let cache = dir.join("cache");
     let env = [("XDG_CACHE_HOME", cache.to_str().unwrap())];
     let o = list_builtin(&dir, &env);
@@ -414,7 +400,7 @@ fn the_built_in_scene_cache_is_private_and_verified() {
 
 #[test]
 fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
-    let dir = tmp("resume");
+    let dir = tmp("bench-resume");
     let out = dir.join("runs");
     let args = [
         "bench",
@@ -469,4 +455,98 @@ fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
     assert!(!done.interrupted && done.missing.is_empty());
     assert_eq!(done.rows.len(), 2, "{:?}", done.rows.len());
     assert!(run.join("summary.md").exists());
+}
+
+#[test]
+fn resuming_a_run_that_would_duplicate_rows_or_write_through_a_link_is_refused() {
+    let dir = tmp("bench-resume-hostile");
+    let suite = repo().join("scenes/suites/smoke.json");
+    let interrupted = |rows: Vec<marchmesh_harness::results::Row>, missing: &[&str]| {
+        let mut res = results(rows);
+        res.suite = "smoke".into();
+        res.suite_file = suite.display().to_string();
+        res.interrupted = true;
+        res.missing = missing.iter().map(|m| m.to_string()).collect();
+        res
+    };
+    let a = row("s", "sdf", "a", 2.0, None);
+    let id = a.config_id.clone();
+    let cases = [
+        (
+            "twice",
+            interrupted(vec![a.clone(), a.clone()], &["g/t/sdf:a/x1/t1"]),
+        ),
+        ("measured-and-missing", interrupted(vec![a.clone()], &[&id])),
+        ("missing-twice", interrupted(vec![], &[&id, &id])),
+    ];
+    for (name, res) in cases {
+        let run = run_dir(&dir, name, &res);
+        let before = std::fs::read(run.join("results.json")).unwrap();
+        let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{name}: {e}");
+        assert!(
+            e.contains("results.json") && e.contains(&id) && e.contains("nothing was measured"),
+            "{name}: {e}"
+        );
+        // The run is left as it was: its results.json unchanged, no image written.
+        assert_eq!(std::fs::read(run.join("results.json")).unwrap(), before);
+        assert!(!run.join("images").exists());
+    }
+    // images/ linked to a folder of the user's: refused before anything is written there.
+    let victim = dir.join("victim");
+    std::fs::create_dir_all(&victim).unwrap();
+    std::fs::write(victim.join("keep.txt"), b"precious").unwrap();
+    let run = run_dir(&dir, "linked", &interrupted(vec![], &[&id]));
+    std::os::unix::fs::symlink(&victim, run.join("images")).unwrap();
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("images") && e.contains("symbolic link") && e.contains("nothing was measured"),
+        "{e}"
+    );
+    let kept: Vec<_> = std::fs::read_dir(&victim).unwrap().flatten().collect();
+    assert_eq!(kept.len(), 1);
+    assert_eq!(std::fs::read(victim.join("keep.txt")).unwrap(), b"precious");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn repeat_policies_beyond_the_documented_maxima_are_refused_at_load() {
+    // Four billion repeats of at least 1e308 s each ran for ever.
+    let dir = tmp("bench-repeats");
+    for (policy, shown) in [
+        (
+            r#"{"min_count": 4294967295, "min_time_s": 0, "max_count": 4294967295}"#,
+            "max_count 4294967295",
+        ),
+        (
+            r#"{"min_count": 1, "min_time_s": 1e308, "max_count": 10}"#,
+            "min_time_s 1e308",
+        ),
+    ] {
+        let p = dir.join("s.json");
+        std::fs::write(
+            &p,
+            format!(
+                r#"{{"repeats": {policy}, "groups": [{{"name": "g", "scenes": [{:?}],
+                    "resolutions": [{{"max_side": 8}}], "threads": [1],
+                    "backends": [{{"backend": "sdf", "label": "a", "options": []}}]}}]}}"#,
+                csg()
+            ),
+        )
+        .unwrap();
+        let o = marchmesh(&["bench", "--suite", p.to_str().unwrap(), "--list"], &dir);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{e}");
+        assert!(
+            e.contains("s.json")
+                && e.contains("repeats")
+                && e.contains("10000")
+                && e.contains(shown),
+            "{e}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

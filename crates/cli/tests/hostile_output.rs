@@ -6,9 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn tmp(name: &str) -> PathBuf {
-    marchmesh_testkit::temp_dir(&format!("hostile-{name}"))
-}
+mod support;
+use support::{stderr, tmp};
 
 /// A tiny scene (8x8 sphere) in `dir`.
 fn scene(dir: &Path) -> PathBuf {
@@ -30,10 +29,6 @@ fn render(dir: &Path, extra: &[&str]) -> Output {
         .current_dir(dir)
         .output()
         .expect("run marchmesh")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 #[test]

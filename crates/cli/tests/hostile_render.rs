@@ -4,23 +4,10 @@
 //! or `stability`.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
-fn tmp(name: &str) -> PathBuf {
-    marchmesh_testkit::temp_dir(&format!("hostile-render-{name}"))
-}
-
-fn marchmesh(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run marchmesh")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod support;
+use support::{marchmesh, stderr, tmp};
 
 /// CRC-32 (IEEE) of `bytes`, as PNG chunks carry it.
 fn crc32(bytes: &[u8]) -> u32 {
@@ -74,7 +61,7 @@ fn env_scene(dir: &Path) -> PathBuf {
 
 #[test]
 fn environment_maps_over_the_memory_limit_are_refused_from_their_header() {
-    let dir = tmp("env");
+    let dir = tmp("render-env");
     let scene = env_scene(&dir);
     let s = scene.to_str().unwrap();
     let o = marchmesh(&["validate", s], &dir);
@@ -96,7 +83,7 @@ fn environment_maps_over_the_memory_limit_are_refused_from_their_header() {
 
 #[test]
 fn os_errors_are_printed_once() {
-    let dir = tmp("twice");
+    let dir = tmp("render-twice");
     for args in [
         vec!["render", "missing.json", "--out", "a.png"],
         vec!["bench", "--suite", "./missing.json", "--list"],
@@ -115,7 +102,7 @@ fn os_errors_are_printed_once() {
 
 #[test]
 fn view_refuses_a_nonsense_step_before_opening_anything() {
-    let dir = tmp("step");
+    let dir = tmp("render-step");
     let scene = dir.join("s.json");
     std::fs::write(
         &scene,
@@ -147,7 +134,7 @@ fn view_refuses_a_nonsense_step_before_opening_anything() {
 
 #[test]
 fn a_closed_stdout_ends_render_bench_and_stability_quietly() {
-    let dir = tmp("pipe");
+    let dir = tmp("render-pipe");
     let scene = dir.join("s.json");
     std::fs::write(
         &scene,
@@ -205,7 +192,7 @@ fn a_closed_stdout_ends_render_bench_and_stability_quietly() {
 
 #[test]
 fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
-    let dir = tmp("long");
+    let dir = tmp("render-long");
     let scene = dir.join("s.json");
     std::fs::write(
         &scene,

@@ -4,84 +4,12 @@
 //! the commands fail instead of passing silently, names cannot inject Markdown or spreadsheet
 //! formulas, and a closed stdout ends them quietly.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
-use marchmesh_harness::results::{Failure, Provenance, Results, Row};
+use marchmesh_harness::results::{Failure, Results};
 
-fn tmp(name: &str) -> PathBuf {
-    marchmesh_testkit::temp_dir(&format!("hostile-report-{name}"))
-}
-
-fn marchmesh(args: &[&str], cwd: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
-        .args(args)
-        .current_dir(cwd)
-        .output()
-        .expect("run marchmesh")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-fn row(scene: &str, backend: &str, quality: &str, ms: f64, psnr: Option<f64>) -> Row {
-    Row {
-        config_id: format!("g/{scene}/{backend}:{quality}/x1/t1"),
-        group: "g".into(),
-        scene: scene.into(),
-        backend: backend.into(),
-        quality: quality.into(),
-        width: 8,
-        height: 8,
-        threads: 1,
-        render_repeats: 1,
-        render_ms_median: ms,
-        render_ms_min: ms,
-        render_ms_max: ms,
-        render_ms_ci_low: ms,
-        render_ms_ci_high: ms,
-        build_ms_total: 1.0,
-        psnr_db: psnr,
-        memory_bytes: 1024,
-        ..Row::default()
-    }
-}
-
-fn results(rows: Vec<Row>) -> Results {
-    let mut provenance = Provenance::collect("test".into());
-    provenance.load_average_1m = Some(0.0);
-    provenance.git_commit = "c0ffee".into();
-    provenance.git_dirty = false;
-    Results {
-        run_id: "run".into(),
-        suite: "suite".into(),
-        suite_file: String::new(),
-        description: String::new(),
-        provenance,
-        interrupted: false,
-        rows,
-        failures: Vec::new(),
-        skipped: Vec::new(),
-        references: Vec::new(),
-        steps_histograms: Default::default(),
-        timings: Default::default(),
-        rotation_seed: Some(1),
-        missing: Vec::new(),
-        shard: None,
-        merged_from: Vec::new(),
-        write_errors: Vec::new(),
-        anchors: Vec::new(),
-    }
-}
-
-/// A run folder `dir/name` holding `res` as results.json.
-fn run_dir(dir: &Path, name: &str, res: &Results) -> PathBuf {
-    let run = dir.join(name);
-    std::fs::create_dir_all(&run).unwrap();
-    res.write_json(&run.join("results.json")).unwrap();
-    run
-}
+mod support;
+use support::{marchmesh, results, row, run_dir, stderr, tmp};
 
 fn small_run() -> Results {
     results(vec![
@@ -92,7 +20,7 @@ fn small_run() -> Results {
 
 #[test]
 fn report_refuses_a_symlink_at_a_plot_and_leaves_its_target_alone() {
-    let dir = tmp("plot-link");
+    let dir = tmp("report-plot-link");
     let run = run_dir(&dir, "run", &small_run());
     // The plot report writes for the scene, planted as a link to a file of the user's.
     std::fs::create_dir_all(run.join("plots")).unwrap();
@@ -122,7 +50,7 @@ fn report_refuses_a_symlink_at_a_plot_and_leaves_its_target_alone() {
 
 #[test]
 fn absurd_numbers_in_results_are_refused_naming_the_row() {
-    let dir = tmp("absurd");
+    let dir = tmp("report-absurd");
     let good = run_dir(&dir, "good", &small_run());
     for (name, value) in [("huge", 1e308), ("negative", -5.0)] {
         let mut res = small_run();
@@ -156,8 +84,51 @@ fn absurd_numbers_in_results_are_refused_naming_the_row() {
 }
 
 #[test]
+fn steps_histograms_whose_counts_overflow_are_refused_not_summed() {
+    // Counts near 2^64 made `report` panic adding them up (the sum overflowed).
+    let dir = tmp("report-histogram");
+    let good = run_dir(&dir, "good", &small_run());
+    let id = small_run().rows[0].config_id.clone();
+    for (name, bins) in [
+        ("overflow", vec![u64::MAX; 3]),
+        ("too-many-bins", vec![1; 1000]),
+    ] {
+        let mut res = small_run();
+        res.steps_histograms.insert(id.clone(), bins);
+        let run = run_dir(&dir, name, &res);
+        std::fs::write(run.join("summary.md"), b"the user's summary").unwrap();
+        let findings = dir.join(format!("{name}.md"));
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+            vec![
+                "findings",
+                run.to_str().unwrap(),
+                "--out",
+                findings.to_str().unwrap(),
+            ],
+        ] {
+            let o = marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+            assert!(
+                e.contains("results.json") && e.contains(&format!("steps_histograms.{id}")),
+                "{args:?}: {e}"
+            );
+            assert!(!e.contains("panicked"), "{e}");
+        }
+        assert_eq!(
+            std::fs::read(run.join("summary.md")).unwrap(),
+            b"the user's summary"
+        );
+        assert!(!findings.exists());
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn results_files_are_capped_and_special_files_refused_without_blocking() {
-    let dir = tmp("special");
+    let dir = tmp("report-special");
     let good = run_dir(&dir, "good", &small_run());
     // A FIFO as results.json: refused at once (opening it for reading would block).
     let fifo_run = dir.join("fifo");
@@ -221,7 +192,7 @@ fn results_files_are_capped_and_special_files_refused_without_blocking() {
 
 #[test]
 fn merge_fails_on_missing_shards_and_incomplete_runs() {
-    let dir = tmp("merge");
+    let dir = tmp("report-merge");
     let mut one = small_run();
     one.shard = Some("1/2".into());
     let one = run_dir(&dir, "one", &one);
@@ -270,7 +241,7 @@ fn merge_fails_on_missing_shards_and_incomplete_runs() {
 
 #[test]
 fn findings_fail_on_incomplete_runs_and_mark_them_instead_of_linking() {
-    let dir = tmp("findings");
+    let dir = tmp("report-findings");
     let good = run_dir(&dir, "good", &small_run());
     let mut killed = small_run();
     killed.interrupted = true;
@@ -295,7 +266,7 @@ fn findings_fail_on_incomplete_runs_and_mark_them_instead_of_linking() {
 
 #[test]
 fn findings_force_onto_a_folder_writes_nothing() {
-    let dir = tmp("findings-folder");
+    let dir = tmp("report-findings-folder");
     let good = run_dir(&dir, "good", &small_run());
     let out = dir.join("F.md");
     std::fs::create_dir_all(&out).unwrap();
@@ -319,7 +290,7 @@ fn findings_force_onto_a_folder_writes_nothing() {
 
 #[test]
 fn names_cannot_inject_markdown_or_spreadsheet_formulas() {
-    let dir = tmp("inject");
+    let dir = tmp("report-inject");
     let mut res = small_run();
     res.rows[0].quality = "=HYPERLINK(\"http://x\")|<img src=x onerror=alert(1)>\n# Owned".into();
     res.rows[0].config_id = format!("g/s/sdf:{}/x1/t1", res.rows[0].quality);
@@ -346,7 +317,7 @@ fn names_cannot_inject_markdown_or_spreadsheet_formulas() {
 
 #[test]
 fn a_closed_stdout_ends_report_compare_merge_and_findings_quietly() {
-    let dir = tmp("pipe");
+    let dir = tmp("report-pipe");
     let good = run_dir(&dir, "good", &small_run());
     let merged = dir.join("merged");
     let findings = dir.join("F.md");

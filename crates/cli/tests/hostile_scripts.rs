@@ -2,12 +2,10 @@
 //! a shared folder is run, temporary files live in a private folder, and two runs in the same
 //! second never write to one output name.
 
-use std::path::PathBuf;
 use std::process::{Command, Output};
 
-fn tmp(name: &str) -> PathBuf {
-    marchmesh_testkit::temp_dir(&format!("hostile-scripts-{name}"))
-}
+mod support;
+use support::{text, tmp};
 
 /// Runs `body` in bash after sourcing the helpers, with `env` set and HOME/XDG cleared.
 fn helpers(body: &str, env: &[(&str, &str)]) -> Output {
@@ -27,13 +25,9 @@ fn helpers(body: &str, env: &[(&str, &str)]) -> Output {
     c.output().unwrap()
 }
 
-fn text(bytes: &[u8]) -> String {
-    String::from_utf8_lossy(bytes).into_owned()
-}
-
 #[test]
 fn the_python_environment_lives_in_the_users_cache_and_planted_ones_are_refused() {
-    let dir = tmp("venv");
+    let dir = tmp("scripts-venv");
     let home = dir.join("home");
     let o = helpers(
         "anchor_venv embree-venv",
@@ -89,7 +83,7 @@ fn temporary_files_go_to_a_private_folder_removed_at_exit() {
 
 #[test]
 fn runs_in_the_same_second_get_distinct_output_names() {
-    let dir = tmp("names");
+    let dir = tmp("scripts-names");
     let d = dir.to_str().unwrap();
     let o = helpers(
         &format!(
@@ -112,4 +106,32 @@ fn runs_in_the_same_second_get_distinct_output_names() {
         assert!(text.contains("anchor_common.sh") && text.contains("anchor_reserve"));
         assert!(!text.contains("/tmp/"), "{script} names a fixed /tmp path");
     }
+}
+
+/// The Mitsuba cross-check's plane geometry, which needs neither numpy nor Mitsuba: a plane's
+/// square is centred on the camera's foot point in render space, also with the camera far
+/// from the world origin (where a world-space foot point left the visible ground uncovered).
+#[test]
+fn the_mitsuba_crosscheck_places_planes_in_render_space() {
+    if Command::new("python3").arg("--version").output().is_err() {
+        eprintln!("skipped: no python3");
+        return;
+    }
+    let o = Command::new("python3")
+        .args([
+            "-m",
+            "unittest",
+            "-v",
+            "test_crosscheck_mitsuba.PlaneSquare",
+        ])
+        .current_dir(marchmesh_testkit::repo_root().join("scripts"))
+        .output()
+        .unwrap();
+    let out = text(&o.stderr);
+    assert!(o.status.success(), "{out}");
+    assert!(
+        out.contains("test_the_square_is_centred_below_a_camera_far_from_the_origin ... ok"),
+        "{out}"
+    );
+    assert!(out.contains("Ran 2 tests"), "{out}");
 }

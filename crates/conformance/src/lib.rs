@@ -141,6 +141,41 @@ cases! {
                 {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [-0.5, 0, 0]}},
                 {"shape": {"sphere": {"radius": 0.6}}, "transform": {"translate": [0.6, 0.1, 0]}}]}}}]}"#
         ),
+    smooth_intersection => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"smooth_intersection": {"blend_radius": 0.3, "children": [
+                {"shape": {"sphere": {"radius": 1.0}}, "transform": {"translate": [-0.35, 0, 0]}},
+                {"shape": {"box": {"half_extents": [0.8, 0.7, 0.7]}}, "transform": {"translate": [0.3, 0, 0], "rotate_deg": [0, 30, 0]}}]}}}]}"#
+        ),
+    smooth_subtraction => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"smooth_subtraction": {"blend_radius": 0.25, "children": [
+                {"shape": {"box": {"half_extents": [0.8, 0.8, 0.8]}}},
+                {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [0, 0.6, -0.6]}, "material": {"color": [1, 0, 0]}},
+                {"shape": {"capsule": {"radius": 0.25, "height": 1.2}}, "transform": {"translate": [0.7, 0, -0.7], "rotate_deg": [0, 0, 90]}}]}}, "transform": {"rotate_deg": [0, -25, 0]}}]}"#
+        ),
+    rounded_box => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"rounded_box": {"half_extents": [0.9, 0.6, 0.7], "rounding_radius": 0.25}},
+                "transform": {"rotate_deg": [20, 35, 0]}}]}"#
+        ),
+    capsule => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"capsule": {"radius": 0.45, "height": 1.4}},
+                "transform": {"rotate_deg": [0, 0, 60]}}]}"#
+        ),
+    capped_cone => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"capped_cone": {"height": 1.6, "bottom_radius": 0.8, "top_radius": 0.3}},
+                "transform": {"rotate_deg": [-25, 0, 15]}},
+                {"shape": {"capped_cone": {"height": 0.8, "bottom_radius": 0.4, "top_radius": 0}},
+                "transform": {"translate": [1.4, 0.2, 0]}}]}"#
+        ),
     repeat_finite => concat!(
             "{",
             cam!(),
@@ -342,7 +377,9 @@ macro_rules! conformance_suite {
         }
         $crate::conformance_suite!(@all $tol, [$($inside)?], [$($flat)?];
             [sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
-             nonuniform_scale, union, intersection, subtraction, smooth_union, repeat_finite,
+             nonuniform_scale, union, intersection, subtraction, smooth_union,
+             smooth_intersection, smooth_subtraction, rounded_box, capsule, capped_cone,
+             repeat_finite,
              repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin,
              camera_inside_subtraction, bunny],
             [camera_inside_one, camera_inside_two, camera_inside_union, camera_inside_repeat],

@@ -947,6 +947,14 @@ impl OcclusionBatch<'_, '_> {
         rays.clear();
         pending.clear();
     }
+
+    /// [`OcclusionBatch::flush`] once `rays` holds [`MAX_OCCLUSION_BATCH`] rays, so a
+    /// wavefront's occlusion buffers stay bounded however many samples a point takes.
+    fn flush_when_full(self, rays: &mut Vec<Ray>, pending: &mut Vec<PendingLight>, ao: bool) {
+        if rays.len() >= MAX_OCCLUSION_BATCH {
+            self.flush(rays, pending, ao);
+        }
+    }
 }
 
 /// One worker's buffers, reused from tile to tile.
@@ -1028,6 +1036,18 @@ fn trace_tile(
         sum,
     } = s;
     let (sh, geometry, background) = (f.sh, f.geometry, f.background);
+    // The occlusion batch over this tile's buffers; a macro, so its borrows end at each flush.
+    macro_rules! occlusion_batch {
+        () => {
+            OcclusionBatch {
+                geometry,
+                occlusion: &mut *occlusion,
+                paths: &paths[..],
+                sum: &mut sum[..],
+                stats: &mut *stats,
+            }
+        };
+    }
     let pixels = tile.pixels();
     paths.clear();
     rays.clear();
@@ -1165,16 +1185,7 @@ fn trace_tile(
                             amount: share,
                         });
                     }
-                    if ao_rays.len() >= MAX_OCCLUSION_BATCH {
-                        OcclusionBatch {
-                            geometry,
-                            occlusion: &mut *occlusion,
-                            paths: &paths[..],
-                            sum: &mut sum[..],
-                            stats: &mut *stats,
-                        }
-                        .flush(ao_rays, ao_pending, true);
-                    }
+                    occlusion_batch!().flush_when_full(ao_rays, ao_pending, true);
                 }
                 _ => sum[px] += ambient,
             }
@@ -1256,16 +1267,7 @@ fn trace_tile(
                                 sum[px] += contribution;
                             }
                         }
-                        if shadow_rays.len() >= MAX_OCCLUSION_BATCH {
-                            OcclusionBatch {
-                                geometry,
-                                occlusion: &mut *occlusion,
-                                paths: &paths[..],
-                                sum: &mut sum[..],
-                                stats: &mut *stats,
-                            }
-                            .flush(shadow_rays, pending, false);
-                        }
+                        occlusion_batch!().flush_when_full(shadow_rays, pending, false);
                         continue;
                     }
                 };
@@ -1306,14 +1308,7 @@ fn trace_tile(
                 });
             }
         }
-        OcclusionBatch {
-            geometry,
-            occlusion: &mut *occlusion,
-            paths: &paths[..],
-            sum: &mut sum[..],
-            stats: &mut *stats,
-        }
-        .flush(shadow_rays, pending, false);
+        occlusion_batch!().flush(shadow_rays, pending, false);
         if !cones.is_empty() {
             stats.trace_time.shadow_ns += timed(visibility, cones.len(), |v| {
                 geometry.cone_visibility(cones, v)
@@ -1337,14 +1332,7 @@ fn trace_tile(
                 sum[paths[p.path as usize].pixel as usize] += p.amount * v.fraction.clamp(0.0, 1.0);
             }
         }
-        OcclusionBatch {
-            geometry,
-            occlusion: &mut *occlusion,
-            paths: &paths[..],
-            sum: &mut sum[..],
-            stats: &mut *stats,
-        }
-        .flush(ao_rays, ao_pending, true);
+        occlusion_batch!().flush(ao_rays, ao_pending, true);
         stats.reflection_rays += next.len() as u64;
         std::mem::swap(paths, next);
         std::mem::swap(rays, next_rays);

@@ -175,6 +175,43 @@ impl Compiler<'_> {
                         },
                         leaf_box(shape),
                     ),
+                    Shape::RoundedBox {
+                        half_extents,
+                        rounding_radius,
+                    } => (
+                        Leaf::RoundedBox {
+                            b: a3((*half_extents - DVec3::splat(*rounding_radius)).max(DVec3::ZERO)),
+                            r: *rounding_radius,
+                        },
+                        leaf_box(shape),
+                    ),
+                    Shape::Capsule {
+                        radius,
+                        half_height,
+                    } => (
+                        Leaf::Capsule {
+                            h: *half_height,
+                            r: *radius,
+                        },
+                        leaf_box(shape),
+                    ),
+                    Shape::CappedCone {
+                        half_height,
+                        bottom_radius,
+                        top_radius,
+                    } => {
+                        let k2 =
+                            (top_radius - bottom_radius).powi(2) + 4.0 * half_height * half_height;
+                        (
+                            Leaf::CappedCone {
+                                h: *half_height,
+                                r1: *bottom_radius,
+                                r2: *top_radius,
+                                inv_k2: 1.0 / k2,
+                            },
+                            leaf_box(shape),
+                        )
+                    }
                     Shape::Triangle { vertices } => {
                         let [a, b, c] = *vertices;
                         let (ba, cb, ac) = (b - a, c - b, a - c);

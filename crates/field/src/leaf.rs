@@ -66,6 +66,31 @@ pub enum Leaf<S> {
         /// Minor radius.
         small: S,
     },
+    /// [`shapes::rounded_box`].
+    RoundedBox {
+        /// Half extents of the inner (unrounded) box.
+        b: [S; 3],
+        /// Rounding radius.
+        r: S,
+    },
+    /// [`shapes::capsule`].
+    Capsule {
+        /// Half the segment's length.
+        h: S,
+        /// Radius.
+        r: S,
+    },
+    /// [`shapes::capped_cone`].
+    CappedCone {
+        /// Half height.
+        h: S,
+        /// Radius at `y = -h`.
+        r1: S,
+        /// Radius at `y = h`.
+        r2: S,
+        /// `1 / ((r2 - r1)^2 + 4 h^2)`.
+        inv_k2: S,
+    },
     /// [`shapes::triangle`].
     Triangle(Box<TriData<S>>),
     /// A baked mesh grid (index into the field's grid list).
@@ -94,6 +119,15 @@ impl<S: Scalar> Leaf<S> {
             }
             Leaf::Cylinder { r, h } => shapes::cylinder(q, T::splat(*r), T::splat(*h)),
             Leaf::Torus { big, small } => shapes::torus(q, T::splat(*big), T::splat(*small)),
+            Leaf::RoundedBox { b, r } => shapes::rounded_box(q, V3::splat3(*b), T::splat(*r)),
+            Leaf::Capsule { h, r } => shapes::capsule(q, T::splat(*h), T::splat(*r)),
+            Leaf::CappedCone { h, r1, r2, inv_k2 } => shapes::capped_cone(
+                q,
+                T::splat(*h),
+                T::splat(*r1),
+                T::splat(*r2),
+                T::splat(*inv_k2),
+            ),
             Leaf::Triangle(t) => shapes::triangle(q, t),
             Leaf::Mesh { grid } => grids.sample(*grid, q),
         }
@@ -123,6 +157,17 @@ impl<S: Scalar> Leaf<S> {
             Leaf::Torus { big, small } => Leaf::Torus {
                 big: c(*big),
                 small: c(*small),
+            },
+            Leaf::RoundedBox { b, r } => Leaf::RoundedBox {
+                b: c3(*b),
+                r: c(*r),
+            },
+            Leaf::Capsule { h, r } => Leaf::Capsule { h: c(*h), r: c(*r) },
+            Leaf::CappedCone { h, r1, r2, inv_k2 } => Leaf::CappedCone {
+                h: c(*h),
+                r1: c(*r1),
+                r2: c(*r2),
+                inv_k2: c(*inv_k2),
             },
             Leaf::Triangle(t) => Leaf::Triangle(Box::new(TriData {
                 a: c3(t.a),
@@ -167,6 +212,20 @@ impl Leaf<f32> {
                 let k = if rad > *r { 1.0 - *r / rad } else { 0.0 };
                 let e = V3::new(lq.x * k, lq.y - lq.y.clamp(-*h, *h), lq.z * k);
                 (e.len2() > 0.0).then_some(e)
+            }
+            // Outside the rounding only: inside it the value still grows along `e`, but the
+            // point is in the solid.
+            Leaf::RoundedBox { b, r } => {
+                let e = V3::new(
+                    lq.x - lq.x.clamp(-b[0], b[0]),
+                    lq.y - lq.y.clamp(-b[1], b[1]),
+                    lq.z - lq.z.clamp(-b[2], b[2]),
+                );
+                (e.len2() > r * r).then_some(e)
+            }
+            Leaf::Capsule { h, r } => {
+                let e = V3::new(lq.x, lq.y - lq.y.clamp(-*h, *h), lq.z);
+                (e.len2() > r * r).then_some(e)
             }
             _ => None,
         }

@@ -41,6 +41,7 @@ pub mod dual;
 pub mod lane;
 pub mod leaf;
 pub mod program;
+pub mod prune;
 mod recede;
 pub mod shapes;
 pub mod tape;
@@ -99,15 +100,59 @@ pub struct FieldOptions {
     pub cache_dir: Option<PathBuf>,
     /// The representation of mesh distance fields (default [`MeshGrid::Dense`]).
     pub mesh_grid: MeshGrid,
+    /// What baking mesh grids may take (default unlimited): before a mesh file is read, and
+    /// again before it is decoded, the grids already baked, the load's bound
+    /// ([`marchmesh_meshio::LoadBound`]), the bake's working set
+    /// ([`BAKE_BYTES_PER_TRIANGLE`] per triangle) and the grid's bound
+    /// ([`FieldOptions::mesh_grid_bytes_bound`]) must fit, else [`FieldError::MeshBake`]
+    /// refuses the mesh. A grid found in the cache is counted as if baked.
+    pub memory_limit_bytes: u64,
 }
 
+/// Bytes per cell of a baked dense mesh grid for the memory estimate: the f32 sample plus
+/// the bake's per-cell working data (nearest-triangle search and sign).
+pub const BAKE_BYTES_PER_CELL: u64 = 12;
+
+/// Bytes per triangle of a bake's working set for the memory estimate: the triangles copied
+/// by value twice (input and leaf order), centroids, order, nodes and winding moments of the
+/// bake's BVH, and the closedness test's edge map.
+pub const BAKE_BYTES_PER_TRIANGLE: u64 = 192;
+
 impl FieldOptions {
-    /// The defaults: dense, resolution 64, no cache.
+    /// The defaults: dense, resolution 64, no cache, no memory limit.
     pub const DEFAULT: FieldOptions = FieldOptions {
         mesh_grid_resolution: 64,
         cache_dir: None,
         mesh_grid: MeshGrid::Dense,
+        memory_limit_bytes: u64::MAX,
     };
+
+    /// Estimated peak bytes of baking one mesh grid, before any mesh is read: dense,
+    /// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper
+    /// bound of [`marchmesh_bake::SparseOptions::max_bake_bytes`] (every brick cell holding
+    /// a brick, which a surface cannot reach: the real grid is proportional to its area).
+    pub fn mesh_grid_bytes_bound(&self) -> u64 {
+        match self.mesh_grid {
+            MeshGrid::Dense => {
+                // Cells on the longest side, plus the apron of one sample each side.
+                u64::from(self.mesh_grid_resolution.saturating_add(3))
+                    .pow(3)
+                    .saturating_mul(BAKE_BYTES_PER_CELL)
+            }
+            MeshGrid::Sparse {
+                band_voxels,
+                quantization,
+                reconstruction,
+            } => marchmesh_bake::SparseOptions {
+                resolution: self.mesh_grid_resolution,
+                band_voxels,
+                quantization,
+                reconstruction,
+                cache_dir: None,
+            }
+            .max_bake_bytes(),
+        }
+    }
 }
 
 impl Default for FieldOptions {
@@ -160,6 +205,9 @@ pub struct Field {
     tape: Option<Tape>,
     grids: Vec<Box<dyn GridSampler>>,
     bounds: Option<(DVec3, DVec3)>,
+    /// The program pruned per octree cell ([`prune`]), when built: what the point queries
+    /// evaluate.
+    cells: Option<prune::Cells>,
     report: FieldReport,
 }
 
@@ -238,7 +286,34 @@ impl MeshResolver for Meshes<'_> {
             reason,
         };
         let t0 = Instant::now();
-        let mesh = marchmesh_meshio::load_mesh(path).map_err(|e| err(e.to_string()))?;
+        let limit = self.opts.memory_limit_bytes;
+        let held: u64 = self.grids.iter().map(|g| g.memory_bytes()).sum();
+        let grid = self.opts.mesh_grid_bytes_bound();
+        let mut check = |b: &marchmesh_meshio::LoadBound| {
+            let bake = b.triangles.saturating_mul(BAKE_BYTES_PER_TRIANGLE);
+            let needed = held
+                .saturating_add(grid)
+                .saturating_add(b.load_bytes())
+                .saturating_add(bake);
+            if needed <= limit {
+                return Ok(());
+            }
+            Err(format!(
+                "loading and baking it would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles, {} MiB for its grid, {} MiB of grids already baked), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
+                needed.div_ceil(1 << 20),
+                b.file_bytes.div_ceil(1 << 20),
+                b.records,
+                b.vertices,
+                b.triangles,
+                grid.div_ceil(1 << 20),
+                held.div_ceil(1 << 20),
+                limit >> 20
+            ))
+        };
+        let mesh = marchmesh_meshio::load_mesh_checked(path, &mut check).map_err(|e| match e {
+            marchmesh_meshio::MeshLoadError::OverBudget { reason, .. } => err(reason),
+            other => err(other.to_string()),
+        })?;
         let open_note = if mesh.is_closed() {
             ""
         } else {
@@ -399,6 +474,7 @@ impl Field {
             p64,
             grids: meshes.grids,
             bounds,
+            cells: None,
             report: FieldReport {
                 phases_ms: phases,
                 counters,
@@ -431,28 +507,114 @@ impl Field {
             .map(Vec3::from_array)
     }
 
+    /// Prunes the program per region ([`prune::Cells`]): an octree of `2^depth` finest cells
+    /// per axis over the field's box, each cell holding the program restricted to the nodes
+    /// that can matter in it, or a far bound where no surface is. Point queries then evaluate
+    /// the cell's program (the same value as the whole program's, bit for bit) or the far
+    /// bound (a safe bound of the distance to any surface with the field's sign, at least half
+    /// the cell's radius: never mistaken for a hit). An octree over its node budget
+    /// ([`prune::Cells::max_nodes`]) is retried one level shallower. Does nothing and returns
+    /// `None` when the field is unbounded, has mesh grids or was built
+    /// [`Field::without_bounds`].
+    pub fn build_cells(&mut self, depth: u32) -> Option<prune::CellStats> {
+        let (lo, hi) = self.bounds?;
+        let t0 = Instant::now();
+        // Over its node budget an octree is retried one level shallower.
+        let cells = (1..=depth.min(8)).rev().find_map(|depth| {
+            // Half a finest cell of margin around the surfaces' box.
+            let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
+            prune::Cells::build(&self.p64, &self.grids, (lo, hi), pad, depth)
+        })?;
+        let stats = cells.stats();
+        self.report
+            .phases_ms
+            .push(("field_prune".into(), t0.elapsed().as_secs_f64() * 1e3));
+        self.report.counters.extend([
+            ("prune_program_cells".into(), stats.program_cells as f64),
+            ("prune_far_cells".into(), stats.far_cells as f64),
+            (
+                "prune_mean_cell_nodes".into(),
+                stats.program_nodes as f64 / stats.program_cells.max(1) as f64,
+            ),
+            (
+                "prune_max_cell_nodes".into(),
+                stats.max_program_nodes as f64,
+            ),
+        ]);
+        self.cells = Some(cells);
+        Some(stats)
+    }
+
+    /// Whether the program holds a smooth union (which the per-bundle culling keeps whole).
+    pub fn has_smooth_unions(&self) -> bool {
+        self.p64.instrs.iter().any(|i| {
+            matches!(
+                i.op,
+                program::Op::Smooth {
+                    op: marchmesh_scene::SmoothOp::Union,
+                    ..
+                }
+            )
+        })
+    }
+
+    /// Whether point queries run on pruned cells ([`Field::build_cells`]).
+    pub fn has_cells(&self) -> bool {
+        self.cells.is_some()
+    }
+
     /// Signed distance bound at `p` (f32). 1e30 for an empty field.
     #[inline]
     pub fn distance(&self, p: Vec3) -> f32 {
-        self.eval::<f32, false>(&self.p32, V3::new(p.x, p.y, p.z)).0
+        match &self.cells {
+            Some(c) => c.eval::<false>(p, &self.p32, &self.grids).0,
+            None => self.eval::<f32, false>(&self.p32, V3::new(p.x, p.y, p.z)).0,
+        }
     }
 
-    /// Signed distance bound at `p` in f64 (same formulas as [`Field::distance`]).
+    /// The f64 program to evaluate at `p`: its cell's when pruned, else the whole one.
+    #[inline]
+    fn p64_at(&self, p: DVec3) -> &Program<f64> {
+        self.cells
+            .as_ref()
+            .and_then(|c| c.program_f64(p))
+            .unwrap_or(&self.p64)
+    }
+
+    /// Signed distance bound at `p` in f64 (same formulas as [`Field::distance`]; the whole
+    /// program's value in far cells).
     #[inline]
     pub fn distance_f64(&self, p: DVec3) -> f64 {
-        self.eval::<f64, false>(&self.p64, V3::new(p.x, p.y, p.z)).0
+        self.eval::<f64, false>(self.p64_at(p), V3::new(p.x, p.y, p.z))
+            .0
     }
 
-    /// Distance and the material of the surface defining it (f32).
+    /// A bound of the distance to the surfaces at `p` in f64 for marching: in the far cells of
+    /// a pruned field ([`Field::build_cells`]) and outside its box their bound, elsewhere
+    /// [`Field::distance_f64`]. Its sign is the field's everywhere, so sign changes along a
+    /// ray are the field's.
+    #[inline]
+    pub fn distance_bound_f64(&self, p: DVec3) -> f64 {
+        match self.cells.as_ref().and_then(|c| c.far_bound_f64(p)) {
+            Some(b) => b,
+            None => self.distance_f64(p),
+        }
+    }
+
+    /// Distance and the material of the surface defining it (f32; the whole program's
+    /// value in far cells, which carry no material).
     #[inline]
     pub fn distance_material(&self, p: Vec3) -> (f32, MaterialId) {
-        self.eval::<f32, true>(&self.p32, V3::new(p.x, p.y, p.z))
+        match &self.cells {
+            Some(c) => c.eval::<true>(p, &self.p32, &self.grids),
+            None => self.eval::<f32, true>(&self.p32, V3::new(p.x, p.y, p.z)),
+        }
     }
 
     /// Distance and material in f64.
     #[inline]
     pub fn distance_material_f64(&self, p: DVec3) -> (f64, MaterialId) {
-        self.eval::<f64, true>(&self.p64, V3::new(p.x, p.y, p.z))
+        self.eval::<f64, true>(self.p64_at(p), V3::new(p.x, p.y, p.z))
     }
 
     /// The distance at `p` (as [`Field::distance`]) and a safe step along `dir` from local
@@ -462,7 +624,14 @@ impl Field {
     /// NaN. `len` must be positive (a longer segment gives looser bounds).
     #[inline]
     pub fn segment_step(&self, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
-        self.segment_in(&self.p32, p, dir, len)
+        // A segment inside one program cell reads the cell's program (the same values
+        // along it); any other the whole program.
+        let prog = self
+            .cells
+            .as_ref()
+            .and_then(|c| c.program_f32_holding(p, p + dir * len))
+            .unwrap_or(&self.p32);
+        self.segment_in(prog, p, dir, len)
     }
 
     /// [`Field::segment_step`] in f64 (same formulas).
@@ -489,6 +658,10 @@ impl Field {
     #[inline]
     pub fn distance_material_x8(&self, p: [Vec3; 8]) -> ([f32; 8], [MaterialId; 8]) {
         let p = V3::from_points(p);
+        if let Some(c) = &self.cells {
+            let (d, m) = c.eval_x8::<true>(p, &self.p32, &self.grids);
+            return (d.0, m);
+        }
         let (d, m) = match &self.tape {
             Some(t) => t.eval::<F32x8, true>(p, &self.grids),
             None => self.eval::<F32x8, true>(&self.p32, p),
@@ -500,6 +673,9 @@ impl Field {
     /// [`Field::distance`]).
     #[inline]
     pub fn distance_lanes(&self, p: V3<F32x8>) -> F32x8 {
+        if let Some(c) = &self.cells {
+            return c.eval_x8::<false>(p, &self.p32, &self.grids).0;
+        }
         match &self.tape {
             Some(t) => t.eval::<F32x8, false>(p, &self.grids).0,
             None => self.eval::<F32x8, false>(&self.p32, p).0,
@@ -581,6 +757,7 @@ impl Field {
         }
         self.tape = Tape::of(&self.p32);
         self.bounds = None;
+        self.cells = None;
         self
     }
 
@@ -594,6 +771,7 @@ impl Field {
     pub fn memory_bytes(&self) -> u64 {
         self.p32.memory_bytes()
             + self.p64.memory_bytes()
+            + self.cells.as_ref().map_or(0, prune::Cells::memory_bytes)
             + self.grids.iter().map(|g| g.memory_bytes()).sum::<u64>()
     }
 
@@ -605,6 +783,11 @@ impl Field {
     /// Compile phases, counters and notes.
     pub fn report(&self) -> &FieldReport {
         &self.report
+    }
+
+    /// The compiled f64 program (the whole one, never a pruned cell's).
+    pub fn program_f64(&self) -> &Program<f64> {
+        &self.p64
     }
 
     /// Number of program nodes.

@@ -33,8 +33,9 @@ use crate::shapes::{self, TriData};
 
 pub mod segment;
 
-/// Most copies evaluated per repeated axis.
-pub const MAX_WINDOW: usize = 5;
+/// Most copies evaluated per repeated axis: the scene's
+/// [`marchmesh_scene::validate::REPEAT_WINDOW`], which its limit on nested repetitions counts.
+pub const MAX_WINDOW: usize = marchmesh_scene::validate::REPEAT_WINDOW as usize;
 
 /// An affine map `p -> lin * p + trans` (`lin` row-major, `None` = identity).
 #[derive(Debug, Clone, PartialEq)]
@@ -301,6 +302,15 @@ impl<S: Scalar> Program<S> {
         self.child::<T, M>(0, p, Ctx::Plain, grids)
     }
 
+    /// The value node `i` contributes to its parent at `p` (its parent's frame), bound logic
+    /// included: what the pruner ([`crate::prune`]) brackets over a region.
+    pub(crate) fn node_value(&self, i: usize, p: V3<S>, grids: &[Box<dyn GridSampler>]) -> S
+    where
+        S: Lane<S = S>,
+    {
+        self.child::<S, false>(i, p, Ctx::Plain, grids).0
+    }
+
     /// Node `i` including its bound logic, `p` in its parent's frame.
     #[inline(always)]
     fn child<T: Lane<S = S>, const M: bool>(
@@ -413,20 +423,36 @@ impl<S: Scalar> Program<S> {
                 }
                 (best, bm)
             }
-            Op::Smooth {
-                op: SmoothOp::Union,
-                k,
-                inv_k,
-            } => {
+            Op::Smooth { op, k, inv_k } => {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);
                 let mut j = i + 1;
                 let (mut best, mut bm) = self.child::<T, M>(j, q, Ctx::Plain, grids);
                 j = self.instrs[j].end as usize;
                 while j < end {
-                    let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best + k), grids);
-                    let take = T::lt(d, best);
-                    best = shapes::smin(best, d, k, inv_k);
+                    let (m, take) = match op {
+                        SmoothOp::Union => {
+                            // A child at least k above the running value leaves it unchanged.
+                            let (d, m) = self.child::<T, M>(j, q, Ctx::Below(best + k), grids);
+                            let take = T::lt(d, best);
+                            best = shapes::smin(best, d, k, inv_k);
+                            (m, take)
+                        }
+                        SmoothOp::Intersection => {
+                            let (d, m) = self.child::<T, M>(j, q, Ctx::Plain, grids);
+                            let take = T::lt(best, d);
+                            best = shapes::smax(best, d, k, inv_k);
+                            (m, take)
+                        }
+                        SmoothOp::Subtraction => {
+                            // Skipped exactly when it cannot come within k of cutting.
+                            let (d, m) = self.subtrahend::<T, M>(j, q, best - k, grids);
+                            let nd = -d;
+                            let take = T::lt(best, nd);
+                            best = shapes::smax(best, nd, k, inv_k);
+                            (m, take)
+                        }
+                    };
                     bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;
                 }

@@ -51,6 +51,43 @@ pub fn cylinder<T: Lane>(p: V3<T>, r: T, h: T) -> T {
     dx.max(dy).min(zero) + (ox * ox + oy * oy).sqrt()
 }
 
+/// Box with half extents `inner + r` whose edges and corners are rounded by radius `r`:
+/// the box of half extents `inner` grown by `r`, so `box3(p, inner) - r`. Exact.
+#[inline(always)]
+pub fn rounded_box<T: Lane>(p: V3<T>, inner: V3<T>, r: T) -> T {
+    box3(p, inner) - r
+}
+
+/// Capsule: the points within `r` of the y-axis segment `|y| <= h`. Exact.
+#[inline(always)]
+pub fn capsule<T: Lane>(p: V3<T>, h: T, r: T) -> T {
+    let y = p.y - p.y.clamp(-h, h);
+    (p.x * p.x + y * y + p.z * p.z).sqrt() - r
+}
+
+/// Capped cone along y from radius `r1` at `y = -h` to `r2` at `y = h` (Quilez's
+/// `sdCappedCone`), `inv_k2 = 1 / ((r2 - r1)^2 + 4 h^2)`. Exact.
+#[inline(always)]
+pub fn capped_cone<T: Lane>(p: V3<T>, h: T, r1: T, r2: T, inv_k2: T) -> T {
+    let zero = T::c(0.0);
+    let qx = (p.x * p.x + p.z * p.z).sqrt();
+    let qy = p.y;
+    // Nearest cap: the bottom one below the middle.
+    let cap_r = T::select(T::lt(qy, zero), r1, r2);
+    let ca_x = qx - qx.min(cap_r);
+    let ca_y = qy.abs() - h;
+    // Nearest point of the slanted side, from (r2, h) along (r2 - r1, 2h).
+    let (k2x, k2y) = (r2 - r1, h + h);
+    let t = (((r2 - qx) * k2x + (h - qy) * k2y) * inv_k2).clamp(zero, T::c(1.0));
+    let cb_x = qx - r2 + k2x * t;
+    let cb_y = qy - h + k2y * t;
+    let inside = T::and(T::lt(cb_x, zero), T::lt(ca_y, zero));
+    let d = (ca_x * ca_x + ca_y * ca_y)
+        .min(cb_x * cb_x + cb_y * cb_y)
+        .sqrt();
+    T::select(inside, -d, d)
+}
+
 /// Ellipsoid with semi-axes `r` (`rmin` = smallest of them): the *scaled-sphere bound*
 /// `rmin * (|p / r| - 1)`.
 ///
@@ -140,4 +177,13 @@ pub fn box_distance<T: Lane>(p: V3<T>, lo: V3<T>, hi: V3<T>) -> T {
 pub fn smin<T: Lane>(a: T, b: T, k: T, inv_k: T) -> T {
     let h = (k - (a - b).abs()).max(T::c(0.0)) * inv_k;
     a.min(b) - h * h * k * T::c(0.25)
+}
+
+/// The polynomial smooth maximum `-smin(-a, -b)` = `max(a, b) + h^2 k / 4` with the same
+/// `h`: never below `max(a, b)`, at most `k / 4` above it, 1-Lipschitz when `a` and `b` are.
+/// Smooth intersection folds it; smooth subtraction folds `smax(a, -b)`.
+#[inline(always)]
+pub fn smax<T: Lane>(a: T, b: T, k: T, inv_k: T) -> T {
+    let h = (k - (a - b).abs()).max(T::c(0.0)) * inv_k;
+    a.max(b) + h * h * k * T::c(0.25)
 }

@@ -764,3 +764,64 @@ fn without_bounds_the_field_has_the_same_sign_and_the_same_values_near_surfaces(
         }
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
+
+    /// `scene::bounds::smooth_fold_deficit` against the field's own kernel: a left-to-right
+    /// fold of `n` smooth minima is never more than the deficit below the children's minimum
+    /// (random values, clustered within a few blend radii so the kernel is active).
+    #[test]
+    fn smooth_folds_stay_within_the_fold_deficit(
+        k in 0.001f64..2.0,
+        values in proptest::collection::vec(-3.0f64..3.0, 1..200),
+    ) {
+        let vals: Vec<f64> = values.iter().map(|v| v * k).collect();
+        let fold = vals[1..].iter().fold(vals[0], |acc, &v| {
+            marchmesh_field::shapes::smin(acc, v, k, 1.0 / k)
+        });
+        let min = vals.iter().copied().fold(f64::INFINITY, f64::min);
+        let deficit = marchmesh_scene::bounds::smooth_fold_deficit(k, vals.len());
+        prop_assert!(fold <= min + 1e-12 * k);
+        prop_assert!(fold >= min - deficit - 1e-12 * k,
+            "n = {}: {} below the minimum, bound {}", vals.len(), min - fold, deficit);
+    }
+
+    /// The box `combine` gives a smooth union holds its blended surface: random chains of
+    /// spheres, the compiled field positive at random points outside the box.
+    #[test]
+    fn smooth_union_boxes_hold_the_blended_surface(
+        k in 0.01f64..0.5,
+        steps in proptest::collection::vec((-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0), 1..60),
+        probe in (-1.0f64..1.0, -1.0f64..1.0, -1.0f64..1.0),
+    ) {
+        let mut c = DVec3::ZERO;
+        let children: Vec<Node> = steps.iter().map(|&(x, y, z)| {
+            c += DVec3::new(x, y, z) * 0.1;
+            at(sphere(0.05), c)
+        }).collect();
+        let n = leaf(NodeKind::Smooth {
+            op: SmoothOp::Union, children, blend_radius: k });
+        let b = n.bounds_in_own_frame(&|_| None).expect("bounded");
+        let f = field(&n);
+        // Points on the box's surface and beyond it.
+        let dir = DVec3::new(probe.0, probe.1, probe.2);
+        let centre = (b.lo + b.hi) * 0.5;
+        let half = (b.hi - b.lo) * 0.5;
+        let scale = (dir.abs() / half).max_element().max(1e-12);
+        for grow in [1.0, 1.01, 1.5] {
+            let p = centre + dir / scale * grow;
+            prop_assert!(f.distance_f64(p) >= -1e-12, "{p} outside {b:?}: {}", f.distance_f64(p));
+        }
+        // Equal children reach the deficit, so the growth is needed: the fold at a point
+        // equidistant from n coincident spheres is the deficit below their distance.
+        let same = leaf(NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children: vec![leaf(sphere(0.05)); steps.len()],
+            blend_radius: k,
+        });
+        let d = field(&same).distance_f64(DVec3::new(1.0, 0.0, 0.0));
+        let want = 0.95 - marchmesh_scene::bounds::smooth_fold_deficit(k, steps.len());
+        prop_assert!((d - want).abs() < 1e-9, "{d} vs {want}");
+    }
+}

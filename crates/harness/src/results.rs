@@ -342,6 +342,10 @@ pub struct MergedShard {
 /// count of 30,000 years, a PSNR, error or ray rate far beyond any measurement).
 pub const MAX_RESULT_VALUE: f64 = 1e15;
 
+/// Most bins of a steps histogram [`Results::check_values`] accepts: bin `k` counts rays of
+/// `2^(k-1)..2^k - 1` steps, so a 64-bit step count fills at most 65.
+pub const MAX_HISTOGRAM_BINS: usize = 65;
+
 /// Why results could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ResultsError {
@@ -543,6 +547,27 @@ impl Results {
                         return Err((format!("timings.{id}[{j}].{name}"), reason(name, x)));
                     }
                 }
+            }
+        }
+        for (id, bins) in &self.steps_histograms {
+            let at = format!("steps_histograms.{id}");
+            if bins.len() > MAX_HISTOGRAM_BINS {
+                return Err((
+                    at,
+                    format!(
+                        "{} bins, more than the {MAX_HISTOGRAM_BINS} log2 bins of a step count",
+                        bins.len()
+                    ),
+                ));
+            }
+            let total: u128 = bins.iter().map(|&n| u128::from(n)).sum();
+            if total as f64 > MAX_RESULT_VALUE {
+                return Err((
+                    at,
+                    format!(
+                        "{total} rays in all is not a measurement (at most {MAX_RESULT_VALUE:e})"
+                    ),
+                ));
             }
         }
         Ok(())

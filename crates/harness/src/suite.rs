@@ -245,6 +245,14 @@ pub const MAX_SUITE_FILE_BYTES: u64 = 16 << 20;
 /// is refused at load, before anything is expanded.
 pub const MAX_CONFIGURATIONS: u64 = 100_000;
 
+/// Most timed repeats a repeat policy may ask for (`max_count`, and so `min_count`):
+/// 1,000,000 per configuration. Every repeat's time is kept in results.json, and a policy of
+/// billions would run (and grow) for ever.
+pub const MAX_REPEATS: u32 = 1_000_000;
+
+/// Longest `min_time_s` a repeat policy may ask for: an hour of repeats per configuration.
+pub const MAX_REPEAT_SECONDS: f64 = 3600.0;
+
 /// The JSON paths of values the suite format reads as objects that are arrays instead
 /// (serde would read an array as the object's fields in order): the top level, each group,
 /// its backends, resolutions, scene entries, repeat policies and render settings.
@@ -460,12 +468,15 @@ pub fn parse(text: &str, file: &Path) -> Result<Suite, SuiteError> {
     let check_policy = |p: &RepeatPolicy, path: String| {
         if p.min_count == 0
             || p.max_count < p.min_count
-            || p.min_time_s.is_nan()
-            || p.min_time_s < 0.0
+            || p.max_count > MAX_REPEATS
+            || !(0.0..=MAX_REPEAT_SECONDS).contains(&p.min_time_s)
         {
             return Err(fmt_err(
                 path,
-                "need min_count >= 1, max_count >= min_count, min_time_s >= 0".into(),
+                format!(
+                    "need 1 <= min_count <= max_count <= {MAX_REPEATS} and 0 <= min_time_s <= {MAX_REPEAT_SECONDS}, got min_count {}, max_count {}, min_time_s {}",
+                    p.min_count, p.max_count, p.min_time_s
+                ),
             ));
         }
         Ok(())

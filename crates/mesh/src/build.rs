@@ -302,6 +302,7 @@ fn repeat_offsets(
             json_path: node.json_path.clone(),
             cells: total.min(u128::from(u64::MAX)) as u64,
             limit: ctx.options.max_instances(),
+            infinite,
         });
     }
     let mut out = Vec::new();

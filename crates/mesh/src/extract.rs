@@ -16,6 +16,9 @@ use crate::tessellate::LocalMesh;
 /// about 0.5 GB of f32.
 pub const MAX_SURFACE_RESOLUTION: u32 = 512;
 
+/// Composites whose field has fewer nodes are sampled without pruning per region.
+const PRUNE_MIN_NODES: usize = 16;
+
 /// Extracts the surface of a composite node in its local frame (the frame before
 /// `node.transform`) from the shared distance field (`marchmesh-field`).
 ///
@@ -29,7 +32,7 @@ pub(crate) fn extract(
     resolution: u32,
     field_options: &FieldOptions,
 ) -> Result<LocalMesh, MeshError> {
-    let field =
+    let mut field =
         Field::compile_node(node, node.transform.inverse(), field_options).map_err(|e| {
             MeshError::Unsupported {
                 json_path: node.json_path.clone(),
@@ -43,8 +46,20 @@ pub(crate) fn extract(
             json_path: node.json_path.clone(),
             reason: "the CSG result is unbounded (e.g. a plane or an infinite repetition survives), so it has no finite surface to extract".into(),
         })?;
+    // Pruned per region: a sample reads only the children that matter near it, and a
+    // sample in a cell without surface reads that cell's far bound. A far cell's field is at
+    // least half its bounding radius, so at least a quarter of its longest edge; with that
+    // edge at least eight extraction cells long, no corner of an extraction cell the surface
+    // crosses (whose field is below a cell diagonal, sqrt(3) cells) reads a far bound: the
+    // mesh is the one the whole field gives.
+    if field.node_count() >= PRUNE_MIN_NODES {
+        let depth = (resolution.clamp(8, MAX_SURFACE_RESOLUTION) / 8)
+            .ilog2()
+            .min(6);
+        field.build_cells(depth);
+    }
     Ok(extract_surface(
-        |p| field.distance_f64(p) as f32,
+        |p| field.distance_bound_f64(p) as f32,
         |p| field.distance_material_f64(p).1,
         bounds,
         resolution,
@@ -60,6 +75,9 @@ pub(crate) fn extract(
 /// of the cell's edge crossings); normals are the normalised field gradient estimated by
 /// the mesher. Triangles come out counter-clockwise seen from outside (positive distance).
 /// A closed zero set inside the bounds gives a closed mesh.
+///
+/// Only the samples near the surface read `distance` (see [`sample_narrow_band`]), so the
+/// cost grows with the surface's area in cells, not the grid's volume.
 pub fn extract_surface(
     distance: impl Fn(DVec3) -> f32 + Sync,
     material_at: impl Fn(DVec3) -> MaterialId,
@@ -73,20 +91,7 @@ pub fn extract_surface(
     let origin = lo - DVec3::splat(2.0 * cell);
     let dims = ((extent / cell).ceil().as_uvec3() + glam::UVec3::splat(5)).to_array();
     let shape = RuntimeShape::<u32, 3>::new(dims);
-    let slice = (dims[0] * dims[1]) as usize;
-    let mut sdf = vec![0f32; slice * dims[2] as usize];
-    sdf.par_chunks_mut(slice)
-        .enumerate()
-        .for_each(|(z, plane)| {
-            for y in 0..dims[1] as usize {
-                for x in 0..dims[0] as usize {
-                    let p = origin + DVec3::new(x as f64, y as f64, z as f64) * cell;
-                    let d = distance(p);
-                    // Non-finite samples would poison the mesher: treat them as outside.
-                    plane[y * dims[0] as usize + x] = if d.is_finite() { d } else { f32::MAX };
-                }
-            }
-        });
+    let sdf = sample_narrow_band(&distance, origin, cell, dims);
     let mut buffer = SurfaceNetsBuffer::default();
     surface_nets(&sdf, &shape, [0; 3], dims.map(|d| d - 1), &mut buffer);
 
@@ -137,5 +142,154 @@ pub fn extract_surface(
         closed: true,
         segments: Vec::new(),
         materials: Some(materials),
+    }
+}
+
+/// Samples per axis of a block of [`sample_narrow_band`].
+const BAND_BLOCK: usize = 8;
+
+/// The grid of `dims` samples at `origin + i * cell`, read from `distance` only near the
+/// surface: each block of [`BAND_BLOCK`]^3 samples first reads the field at its centre, and
+/// when that value `d` is farther from zero than the block's half diagonal plus two cell
+/// diagonals (the field is 1-Lipschitz, or a bound of a 1-Lipschitz field that is never
+/// nearer zero than the field), every sample `p` of the block takes `d` moved towards zero
+/// by `|p - centre|`, which keeps the field's sign and stays at least two cell diagonals
+/// from zero. Surface nets read values only at the corners of cells the surface crosses,
+/// whose values lie within a cell diagonal of zero, so no such corner is in a skipped
+/// block: the mesh is the one the fully sampled grid gives.
+fn sample_narrow_band(
+    distance: &(impl Fn(DVec3) -> f32 + Sync),
+    origin: DVec3,
+    cell: f64,
+    dims: [u32; 3],
+) -> Vec<f32> {
+    let [nx, ny, nz] = dims.map(|d| d as usize);
+    let slice = nx * ny;
+    let blocks = [nx, ny, nz].map(|n| n.div_ceil(BAND_BLOCK));
+    let sample = |x: usize, y: usize, z: usize| -> f32 {
+        let p = origin + DVec3::new(x as f64, y as f64, z as f64) * cell;
+        let d = distance(p);
+        // Non-finite samples would poison the mesher: treat them as outside.
+        if d.is_finite() { d } else { f32::MAX }
+    };
+    // One slab of blocks (BAND_BLOCK planes of z) per task.
+    let slabs: Vec<Vec<f32>> = (0..blocks[2])
+        .into_par_iter()
+        .map(|bz| {
+            let z0 = bz * BAND_BLOCK;
+            let z1 = (z0 + BAND_BLOCK).min(nz);
+            let mut out = vec![0f32; slice * (z1 - z0)];
+            for by in 0..blocks[1] {
+                let (y0, y1) = (by * BAND_BLOCK, ((by + 1) * BAND_BLOCK).min(ny));
+                for bx in 0..blocks[0] {
+                    let (x0, x1) = (bx * BAND_BLOCK, ((bx + 1) * BAND_BLOCK).min(nx));
+                    let centre_index = DVec3::new(
+                        0.5 * (x0 + x1 - 1) as f64,
+                        0.5 * (y0 + y1 - 1) as f64,
+                        0.5 * (z0 + z1 - 1) as f64,
+                    );
+                    let centre = origin + centre_index * cell;
+                    let half_diagonal = DVec3::new(
+                        (x1 - x0 - 1) as f64,
+                        (y1 - y0 - 1) as f64,
+                        (z1 - z0 - 1) as f64,
+                    )
+                    .length()
+                        * 0.5
+                        * cell;
+                    let d = f64::from(distance(centre));
+                    let far = d.is_finite() && d.abs() > half_diagonal + 2.0 * 3f64.sqrt() * cell;
+                    for z in z0..z1 {
+                        for y in y0..y1 {
+                            let row = (z - z0) * slice + y * nx;
+                            for x in x0..x1 {
+                                out[row + x] = if far {
+                                    let offset = (DVec3::new(x as f64, y as f64, z as f64)
+                                        - centre_index)
+                                        .length()
+                                        * cell;
+                                    ((d.abs() - offset) as f32).copysign(d as f32)
+                                } else {
+                                    sample(x, y, z)
+                                };
+                            }
+                        }
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    slabs.concat()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The narrow band gives the surface-nets mesh of the fully sampled grid: same
+    /// triangles, same positions, for spheres of several sizes against the grid.
+    #[test]
+    fn narrow_band_meshes_like_the_full_grid() {
+        for (radius, resolution) in [(0.9, 16u32), (0.3, 64), (0.05, 128), (0.013, 200)] {
+            let distance = |p: DVec3| (p.length() - radius) as f32;
+            let bounds = (DVec3::splat(-1.0), DVec3::splat(1.0));
+            let band = extract_surface(distance, |_| MaterialId::default(), bounds, resolution);
+            // The full grid: every sample read.
+            let cell = 2.0 / f64::from(resolution);
+            let origin = bounds.0 - DVec3::splat(2.0 * cell);
+            let dims =
+                ((DVec3::splat(2.0) / cell).ceil().as_uvec3() + glam::UVec3::splat(5)).to_array();
+            let mut full = Vec::new();
+            for z in 0..dims[2] {
+                for y in 0..dims[1] {
+                    for x in 0..dims[0] {
+                        full.push(distance(
+                            origin + DVec3::new(f64::from(x), f64::from(y), f64::from(z)) * cell,
+                        ));
+                    }
+                }
+            }
+            let shape = RuntimeShape::<u32, 3>::new(dims);
+            let mut buffer = SurfaceNetsBuffer::default();
+            surface_nets(&full, &shape, [0; 3], dims.map(|d| d - 1), &mut buffer);
+            assert!(!band.triangles.is_empty(), "radius {radius}: no surface");
+            assert_eq!(
+                band.positions.len(),
+                buffer.positions.len(),
+                "radius {radius}"
+            );
+            for (a, b) in band.positions.iter().zip(&buffer.positions) {
+                let b =
+                    origin + DVec3::new(f64::from(b[0]), f64::from(b[1]), f64::from(b[2])) * cell;
+                assert!((*a - b).length() < 1e-9, "radius {radius}: {a} vs {b}");
+            }
+            assert_eq!(
+                band.triangles.len() * 3,
+                buffer.indices.len(),
+                "radius {radius}"
+            );
+        }
+    }
+
+    /// Far blocks keep the field's sign: a sample inside a big solid stays negative.
+    #[test]
+    fn narrow_band_keeps_signs_far_from_the_surface() {
+        let distance = |p: DVec3| (p.length() - 0.9) as f32;
+        let dims = [40u32, 40, 40];
+        let cell = 0.05;
+        let origin = DVec3::splat(-1.0);
+        let grid = sample_narrow_band(&distance, origin, cell, dims);
+        for z in 0..40usize {
+            for y in 0..40usize {
+                for x in 0..40usize {
+                    let p = origin + DVec3::new(x as f64, y as f64, z as f64) * cell;
+                    let v = grid[(z * 40 + y) * 40 + x];
+                    let exact = distance(p);
+                    assert_eq!(v.signum(), exact.signum(), "at {p}");
+                    assert!(v.abs() <= exact.abs() + 1e-6, "at {p}: {v} vs {exact}");
+                }
+            }
+        }
     }
 }

@@ -74,9 +74,13 @@ pub enum MeshError {
         /// Why.
         reason: String,
     },
-    /// An infinite repetition reaches more cells than `MeshOptions::max_instances`.
+    /// A repetition places more copies than `MeshOptions::max_instances`: a finite one by its
+    /// counts, an infinite one by the cells within `max_distance` of the camera.
     #[error(
-        "{json_path}: infinite repetition would need {cells} cells within max_distance (limit {limit}); lower render.max_distance or raise max_instances"
+        "{json_path}: {} would need {cells} cells{} (limit {limit}); {} or raise max_instances",
+        if *infinite { "infinite repetition" } else { "finite repetition" },
+        if *infinite { " within max_distance" } else { " by its counts" },
+        if *infinite { "lower render.max_distance" } else { "lower its counts" }
     )]
     TooManyInstances {
         /// The repeat node.
@@ -85,6 +89,8 @@ pub enum MeshError {
         cells: u64,
         /// The limit.
         limit: u64,
+        /// Whether some repeated axis has no count (cells counted within `max_distance`).
+        infinite: bool,
     },
     /// The build would need more memory than [`MeshOptions::memory_limit_bytes`]; refused
     /// before allocating it.
@@ -388,14 +394,40 @@ impl ShapeInputs<'_> {
             || format!("{placement_count} placements"),
             "max_instances",
         )?;
-        for (key, placements) in groups {
-            let node = placements[0].node;
-            // Triangles are stored once per placement unless instanced.
-            let copies = if options.instancing() && placements.len() > 1 {
+        // Every extraction's output estimated before the first one runs (each can take
+        // seconds): a build over the limit is refused before any work.
+        // Triangles are stored once per placement unless instanced.
+        let copies_of = |placements: &[&Placement]| {
+            if options.instancing() && placements.len() > 1 {
                 1
             } else {
                 placements.len() as u64
-            };
+            }
+        };
+        let extractions: Vec<(&str, u64)> = groups
+            .iter()
+            .filter(|(key, _)| matches!(key, ShapeKey::Composite(_)))
+            .map(|(_, placements)| (placements[0].node.json_path.as_str(), copies_of(placements)))
+            .collect();
+        if let Some((first, _)) = extractions.first() {
+            let per_extraction = extracted_triangles_estimate(options.surface_resolution());
+            let copies: u64 = extractions.iter().map(|(_, c)| c).sum();
+            let bytes = triangle_bytes(per_extraction, copies);
+            if budget.planned_bytes.saturating_add(bytes) > budget.limit_bytes {
+                return Err(budget.refusal(
+                    bytes,
+                    first,
+                    format!(
+                        "{} surface extractions ({copies} copies in all) of about {per_extraction} triangles each",
+                        extractions.len()
+                    ),
+                    "the extraction grid (--opt surface_res)",
+                ));
+            }
+        }
+        for (key, placements) in groups {
+            let node = placements[0].node;
+            let copies = copies_of(placements);
             let mesh = match key {
                 ShapeKey::Analytic(..) => {
                     Some(self.tessellate(node, placements, copies, &mut budget, report)?)
@@ -645,6 +677,16 @@ impl ShapeInputs<'_> {
 }
 
 /// Peak build bytes of `triangles` stored `copies` times.
+/// Triangles expected from extracting a surface on a grid of `resolution` cells along its
+/// longest side, for the estimate made before any extraction: a sphere filling the grid
+/// (surface nets emit two triangles per grid face the surface crosses: `2 pi res^2`). A
+/// surface with more area in the same box (many small parts) gives more; the exact count is
+/// charged after each extraction.
+fn extracted_triangles_estimate(resolution: u32) -> u64 {
+    let r = u64::from(resolution);
+    (r * r).saturating_mul(2 * 314) / 100
+}
+
 fn triangle_bytes(triangles: u64, copies: u64) -> u64 {
     triangles
         .saturating_mul(copies)

@@ -188,10 +188,10 @@ pub struct MeshOptions {
     /// Shapes used more than once (repetition, a mesh placed twice) come from one BLAS.
     /// `false` gives the same image with more memory. Default `true`.
     pub instancing: Option<bool>,
-    /// Largest instance count an infinite repetition may expand to.
+    /// Largest instance count a repetition may expand to.
     ///
-    /// Cells within `render.max_distance` of the camera; exceeding it is an error. Default
-    /// 4,194,304.
+    /// A finite repetition's cells by its counts, an infinite one's cells within
+    /// `render.max_distance` of the camera; exceeding it is an error. Default 4,194,304.
     pub max_instances: Option<u64>,
     /// Cap on segments per full turn of any parametric direction (8..=65536).
     ///
@@ -307,7 +307,7 @@ impl MeshOptions {
         self.pick(|o| o.instancing)
     }
 
-    /// Largest instance count of an infinite repetition (`max_instances`).
+    /// Largest instance count of a repetition (`max_instances`).
     pub fn max_instances(&self) -> u64 {
         self.pick(|o| o.max_instances)
     }

@@ -13,7 +13,7 @@
 //! same position are identified; caps and sides keep separate vertices for their normals),
 //! counter-clockwise seen from outside.
 
-use std::f64::consts::{FRAC_PI_2, PI, TAU};
+use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
 
 use glam::DVec3;
 use marchmesh_scene::{NodeKind, Shape};
@@ -203,14 +203,17 @@ fn revolve(
     let (sin, cos): (Vec<f64>, Vec<f64>) = phi.iter().map(|a| a.sin_cos()).unzip();
     let normals = mesh.normals.get_or_insert_with(Vec::new);
     for (profile, closed) in pieces {
-        // First vertex index of each profile row.
-        let mut rows: Vec<(u32, bool)> = Vec::with_capacity(profile.len());
+        // First vertex index of each profile row, whether it is a pole (one triangle per
+        // segment meets it) and whether it is a ring of vertices at an apex.
+        let mut rows: Vec<(u32, bool, bool)> = Vec::with_capacity(profile.len());
         for p in profile {
             let start = mesh.positions.len() as u32;
-            if p.pole {
+            if p.pole && p.normal.0 == 0.0 {
                 mesh.positions.push(DVec3::new(0.0, p.y, 0.0));
                 normals.push(DVec3::new(0.0, p.normal.1.signum(), 0.0));
             } else {
+                // A ring of vertices; at an apex (a pole with a slanted normal, a cone's tip)
+                // they share the point, so each triangle meeting there keeps its own normal.
                 for j in 0..n as usize {
                     mesh.positions
                         .push(DVec3::new(p.radial * cos[j], p.y, p.radial * sin[j]));
@@ -221,7 +224,7 @@ fn revolve(
                     ));
                 }
             }
-            rows.push((start, p.pole));
+            rows.push((start, p.pole, p.pole && p.normal.0 != 0.0));
         }
         let count = rows.len();
         let bands = if *closed {
@@ -230,14 +233,16 @@ fn revolve(
             count.saturating_sub(1)
         };
         for k in 0..bands {
-            let (top, top_pole) = rows[k];
-            let (bottom, bottom_pole) = rows[(k + 1) % count];
-            let at = |start: u32, pole: bool, j: u32| if pole { start } else { start + j % n };
+            let (top, top_pole, top_ring) = rows[k];
+            let (bottom, bottom_pole, bottom_ring) = rows[(k + 1) % count];
+            let at = |start: u32, pole: bool, ring: bool, j: u32| {
+                if pole && !ring { start } else { start + j % n }
+            };
             for j in 0..n {
-                let a = at(top, top_pole, j);
-                let b = at(top, top_pole, j + 1);
-                let c = at(bottom, bottom_pole, j);
-                let d = at(bottom, bottom_pole, j + 1);
+                let a = at(top, top_pole, top_ring, j);
+                let b = at(top, top_pole, top_ring, j + 1);
+                let c = at(bottom, bottom_pole, bottom_ring, j);
+                let d = at(bottom, bottom_pole, bottom_ring, j + 1);
                 if !top_pole {
                     mesh.triangles.push([a, b, c]);
                 }
@@ -642,6 +647,32 @@ pub fn tessellate_within(
             revolve(&[(profile, true)], &phi, &mut m, max_triangles)?;
             m
         }
+        Shape::Capsule {
+            radius,
+            half_height,
+        } => capsule(radius, half_height, detail, max_per_turn, max_triangles)?,
+        Shape::CappedCone {
+            half_height,
+            bottom_radius,
+            top_radius,
+        } => capped_cone(
+            half_height,
+            bottom_radius,
+            top_radius,
+            detail,
+            max_per_turn,
+            max_triangles,
+        )?,
+        Shape::RoundedBox {
+            half_extents,
+            rounding_radius,
+        } => rounded_box(
+            half_extents,
+            rounding_radius,
+            detail,
+            max_per_turn,
+            max_triangles,
+        )?,
         Shape::Box { half_extents } => box_mesh(half_extents),
         Shape::Triangle { vertices } => LocalMesh {
             positions: vertices.to_vec(),
@@ -654,6 +685,229 @@ pub fn tessellate_within(
         Shape::Plane { .. } | Shape::Mesh { .. } => return Ok(None),
     };
     Ok(Some(mesh))
+}
+
+/// A capsule (radius `r`, segment `|y| <= h`) as a latitude-longitude sphere of radius `r`
+/// whose upper half is moved up by `h` and lower half down by `h`, the equator row doubled
+/// so the band between the halves is the cylinder.
+fn capsule(
+    r: f64,
+    h: f64,
+    detail: Detail,
+    max_per_turn: u32,
+    max_triangles: u64,
+) -> Result<LocalMesh, TooManyTriangles> {
+    // Every point of the rounded ends moves by at most r per radian squared.
+    let theta = sample_span(detail, (0.0, FRAC_PI_2), r, 1, max_per_turn, |a, b| {
+        let Detail::Screen(budget) = detail else {
+            return f64::INFINITY;
+        };
+        let radial = mul_range((r, r), sin_range(a, b));
+        let y = mul_range((r, r), cos_range(a, b));
+        step_for(
+            budget
+                .ring_error(radial, (y.0 + h, y.1 + h))
+                .min(budget.ring_error(radial, (-y.1 - h, -y.0 - h))),
+            r,
+        )
+    });
+    let bands: Vec<Band> = theta
+        .windows(2)
+        .map(|w| {
+            let y = mul_range((r, r), cos_range(w[0], w[1]));
+            Band {
+                radial: mul_range((r, r), sin_range(w[0], w[1])),
+                y: (-y.1 - h, y.1 + h),
+            }
+        })
+        .collect();
+    let phi = revolution_angles(detail, &bands, 3, max_per_turn);
+    let point = |t: f64, shift: f64, pole: bool| {
+        let (s, c) = t.sin_cos();
+        let (s, c) = if pole { (0.0, c.signum()) } else { (s, c) };
+        ProfilePoint {
+            radial: r * s,
+            y: r * c + shift,
+            normal: (s, c),
+            pole,
+        }
+    };
+    let last = theta.len() - 1;
+    let mut profile: Vec<ProfilePoint> = Vec::with_capacity(2 * theta.len());
+    for (k, &t) in theta.iter().enumerate() {
+        // The equator row exactly on the side: normal (1, 0).
+        let t = if k == last { FRAC_PI_2 } else { t };
+        profile.push(point(t, h, k == 0));
+    }
+    for (k, &t) in theta.iter().enumerate().rev() {
+        let t = if k == last { FRAC_PI_2 } else { PI - t };
+        profile.push(point(t, -h, k == 0));
+    }
+    // The equator's cosine is not exactly 0 in f64: put both rows on the side exactly.
+    for p in &mut profile {
+        if !p.pole && p.normal.0 == 1.0 {
+            p.normal.1 = 0.0;
+        }
+    }
+    profile[last].y = h;
+    profile[last].normal = (1.0, 0.0);
+    profile[last + 1].y = -h;
+    profile[last + 1].normal = (1.0, 0.0);
+    let mut mesh = LocalMesh {
+        closed: true,
+        segments: vec![phi.len() as u32, 4 * last as u32],
+        ..LocalMesh::default()
+    };
+    revolve(&[(profile, false)], &phi, &mut mesh, max_triangles)?;
+    Ok(mesh)
+}
+
+/// A capped cone (radius `r1` at `y = -h`, `r2` at `y = h`) revolved like the cylinder:
+/// a cap, the slanted side and a cap; a cap of radius 0 is the apex (a pole).
+fn capped_cone(
+    h: f64,
+    r1: f64,
+    r2: f64,
+    detail: Detail,
+    max_per_turn: u32,
+    max_triangles: u64,
+) -> Result<LocalMesh, TooManyTriangles> {
+    let bands = [Band {
+        radial: (0.0, r1.max(r2)),
+        y: (-h, h),
+    }];
+    let phi = revolution_angles(detail, &bands, 3, max_per_turn);
+    // Outward normal of the side in the (radial, y) plane: along (2h, r1 - r2).
+    let side = glam::DVec2::new(2.0 * h, r1 - r2).normalize();
+    let rim = |radial: f64, y: f64, normal: (f64, f64)| ProfilePoint {
+        radial,
+        y,
+        normal,
+        pole: radial == 0.0,
+    };
+    let centre = |y: f64| ProfilePoint {
+        radial: 0.0,
+        y,
+        normal: (0.0, y.signum()),
+        pole: true,
+    };
+    let mut pieces = Vec::with_capacity(3);
+    if r2 > 0.0 {
+        pieces.push((vec![centre(h), rim(r2, h, (0.0, 1.0))], false));
+    }
+    pieces.push((
+        vec![rim(r2, h, (side.x, side.y)), rim(r1, -h, (side.x, side.y))],
+        false,
+    ));
+    if r1 > 0.0 {
+        pieces.push((vec![rim(r1, -h, (0.0, -1.0)), centre(-h)], false));
+    }
+    let mut mesh = LocalMesh {
+        closed: true,
+        segments: vec![phi.len() as u32],
+        ..LocalMesh::default()
+    };
+    revolve(&pieces, &phi, &mut mesh, max_triangles)?;
+    Ok(mesh)
+}
+
+/// A rounded box (outer half extents `half`, rounding radius `r`) as a cube-sphere of
+/// radius `r` cut open along the three coordinate planes, its eight octants moved out to
+/// the inner box's corners `±(half - r)`: each face of the cube grid samples its angles from
+/// -45 to 45 degrees per direction with the 0 row doubled (one copy per side of the cut), so
+/// the band between the copies becomes the flat face or the cylindrical edge. Points and
+/// normals are exact on the surface; rows shared by two faces are computed from the same
+/// inputs, so the mesh is watertight. `r = 0` is the plain box.
+fn rounded_box(
+    half: DVec3,
+    r: f64,
+    detail: Detail,
+    max_per_turn: u32,
+    max_triangles: u64,
+) -> Result<LocalMesh, TooManyTriangles> {
+    if r <= 0.0 {
+        return Ok(box_mesh(half));
+    }
+    let inner = (half - DVec3::splat(r)).max(DVec3::ZERO);
+    // The curved parts are arcs of radius r; a screen budget takes the error allowed at the
+    // box's nearest point (the finest the shape needs anywhere).
+    let detail = match detail {
+        Detail::Screen(budget) => Detail::ChordError(budget.local_error((-half, half))),
+        other => other,
+    };
+    // Segments per 45 degrees.
+    let m = segments(detail, r, 0.125, 1, max_per_turn).max(1);
+    let step = FRAC_PI_4 / f64::from(m);
+    // Per face direction along `axis`: (tangent of the angle, side of the cut), -45 to 45
+    // degrees, the 0 row doubled where the inner box has extent along the axis. The ends
+    // are exactly -1, 0 and 1 so that faces meeting at an edge compute the same points.
+    let samples = |axis: usize| -> Vec<(f64, f64)> {
+        let tan = |i: u32| match i {
+            0 => 0.0,
+            i if i == m => 1.0,
+            i => (step * f64::from(i)).tan(),
+        };
+        let mut v: Vec<(f64, f64)> = (0..=m).rev().map(|i| (-tan(i), -1.0)).collect();
+        let first_positive = if inner[axis] > 0.0 { 0 } else { 1 };
+        v.extend((first_positive..=m).map(|i| (tan(i), 1.0)));
+        v
+    };
+    // Each face as (normal axis, sign, u axis, v axis) with u x v = normal (as `box_mesh`).
+    let faces = [
+        (0, 1.0, 1, 2),
+        (0, -1.0, 2, 1),
+        (1, 1.0, 2, 0),
+        (1, -1.0, 0, 2),
+        (2, 1.0, 0, 1),
+        (2, -1.0, 1, 0),
+    ];
+    let planned: u64 = faces
+        .iter()
+        .map(|&(_, _, u, v)| 2 * (samples(u).len() as u64 - 1) * (samples(v).len() as u64 - 1))
+        .sum();
+    if planned > max_triangles {
+        return Err(TooManyTriangles {
+            triangles: planned,
+            segments: vec![8 * m],
+        });
+    }
+    let mut mesh = LocalMesh {
+        closed: true,
+        segments: vec![8 * m],
+        normals: Some(Vec::new()),
+        ..LocalMesh::default()
+    };
+    for (axis, sign, u, v) in faces {
+        let (su, sv) = (samples(u), samples(v));
+        let start = mesh.positions.len() as u32;
+        for &(tv, side_v) in &sv {
+            for &(tu, side_u) in &su {
+                let mut c = DVec3::ZERO;
+                c[axis] = sign;
+                c[u] = tu;
+                c[v] = tv;
+                let n = c.normalize();
+                let mut side = DVec3::ZERO;
+                side[axis] = sign;
+                side[u] = side_u;
+                side[v] = side_v;
+                mesh.positions.push(side * inner + r * n);
+                if let Some(normals) = &mut mesh.normals {
+                    normals.push(n);
+                }
+            }
+        }
+        let row = su.len() as u32;
+        for j in 0..sv.len() as u32 - 1 {
+            for i in 0..row - 1 {
+                let a = start + j * row + i;
+                let (b, c, d) = (a + 1, a + row + 1, a + row);
+                mesh.triangles.push([a, b, c]);
+                mesh.triangles.push([a, c, d]);
+            }
+        }
+    }
+    Ok(mesh)
 }
 
 /// The 12 triangles of an axis-aligned box (exact; flat faces, no vertex normals).

@@ -376,6 +376,23 @@ fn infinite_repetition_is_bounded_and_reported() {
     )
     .expect_err("limit");
     assert!(err.to_string().contains("max_instances"), "{err}");
+    assert!(err.to_string().contains("infinite repetition"), "{err}");
+}
+
+#[test]
+fn a_finite_repetition_over_the_instance_limit_is_not_called_infinite() {
+    let s = scene(
+        r#"{"camera": {"position": [0, 2, -6], "look_at": [0, 0, 0], "vfov_deg": 50, "width": 32, "height": 32},
+            "objects": [{"shape": {"repeat": {"period": [2, 2, 2], "count": [200, 200, 200],
+                "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}]}"#,
+    );
+    let err = build(&s, &MeshOptions::DEFAULT).expect_err("8M cells are over the default limit");
+    let msg = err.to_string();
+    assert!(msg.starts_with("objects[0]: "), "{msg}");
+    assert!(msg.contains("finite repetition"), "{msg}");
+    assert!(msg.contains("8000000 cells by its counts"), "{msg}");
+    assert!(!msg.contains("infinite"), "{msg}");
+    assert!(!msg.contains("max_distance"), "{msg}");
 }
 
 #[test]

@@ -6,7 +6,7 @@ use std::path::Path;
 use glam::{DMat3, DMat4, Mat4, Vec3};
 use gltf::mesh::Mode;
 
-use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh, TriangleMesh};
+use crate::{LoadBound, LoadCheck, LoadReport, MeshFormat, MeshLoadError, RawMesh, TriangleMesh};
 
 /// Deepest node hierarchy followed (guards against cyclic node graphs in corrupt files).
 const MAX_NODE_DEPTH: usize = 256;
@@ -20,8 +20,9 @@ fn malformed(path: &Path, reason: impl Into<String>) -> MeshLoadError {
 }
 
 /// Reads every triangle primitive instanced by the default scene (or the first scene; or every
-/// mesh untransformed if the file has no scene), node transforms applied.
-pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
+/// mesh untransformed if the file has no scene), node transforms applied, asking `check` with
+/// [`load_bound`] before any buffer is read.
+pub(crate) fn load(path: &Path, check: &mut LoadCheck<'_>) -> Result<RawMesh, MeshLoadError> {
     let bytes = crate::read_file(path)?;
     if bytes.starts_with(b"glTF") {
         check_glb_header(path, &bytes)?;
@@ -33,6 +34,15 @@ pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
     }))
     .map_err(|_| malformed(path, "the glTF parser failed on this file"))?;
     let (document, blob) = parsed.map_err(|e| malformed(path, e.to_string()))?;
+    let scene = document
+        .default_scene()
+        .or_else(|| document.scenes().next());
+    check_node_tree(path, &document, scene.as_ref())?;
+    crate::run_check(
+        path,
+        check,
+        &load_bound(&document, scene.as_ref(), bytes.len() as u64),
+    )?;
     let buffers = load_buffers(path, &document, blob)?;
     check_accessors(path, &document, &buffers)?;
 
@@ -46,10 +56,6 @@ pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
         normals: Some(Vec::new()),
         triangles: Vec::new(),
     };
-    let scene = document
-        .default_scene()
-        .or_else(|| document.scenes().next());
-    check_node_tree(path, &document, scene.as_ref())?;
     let read = catch_unwind(AssertUnwindSafe(|| -> Result<(), MeshLoadError> {
         match scene {
             Some(scene) => {
@@ -197,6 +203,52 @@ fn percent_decode(uri: &str) -> Option<String> {
         }
     }
     String::from_utf8(out).ok()
+}
+
+/// What loading `document` allocates at most ([`LoadBound`]), from its declared sizes: the
+/// file (`file_bytes`, twice: a GLB's binary chunk is copied) and every buffer as declared;
+/// the vertices and triangles of every triangle primitive once per node that places it
+/// (the node graph is a tree, checked first), or once per mesh without a scene.
+fn load_bound(
+    document: &gltf::Document,
+    scene: Option<&gltf::Scene>,
+    file_bytes: u64,
+) -> LoadBound {
+    let mut bound = LoadBound {
+        file_bytes: document
+            .buffers()
+            .map(|b| b.length() as u64)
+            .fold(file_bytes.saturating_mul(2), u64::saturating_add),
+        ..LoadBound::default()
+    };
+    let mut add_mesh = |mesh: gltf::Mesh| {
+        for primitive in mesh.primitives() {
+            let vertices = primitive
+                .get(&gltf::Semantic::Positions)
+                .map_or(0, |a| a.count() as u64);
+            let corners = primitive.indices().map_or(vertices, |a| a.count() as u64);
+            let triangles = match primitive.mode() {
+                Mode::Triangles => corners / 3,
+                Mode::TriangleStrip | Mode::TriangleFan => corners.saturating_sub(2),
+                _ => continue,
+            };
+            bound.vertices = bound.vertices.saturating_add(vertices);
+            bound.triangles = bound.triangles.saturating_add(triangles);
+        }
+    };
+    match scene {
+        Some(scene) => {
+            let mut stack: Vec<gltf::Node> = scene.nodes().collect();
+            while let Some(node) = stack.pop() {
+                if let Some(mesh) = node.mesh() {
+                    add_mesh(mesh);
+                }
+                stack.extend(node.children());
+            }
+        }
+        None => document.meshes().for_each(add_mesh),
+    }
+    bound
 }
 
 /// Checks, before any accessor is read, that every buffer view lies inside its buffer, every

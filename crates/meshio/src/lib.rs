@@ -140,6 +140,15 @@ pub enum MeshLoadError {
         /// Of which degenerate.
         degenerate_skipped: usize,
     },
+    /// Loading the file would take more memory than the caller allows
+    /// ([`load_mesh_checked`]); refused before the allocation.
+    #[error("{path}: {reason}")]
+    OverBudget {
+        /// The file.
+        path: PathBuf,
+        /// The caller's reason (the estimate and the limit).
+        reason: String,
+    },
     /// The mesh is too large for the format (u32 indices / glb sizes).
     #[error("{path}: mesh too large: {reason}")]
     TooLarge {
@@ -150,18 +159,78 @@ pub enum MeshLoadError {
     },
 }
 
+/// An upper bound of what loading a mesh file allocates, known before its contents are
+/// decoded: from the file's size alone (before it is read: no vertices or triangles yet), then
+/// from its counts (an OBJ's records and face corners in one pass over its bytes; a glTF's
+/// declared buffers and the accessor counts of every primitive its node tree places).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LoadBound {
+    /// Bytes read and held while loading (the file, a GLB's copied binary chunk, a glTF's
+    /// buffers as declared).
+    pub file_bytes: u64,
+    /// OBJ `v`, `vn` and `vt` records (parsed into temporary arrays).
+    pub records: u64,
+    /// Most vertices of the loaded mesh (an OBJ's face corners, a glTF's placed `POSITION`
+    /// counts).
+    pub vertices: u64,
+    /// Most triangles of the loaded mesh.
+    pub triangles: u64,
+}
+
+impl LoadBound {
+    /// Bytes per OBJ record while parsing (three f32 and the parser's bookkeeping).
+    pub const BYTES_PER_RECORD: u64 = 16;
+    /// Bytes per vertex at the peak of a load: the parser's arrays and index map, the raw
+    /// and the final positions and normals.
+    pub const BYTES_PER_VERTEX: u64 = 128;
+    /// Bytes per triangle at the peak of a load: the parser's faces and indices, the raw and
+    /// the kept triangles and the duplicate set.
+    pub const BYTES_PER_TRIANGLE: u64 = 128;
+
+    /// The bound in bytes (saturating).
+    pub fn load_bytes(&self) -> u64 {
+        self.file_bytes
+            .saturating_add(self.records.saturating_mul(Self::BYTES_PER_RECORD))
+            .saturating_add(self.vertices.saturating_mul(Self::BYTES_PER_VERTEX))
+            .saturating_add(self.triangles.saturating_mul(Self::BYTES_PER_TRIANGLE))
+    }
+}
+
+/// The check a caller of [`load_mesh_checked`] runs on each [`LoadBound`]: `Err(reason)`
+/// refuses the load.
+pub type LoadCheck<'a> = dyn FnMut(&LoadBound) -> Result<(), String> + 'a;
+
 /// Loads an `.obj`, `.gltf` or `.glb` file (extension matched case-insensitively).
 ///
 /// Errors: missing/unreadable file, unsupported extension, corrupt contents, a non-finite
 /// vertex (naming its index), an out-of-range index, or no non-degenerate triangle at all.
 pub fn load_mesh(path: &Path) -> Result<TriangleMesh, MeshLoadError> {
+    load_mesh_checked(path, &mut |_| Ok(()))
+}
+
+/// [`load_mesh`], asking `check` before each allocation that grows with the file: with the
+/// file's size before it is read, and with the counts before the mesh is decoded (see
+/// [`LoadBound`]). A caller adds what it will build from the mesh (a BVH, a bake) and
+/// compares with its memory limit; `Err(reason)` becomes [`MeshLoadError::OverBudget`].
+pub fn load_mesh_checked(
+    path: &Path,
+    check: &mut LoadCheck<'_>,
+) -> Result<TriangleMesh, MeshLoadError> {
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
+    // The size on the path; the read itself type-checks and caps the file.
+    if let Ok(meta) = std::fs::metadata(path) {
+        let before_reading = LoadBound {
+            file_bytes: meta.len(),
+            ..LoadBound::default()
+        };
+        run_check(path, check, &before_reading)?;
+    }
     let raw = match extension.as_str() {
-        "obj" => obj::load(path)?,
-        "gltf" | "glb" => gltf_io::load(path)?,
+        "obj" => obj::load(path, check)?,
+        "gltf" | "glb" => gltf_io::load(path, check)?,
         _ => {
             return Err(MeshLoadError::UnsupportedExtension {
                 path: path.to_path_buf(),
@@ -170,6 +239,18 @@ pub fn load_mesh(path: &Path) -> Result<TriangleMesh, MeshLoadError> {
         }
     };
     assemble(raw)
+}
+
+/// Runs the caller's check on `bound`, naming the file in a refusal.
+pub(crate) fn run_check(
+    path: &Path,
+    check: &mut LoadCheck<'_>,
+    bound: &LoadBound,
+) -> Result<(), MeshLoadError> {
+    check(bound).map_err(|reason| MeshLoadError::OverBudget {
+        path: path.to_path_buf(),
+        reason,
+    })
 }
 
 /// Reads a mesh file with the [`marchmesh_safeio`] cap (1 GiB unless `MARCHMESH_MAX_READ_MIB`

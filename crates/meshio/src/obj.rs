@@ -5,7 +5,7 @@ use std::path::Path;
 
 use glam::Vec3;
 
-use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh};
+use crate::{LoadBound, LoadCheck, LoadReport, MeshFormat, MeshLoadError, RawMesh};
 
 /// Most vertices one OBJ face may have. A polygon becomes a fan of `n - 2` triangles sharing
 /// one vertex; a fan of 100,000 slivers makes every backend's build crawl, and real meshes'
@@ -13,19 +13,33 @@ use crate::{LoadReport, MeshFormat, MeshLoadError, RawMesh};
 pub const MAX_OBJ_FACE_VERTICES: usize = 4096;
 
 /// Refuses a face (`f` line, with `\` continuations) of more than [`MAX_OBJ_FACE_VERTICES`]
-/// vertices, in one linear pass before parsing.
-fn check_face_sizes(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
+/// vertices, and counts what parsing will allocate ([`LoadBound`]: records, face corners,
+/// fan triangles), in one linear pass before parsing.
+fn scan(path: &Path, bytes: &[u8]) -> Result<LoadBound, MeshLoadError> {
+    let mut bound = LoadBound {
+        file_bytes: bytes.len() as u64,
+        ..LoadBound::default()
+    };
     let mut line_no = 0usize;
     let mut in_face = false;
     let mut vertices = 0usize;
+    let end_face = |bound: &mut LoadBound, vertices: usize| {
+        bound.vertices += vertices as u64;
+        bound.triangles += vertices.saturating_sub(2) as u64;
+    };
     for line in bytes.split(|&b| b == b'\n') {
         line_no += 1;
         let mut tokens = line
             .split(|b| b.is_ascii_whitespace())
             .filter(|t| !t.is_empty());
         if !in_face {
-            if tokens.next() != Some(b"f".as_slice()) {
-                continue;
+            match tokens.next() {
+                Some(b"f") => {}
+                Some(b"v" | b"vn" | b"vt") => {
+                    bound.records += 1;
+                    continue;
+                }
+                _ => continue,
             }
             vertices = 0;
         }
@@ -38,6 +52,9 @@ fn check_face_sizes(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
             }
         }
         in_face = continued;
+        if !in_face {
+            end_face(&mut bound, vertices);
+        }
         if vertices > MAX_OBJ_FACE_VERTICES {
             return Err(MeshLoadError::Malformed {
                 path: path.to_path_buf(),
@@ -48,13 +65,18 @@ fn check_face_sizes(path: &Path, bytes: &[u8]) -> Result<(), MeshLoadError> {
             });
         }
     }
-    Ok(())
+    if in_face {
+        end_face(&mut bound, vertices);
+    }
+    Ok(bound)
 }
 
-/// Reads every model of an OBJ file (materials ignored) into one raw mesh.
-pub(crate) fn load(path: &Path) -> Result<RawMesh, MeshLoadError> {
+/// Reads every model of an OBJ file (materials ignored) into one raw mesh, asking `check`
+/// with the counts of [`scan`] before parsing.
+pub(crate) fn load(path: &Path, check: &mut LoadCheck<'_>) -> Result<RawMesh, MeshLoadError> {
     let bytes = crate::read_file(path)?;
-    check_face_sizes(path, &bytes)?;
+    let bound = scan(path, &bytes)?;
+    crate::run_check(path, check, &bound)?;
     let mut reader = BufReader::new(&bytes[..]);
     let options = tobj::LoadOptions {
         single_index: true,

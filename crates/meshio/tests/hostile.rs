@@ -291,3 +291,94 @@ fn obj_faces_beyond_the_vertex_cap_are_refused_in_linear_time() {
         "{msg}"
     );
 }
+
+/// Every bound a checked load passes to its check, in order.
+fn bounds_seen(path: &Path) -> (Vec<marchmesh_meshio::LoadBound>, bool) {
+    let mut seen = Vec::new();
+    let ok = marchmesh_meshio::load_mesh_checked(path, &mut |b| {
+        seen.push(*b);
+        Ok(())
+    })
+    .is_ok();
+    (seen, ok)
+}
+
+#[test]
+fn checked_loads_ask_before_reading_and_before_decoding_with_the_counts() {
+    let dir = scratch();
+    // A quad (two fan triangles) and a triangle; four positions, one normal.
+    let obj = dir.join("quad.obj");
+    std::fs::write(
+        &obj,
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\nf 1//1 2//1 4//1\n",
+    )
+    .unwrap();
+    let size = std::fs::metadata(&obj).unwrap().len();
+    let (seen, ok) = bounds_seen(&obj);
+    assert!(ok);
+    assert_eq!(seen.len(), 2, "{seen:?}");
+    // Before reading: the file's size alone.
+    assert_eq!(
+        seen[0],
+        marchmesh_meshio::LoadBound {
+            file_bytes: size,
+            ..Default::default()
+        }
+    );
+    // Before decoding: 5 records, 7 corners, 3 triangles.
+    assert_eq!(
+        seen[1],
+        marchmesh_meshio::LoadBound {
+            file_bytes: size,
+            records: 5,
+            vertices: 7,
+            triangles: 3,
+        }
+    );
+    // glTF: the placed primitives' counts and the buffers as declared, before any is read.
+    let mesh = marchmesh_meshio::load_mesh(&obj).unwrap();
+    let glb = dir.join("quad.glb");
+    marchmesh_meshio::write_glb(&mesh, &glb).unwrap();
+    let size = std::fs::metadata(&glb).unwrap().len();
+    let (seen, ok) = bounds_seen(&glb);
+    assert!(ok);
+    assert_eq!(seen.len(), 2, "{seen:?}");
+    assert_eq!(seen[1].vertices, mesh.positions.len() as u64);
+    assert_eq!(seen[1].triangles, mesh.triangles.len() as u64);
+    assert!(seen[1].file_bytes > 2 * size, "{seen:?}");
+    assert!(seen[1].load_bytes() > seen[0].load_bytes());
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn a_refused_checked_load_names_the_file_and_reads_nothing_more() {
+    let dir = scratch();
+    let obj = dir.join("big.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let mut calls = 0;
+    let e = marchmesh_meshio::load_mesh_checked(&obj, &mut |b| {
+        calls += 1;
+        if b.triangles > 0 {
+            Err("too many triangles for this test".into())
+        } else {
+            Ok(())
+        }
+    })
+    .expect_err("refused before decoding");
+    assert_eq!(calls, 2);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("big.obj") && msg.ends_with("too many triangles for this test"),
+        "{msg}"
+    );
+    // Refused on its size: the first check runs before the file is read.
+    let mut calls = 0;
+    let e = marchmesh_meshio::load_mesh_checked(&obj, &mut |b| {
+        calls += 1;
+        assert_eq!((b.records, b.vertices, b.triangles), (0, 0, 0));
+        Err("too large a file".into())
+    });
+    assert!(e.is_err_and(|e| e.to_string().ends_with("too large a file")));
+    assert_eq!(calls, 1);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -3,12 +3,12 @@
 //! mesh files loaded once.
 
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use glam::{DAffine3, DVec3};
 use marchmesh_field::{Field, FieldOptions};
-use marchmesh_meshio::load_mesh;
+use marchmesh_meshio::{MeshLoadError, TriangleMesh, load_mesh_checked};
 use marchmesh_scene::bounds::{Aabb, LocalBounds, combine};
 use marchmesh_scene::{Node, NodeKind, Shape};
 
@@ -16,7 +16,13 @@ use crate::meshbvh::MeshData;
 use crate::node::{CompiledKind, CompiledNode, MAX_COPIES_PER_CELL};
 use crate::repeat::Repeat;
 use crate::smooth::Smooth;
-use crate::{ReferenceError, ReferenceOptions};
+use crate::{MESH_BYTES_PER_TRIANGLE, MESH_BYTES_PER_VERTEX, ReferenceError, ReferenceOptions};
+
+/// Smooth unions of at least this many field nodes get their field pruned per region.
+const SMOOTH_PRUNE_MIN_NODES: usize = 16;
+
+/// Octree depth of a smooth union's pruned field (`2^6` finest cells per axis).
+const SMOOTH_PRUNE_DEPTH: u32 = 6;
 
 /// Loads each mesh file once.
 pub(crate) struct Compiler<'a> {
@@ -55,6 +61,33 @@ pub(crate) fn combined_bounds(
 }
 
 impl Compiler<'_> {
+    /// Loads a mesh file, refused before it is read, and again before it is decoded, when
+    /// the meshes already loaded, the load and the f64 copy with its BVH would exceed
+    /// [`ReferenceOptions::memory_limit_bytes`].
+    fn load_within_limit(&self, path: &Path) -> Result<TriangleMesh, MeshLoadError> {
+        let (held, limit) = (self.mesh_bytes, self.options.memory_limit_bytes);
+        load_mesh_checked(path, &mut |b| {
+            let kept = b
+                .triangles
+                .saturating_mul(MESH_BYTES_PER_TRIANGLE)
+                .saturating_add(b.vertices.saturating_mul(MESH_BYTES_PER_VERTEX));
+            let needed = held.saturating_add(b.load_bytes()).saturating_add(kept);
+            if needed <= limit {
+                return Ok(());
+            }
+            Err(format!(
+                "loading it would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles and their f64 copy with its BVH, {} MiB of meshes already loaded), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
+                needed.div_ceil(1 << 20),
+                b.file_bytes.div_ceil(1 << 20),
+                b.records,
+                b.vertices,
+                b.triangles,
+                held.div_ceil(1 << 20),
+                limit >> 20
+            ))
+        })
+    }
+
     /// Compiles `node`; `parent_to_frame` maps the node's parent frame to the frame the
     /// result is queried in (render space for top-level objects, identity below).
     pub fn compile(
@@ -75,10 +108,12 @@ impl Compiler<'_> {
                 let mesh = match self.meshes.get(path) {
                     Some(m) => m.clone(),
                     None => {
-                        let loaded = load_mesh(path).map_err(|e| ReferenceError::Mesh {
-                            json_path: node.json_path.clone(),
-                            reason: e.to_string(),
-                        })?;
+                        let loaded =
+                            self.load_within_limit(path)
+                                .map_err(|e| ReferenceError::Mesh {
+                                    json_path: node.json_path.clone(),
+                                    reason: e.to_string(),
+                                })?;
                         let m = Arc::new(MeshData::new(&loaded));
                         self.mesh_bytes += m.memory_bytes();
                         self.notes.push(format!(
@@ -130,11 +165,24 @@ impl Compiler<'_> {
                 (kind, b, true)
             }
             NodeKind::Smooth { .. } => {
-                let field =
-                    Field::compile_node(node, node.transform.inverse(), &FieldOptions::default())
-                        .map_err(|e| {
-                        unsupported(&format!("its distance field could not be built: {e}"))
-                    })?;
+                let mut field = Field::compile_node(
+                    node,
+                    node.transform.inverse(),
+                    &FieldOptions {
+                        memory_limit_bytes: self
+                            .options
+                            .memory_limit_bytes
+                            .saturating_sub(self.mesh_bytes),
+                        ..FieldOptions::default()
+                    },
+                )
+                .map_err(|e| unsupported(&format!("its distance field could not be built: {e}")))?;
+                // Pruned per region: the root finding then reads, at each point, only the
+                // children that can change the blend there (the same values bit for bit)
+                // and crosses empty cells in one step each.
+                if field.node_count() >= SMOOTH_PRUNE_MIN_NODES {
+                    field.build_cells(SMOOTH_PRUNE_DEPTH);
+                }
                 let bounds = field.bounds();
                 let size = bounds.map_or(1.0, |(lo, hi)| (hi - lo).length().max(1e-300));
                 let smooth = Smooth {

@@ -83,7 +83,21 @@ pub struct ReferenceOptions {
     pub smooth_union_tolerance: f64,
     /// Largest number of field evaluations per smooth-union query. Default 100,000.
     pub smooth_union_max_steps: u32,
+    /// What the scene's meshes may take (default unlimited; the backend passes
+    /// `--memory-limit-mib`): before each mesh file is read, and again before it is decoded,
+    /// the meshes already loaded, the load's bound ([`marchmesh_meshio::LoadBound`]) and the
+    /// f64 copy with its BVH ([`MESH_BYTES_PER_TRIANGLE`], [`MESH_BYTES_PER_VERTEX`]) must
+    /// fit, else [`ReferenceError::Mesh`] refuses the mesh.
+    pub memory_limit_bytes: u64,
 }
+
+/// Bytes per triangle of the reference's mesh for the memory estimate: indices, the BVH's
+/// order, nodes and build centroids, and the closedness test's edge map.
+pub const MESH_BYTES_PER_TRIANGLE: u64 = 160;
+
+/// Bytes per vertex of the reference's mesh for the memory estimate: f64 positions and
+/// normals and the closedness test's welding map.
+pub const MESH_BYTES_PER_VERTEX: u64 = 80;
 
 impl ReferenceOptions {
     /// The documented defaults.
@@ -91,6 +105,7 @@ impl ReferenceOptions {
         max_repeat_cells: 1_000_000,
         smooth_union_tolerance: 1e-9,
         smooth_union_max_steps: 100_000,
+        memory_limit_bytes: u64::MAX,
     };
 }
 
@@ -300,13 +315,19 @@ impl marchmesh_core::Backend for ReferenceBackend {
     type Error = ReferenceError;
     type Geometry = ReferenceGeometry;
 
-    /// The reference keeps only the scene's meshes, whose reads are capped; it is not
-    /// estimated against `memory_limit_bytes`.
+    /// The reference allocates in proportion to the scene's meshes: each is estimated
+    /// against `memory_limit_bytes` before it is read ([`ReferenceOptions::memory_limit_bytes`]).
     fn build(
         scene: &Scene,
         _settings: &ReferenceSettings,
-        _memory_limit_bytes: u64,
+        memory_limit_bytes: u64,
     ) -> Result<ReferenceGeometry, ReferenceError> {
-        build(scene, &ReferenceOptions::DEFAULT)
+        build(
+            scene,
+            &ReferenceOptions {
+                memory_limit_bytes,
+                ..ReferenceOptions::DEFAULT
+            },
+        )
     }
 }

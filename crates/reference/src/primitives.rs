@@ -28,6 +28,19 @@ pub(crate) fn spans(shape: &Shape, o: DVec3, d: DVec3) -> Vec<Span> {
             major_radius,
             minor_radius,
         } => torus(o, d, *major_radius, *minor_radius),
+        Shape::RoundedBox {
+            half_extents,
+            rounding_radius,
+        } => one(rounded_box(o, d, *half_extents, *rounding_radius)),
+        Shape::Capsule {
+            radius,
+            half_height,
+        } => one(capsule(o, d, *radius, *half_height)),
+        Shape::CappedCone {
+            half_height,
+            bottom_radius,
+            top_radius,
+        } => one(capped_cone(o, d, *half_height, *bottom_radius, *top_radius)),
         Shape::Plane { normal, offset } => one(half_space(o, d, *normal, *offset)),
         Shape::Triangle { .. } | Shape::Mesh { .. } => Vec::new(),
     }
@@ -162,6 +175,185 @@ pub fn cylinder(o: DVec3, d: DVec3, r: f64, hh: f64) -> Option<Span> {
             t1 = far;
             n1 = DVec3::new(0.0, -ny, 0.0);
         }
+    }
+    (t0 <= t1).then(|| Span {
+        enter: b(t0, n0),
+        exit: b(t1, n1),
+    })
+}
+
+/// The convex hull of spans of convex pieces: a convex solid that is the union of convex
+/// pieces meets a line in one interval, from the earliest entry to the latest exit of any
+/// piece (each piece's interval lies in it, and together they cover it).
+fn convex_union(pieces: impl IntoIterator<Item = Option<Span>>) -> Option<Span> {
+    pieces.into_iter().flatten().reduce(|a, s| Span {
+        enter: if s.enter.t < a.enter.t {
+            s.enter
+        } else {
+            a.enter
+        },
+        exit: if s.exit.t > a.exit.t { s.exit } else { a.exit },
+    })
+}
+
+/// The capsule of radius `r` around the y-axis segment `|y| <= hh`: the union of the
+/// capped cylinder over the segment and the spheres at its ends (convex: [`convex_union`]).
+pub fn capsule(o: DVec3, d: DVec3, r: f64, hh: f64) -> Option<Span> {
+    let end = |y: f64| {
+        let c = DVec3::new(0.0, y, 0.0);
+        sphere(o - c, d, r)
+    };
+    let middle = (hh > 0.0).then(|| cylinder(o, d, r, hh)).flatten();
+    convex_union([middle, end(hh), end(-hh)])
+}
+
+/// The box of half extents `half` with edges and corners rounded by radius `r`
+/// (`0 <= r <= min(half)`): the inner box `half - r` grown by `r`, i.e. the union of the
+/// inner box grown along each axis alone, a cylinder along each of its 12 edges and a sphere
+/// at each of its 8 corners (convex: [`convex_union`]). `r = 0` is the plain box.
+pub fn rounded_box(o: DVec3, d: DVec3, half: DVec3, r: f64) -> Option<Span> {
+    if r <= 0.0 {
+        return aabox(o, d, half);
+    }
+    let inner = (half - DVec3::splat(r)).max(DVec3::ZERO);
+    let mut pieces: Vec<Option<Span>> = Vec::with_capacity(23);
+    for axis in 0..3 {
+        let mut h = inner;
+        h[axis] += r;
+        pieces.push(aabox(o, d, h));
+    }
+    // Edges along `axis`: cylinders in a frame whose y is that axis (a permutation of the
+    // coordinates: orthogonal, so `t` is unchanged and normals map back by the inverse).
+    for axis in 0..3 {
+        let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+        let to_frame = |v: DVec3| DVec3::new(v[a], v[axis], v[b]);
+        let from_frame = |v: DVec3| {
+            let mut w = DVec3::ZERO;
+            w[a] = v.x;
+            w[axis] = v.y;
+            w[b] = v.z;
+            w
+        };
+        for (sa, sb) in [(-1.0, -1.0), (-1.0, 1.0), (1.0, -1.0), (1.0, 1.0)] {
+            let mut c = DVec3::ZERO;
+            c[a] = sa * inner[a];
+            c[b] = sb * inner[b];
+            pieces.push(
+                cylinder(to_frame(o - c), to_frame(d), r, inner[axis]).map(|s| Span {
+                    enter: Boundary {
+                        normal: from_frame(s.enter.normal),
+                        ..s.enter
+                    },
+                    exit: Boundary {
+                        normal: from_frame(s.exit.normal),
+                        ..s.exit
+                    },
+                }),
+            );
+        }
+    }
+    for i in 0..8 {
+        let c = DVec3::new(
+            if i & 1 == 0 { -inner.x } else { inner.x },
+            if i & 2 == 0 { -inner.y } else { inner.y },
+            if i & 4 == 0 { -inner.z } else { inner.z },
+        );
+        pieces.push(sphere(o - c, d, r));
+    }
+    convex_union(pieces)
+}
+
+/// The capped cone along y from radius `r1` at `y = -hh` to `r2` at `y = hh` (both >= 0,
+/// not both 0): the slab `|y| <= hh` clipped by the lateral quadric
+/// `x^2 + z^2 <= R(y)^2`, `R(y) = (r1 + r2) / 2 + (r2 - r1) / (2 hh) y`. In the slab `R >= 0`,
+/// so the quadric's other nappe (beyond the apex) never enters and the part of the slab
+/// interval where the quadratic is <= 0 is the one interval a convex solid gives.
+pub fn capped_cone(o: DVec3, d: DVec3, hh: f64, r1: f64, r2: f64) -> Option<Span> {
+    // Slab in y.
+    let (mut t0, mut t1, mut n0, mut n1);
+    if d.y == 0.0 {
+        if o.y.abs() > hh {
+            return None;
+        }
+        (t0, t1) = (f64::NEG_INFINITY, f64::INFINITY);
+        (n0, n1) = (DVec3::ZERO, DVec3::ZERO);
+    } else {
+        let (mut near, mut far) = ((-hh - o.y) / d.y, (hh - o.y) / d.y);
+        let mut ny = -1.0;
+        if near > far {
+            std::mem::swap(&mut near, &mut far);
+            ny = 1.0;
+        }
+        (t0, t1) = (near, far);
+        (n0, n1) = (DVec3::new(0.0, ny, 0.0), DVec3::new(0.0, -ny, 0.0));
+    }
+    let slope = (r2 - r1) / (2.0 * hh);
+    let mid = 0.5 * (r1 + r2);
+    // g(t) = |xz(o + t d)|^2 - R(y(t))^2 = qa t^2 + qb t + qc.
+    let ro = mid + slope * o.y;
+    let qa = d.x * d.x + d.z * d.z - slope * slope * d.y * d.y;
+    let qb = 2.0 * (o.x * d.x + o.z * d.z - slope * d.y * ro);
+    let qc = o.x * o.x + o.z * o.z - ro * ro;
+    let side = |t: f64| {
+        let p = o + t * d;
+        let rho = (p.x * p.x + p.z * p.z).sqrt();
+        if rho > 0.0 {
+            DVec3::new(p.x / rho, -slope, p.z / rho)
+        } else {
+            DVec3::new(0.0, -slope.signum(), 0.0)
+        }
+    };
+    // The parameter interval (possibly unbounded) where g <= 0 inside the slab.
+    let (lo, hi): (f64, f64) = if qa == 0.0 {
+        if qb == 0.0 {
+            if qc > 0.0 {
+                return None;
+            }
+            (f64::NEG_INFINITY, f64::INFINITY)
+        } else if qb > 0.0 {
+            (f64::NEG_INFINITY, -qc / qb)
+        } else {
+            (-qc / qb, f64::INFINITY)
+        }
+    } else {
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc < 0.0 {
+            if qa > 0.0 {
+                return None;
+            }
+            (f64::NEG_INFINITY, f64::INFINITY)
+        } else {
+            // Stable roots (no cancellation between -qb and the root).
+            let root = if qb >= 0.0 { disc.sqrt() } else { -disc.sqrt() };
+            let q = -0.5 * (qb + root);
+            let (mut ra, mut rb) = (q / qa, qc / q);
+            if q == 0.0 {
+                (ra, rb) = (0.0, 0.0);
+            }
+            if ra > rb {
+                std::mem::swap(&mut ra, &mut rb);
+            }
+            if qa > 0.0 {
+                (ra, rb)
+            } else {
+                // g <= 0 outside the roots: keep the side that meets the slab.
+                let left = t1.min(ra) - t0;
+                let right = t1 - t0.max(rb);
+                if left >= right {
+                    (f64::NEG_INFINITY, ra)
+                } else {
+                    (rb, f64::INFINITY)
+                }
+            }
+        }
+    };
+    if lo > t0 {
+        t0 = lo;
+        n0 = side(lo);
+    }
+    if hi < t1 {
+        t1 = hi;
+        n1 = side(hi);
     }
     (t0 <= t1).then(|| Span {
         enter: b(t0, n0),

@@ -46,7 +46,15 @@ impl Smooth {
         t_max: f64,
         work: &mut Work,
     ) -> Vec<Span> {
-        let (mut t, t_end) = match self.bounds {
+        // The box grown by a few root tolerances: a smooth intersection's or subtraction's
+        // surface lies on its box (a smooth maximum equals its first argument away from the
+        // blends), and a march starting exactly on the surface can read the inside's sign
+        // first and lose the hit.
+        let grown = self.bounds.map(|(lo, hi)| {
+            let margin = DVec3::splat(4.0 * self.eps);
+            (lo - margin, hi + margin)
+        });
+        let (mut t, t_end) = match grown {
             Some(b) => match ray_box(o, d, b, t_min, t_max) {
                 Some(r) => r,
                 None => return Vec::new(),
@@ -54,7 +62,9 @@ impl Smooth {
             None => (t_min, t_max),
         };
         let len = d.length();
-        let f = |t: f64| self.field.distance_f64(o + t * d);
+        // A bound with the field's sign: exact where a surface may be, the far cells'
+        // bound elsewhere (see `Field::distance_bound_f64`).
+        let f = |t: f64| self.field.distance_bound_f64(o + t * d);
         let mut g = f(t);
         let mut inside = g < 0.0;
         let mut open = inside.then(|| Boundary::infinite(f64::NEG_INFINITY));

@@ -492,3 +492,46 @@ fn rays_starting_inside_see_each_objects_boundary_but_one_boundary_per_csg_node(
     );
     assert!(near(got, 1.0), "{got}");
 }
+
+/// A smooth subtraction's and a smooth intersection's surface lies on their box away from
+/// the blends: rays that meet it there (the box's faces, edges and the ray entering the box
+/// right on the surface) hit at the face, as a plain box does.
+#[test]
+fn smooth_maximum_surfaces_on_their_box_are_hit() {
+    for op in ["smooth_subtraction", "smooth_intersection"] {
+        let second = if op == "smooth_subtraction" {
+            // A cut far from the rays below.
+            r#"{"shape": {"sphere": {"radius": 0.3}}, "transform": {"translate": [0, 0.8, 3.2]}}"#
+        } else {
+            r#"{"shape": {"sphere": {"radius": 5}}, "transform": {"translate": [0, 0, 4]}}"#
+        };
+        let scene = scene_with(&format!(
+            r#"{{"shape": {{"{op}": {{"blend_radius": 0.25, "children": [
+                {{"shape": {{"box": {{"half_extents": [0.8, 0.8, 0.8]}}}}, "transform": {{"translate": [0, 0, 4]}}}},
+                {second}]}}}}}}"#
+        ));
+        let g = geometry(&scene);
+        let mut missed = Vec::new();
+        for i in 0..=40 {
+            for j in 0..=40 {
+                // Aim at points of the front face z = 3.2, the lower part (away from the cut).
+                let target = DVec3::new(
+                    -0.75 + 1.5 * f64::from(i) / 40.0,
+                    -0.75 + 0.9 * f64::from(j) / 40.0,
+                    3.2,
+                );
+                let d = target.normalize();
+                let res = g.closest_hit(&ray(DVec3::ZERO, d));
+                if res.termination() != Termination::Hit {
+                    missed.push(target);
+                }
+            }
+        }
+        assert!(
+            missed.is_empty(),
+            "{op}: {} of 1681 rays missed, e.g. {:?}",
+            missed.len(),
+            missed.first()
+        );
+    }
+}

@@ -102,3 +102,51 @@ fn mesh_grids_of_the_sdf_backend_count_against_the_limit() {
         "{msg}"
     );
 }
+
+const REFERENCE: BackendId = BackendId::REFERENCE;
+
+#[test]
+fn mesh_loads_of_the_reference_and_the_sdf_backend_count_against_the_limit() {
+    // The bunny's load bound with the reference's f64 copy and BVH, or the sdf backend's bake,
+    // is a few MiB: refused at 1 MiB (a tiny grid fits) naming the object, the file and the
+    // limit, before the mesh is decoded.
+    let s = scene(r#"{ "objects": [ { "shape": { "mesh": { "path": "meshes/bunny.obj" } } } ] }"#);
+    for (kind, options) in [(REFERENCE, &[][..]), (SDF, &["grid_res=8"][..])] {
+        let msg = build_error(&s, &spec(kind, options), MIB);
+        for part in [
+            "objects[0]",
+            "bunny.obj",
+            "triangles",
+            "memory limit of 1 MiB",
+            "--memory-limit-mib",
+        ] {
+            assert!(msg.contains(part), "{part}: {msg}");
+        }
+        backend::build_within(&s, &spec(kind, options), 64 * MIB).expect("fits in 64 MiB");
+    }
+}
+
+#[test]
+fn mesh_files_larger_than_the_limit_are_refused_before_they_are_read() {
+    // 12 MiB of vertex records: over a 10 MiB limit on its size alone.
+    let dir = std::env::temp_dir().join(format!("marchmesh-limit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let obj = dir.join("huge.obj");
+    std::fs::write(&obj, "v 0.50 0.50 0.5\n".repeat(12 << 20 >> 4)).unwrap();
+    let text = format!(
+        r#"{{ "objects": [ {{ "shape": {{ "mesh": {{ "path": {:?} }} }} }} ] }}"#,
+        obj.display()
+    );
+    let s = scene(&text);
+    for (kind, options) in [(REFERENCE, &[][..]), (SDF, &["grid_res=8"][..])] {
+        let msg = build_error(&s, &spec(kind, options), 10 * MIB);
+        for part in [
+            "huge.obj",
+            "12 MiB of file, 0 records",
+            "memory limit of 10 MiB",
+        ] {
+            assert!(msg.contains(part), "{part}: {msg}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}

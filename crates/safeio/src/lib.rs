@@ -101,6 +101,17 @@ fn not_regular(path: &Path, meta: &std::fs::Metadata) -> SafeIoError {
     }
 }
 
+/// The conversion of an OS error met while doing `action` on `path` into a
+/// [`SafeIoError::Io`] naming both.
+fn io_error(path: &Path, action: &'static str) -> impl FnOnce(std::io::Error) -> SafeIoError {
+    let path = path.to_path_buf();
+    move |source| SafeIoError::Io {
+        path,
+        action,
+        source,
+    }
+}
+
 /// Opens a regular file of at most `cap_bytes` bytes for reading (symlinks are followed)
 /// without ever blocking: the type is checked on the path before the open, the open does not
 /// wait (a FIFO swapped in meanwhile opens at once), and the type and size are checked again
@@ -109,14 +120,7 @@ fn not_regular(path: &Path, meta: &std::fs::Metadata) -> SafeIoError {
 /// Errors: [`SafeIoError::NotRegularFile`] for a folder, device, FIFO or socket,
 /// [`SafeIoError::TooLarge`] over the cap, or the OS error naming the file.
 pub fn open_regular(path: &Path, cap_bytes: u64) -> Result<(File, u64), SafeIoError> {
-    let io = |action| {
-        let path = path.to_path_buf();
-        move |source| SafeIoError::Io {
-            path,
-            action,
-            source,
-        }
-    };
+    let io = |action| io_error(path, action);
     let meta = std::fs::metadata(path).map_err(io("cannot open"))?;
     if !meta.is_file() {
         return Err(not_regular(path, &meta));
@@ -147,14 +151,7 @@ pub fn open_regular(path: &Path, cap_bytes: u64) -> Result<(File, u64), SafeIoEr
 /// Errors: the path is not a regular file, is larger than the cap (checked on the metadata and
 /// again while reading, so a growing file cannot exceed it), or the OS fails.
 pub fn read_capped(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> {
-    let io = |action| {
-        let path = path.to_path_buf();
-        move |source| SafeIoError::Io {
-            path,
-            action,
-            source,
-        }
-    };
+    let io = |action| io_error(path, action);
     let (file, len) = open_regular(path, cap_bytes)?;
     let too_large = || SafeIoError::TooLarge {
         path: path.to_path_buf(),
@@ -210,14 +207,7 @@ fn unique_temporary(target: &Path) -> PathBuf {
 /// succeeds), or an I/O error; on any error no file is left at `target` by this call.
 pub fn publish_new(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
     let temporary = unique_temporary(target);
-    let io = |action| {
-        let path = target.to_path_buf();
-        move |source| SafeIoError::Io {
-            path,
-            action,
-            source,
-        }
-    };
+    let io = |action| io_error(target, action);
     let write = || -> Result<(), SafeIoError> {
         let mut file = std::fs::OpenOptions::new()
             .write(true)
@@ -261,14 +251,7 @@ pub fn replace_regular(target: &Path, bytes: &[u8]) -> Result<(), SafeIoError> {
         });
     }
     let temporary = unique_temporary(target);
-    let io = |action| {
-        let path = target.to_path_buf();
-        move |source| SafeIoError::Io {
-            path,
-            action,
-            source,
-        }
-    };
+    let io = |action| io_error(target, action);
     let write = || -> Result<(), SafeIoError> {
         let mut file = std::fs::OpenOptions::new()
             .write(true)

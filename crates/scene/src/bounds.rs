@@ -158,6 +158,25 @@ impl Shape {
                 lo: vertices[0].min(vertices[1]).min(vertices[2]),
                 hi: vertices[0].max(vertices[1]).max(vertices[2]),
             }),
+            Shape::RoundedBox { half_extents, .. } => {
+                LocalBounds::Finite(Aabb::symmetric(*half_extents))
+            }
+            Shape::Capsule {
+                radius,
+                half_height,
+            } => LocalBounds::Finite(Aabb::symmetric(DVec3::new(
+                *radius,
+                half_height + radius,
+                *radius,
+            ))),
+            Shape::CappedCone {
+                half_height,
+                bottom_radius,
+                top_radius,
+            } => {
+                let r = bottom_radius.max(*top_radius);
+                LocalBounds::Finite(Aabb::symmetric(DVec3::new(r, *half_height, r)))
+            }
             Shape::Plane { .. } => LocalBounds::Unbounded,
             Shape::Mesh { path } => LocalBounds::MeshFile(path),
         }
@@ -179,13 +198,44 @@ impl NodeKind {
     }
 }
 
+/// How far below its children's minimum a left-to-right fold of `children` polynomial smooth
+/// minima with blend radius `blend_radius` (`k`) can lie: `D(children)`, never above `k`
+/// whatever the count, and exact (reached when all children are equal).
+///
+/// The kernel (Quilez 2013) is `smin(x, a) = min(x, a) - max(k - |x - a|, 0)^2 / (4k)`; it
+/// is non-decreasing in both arguments. Folding `f_1 = a_1`, `f_{i+1} = smin(f_i, a_{i+1})`
+/// with `m_i = min(a_1..a_i)` and the deficit `D_i = m_i - f_i >= 0`, and writing
+/// `g(D) = D + max(k - D, 0)^2 / (4k)` (increasing, `g(D) < k` for `D < k`, fixed point `k`):
+/// - `a >= m_i`: `|f_i - a| >= D_i`, so `D_{i+1} = D_i + max(k - |f_i - a|, 0)^2 / (4k) <= g(D_i)`;
+/// - `f_i <= a < m_i`: with `t = a - f_i` in `[0, D_i)`, `D_{i+1} = g(t) <= g(D_i)`;
+/// - `a < f_i`: `D_{i+1} = max(k - (f_i - a), 0)^2 / (4k) <= k / 4 = g(0)`.
+///
+/// So `D_n <= g^(n-1)(0)`, with equality for equal children: `0, k/4, 25k/64, ...`, rising to
+/// `k` as `1 - D_n / k ~ 4 / n`. The old rule of `k/4` per fold (unbounded in `n`) is the first
+/// step only. Returns `k` itself beyond 65,536 children (the limit, always safe).
+pub fn smooth_fold_deficit(blend_radius: f64, children: usize) -> f64 {
+    let k = blend_radius;
+    if children > 1 << 16 {
+        return k;
+    }
+    let mut d = 0.0f64;
+    for _ in 1..children {
+        let h = (k - d).max(0.0);
+        d += h * h / (4.0 * k);
+    }
+    // One part in 1e12 for the rounding of the iteration; never above the limit k.
+    (d * (1.0 + 1e-12)).min(k)
+}
+
 /// A composite's box in its own frame from its children's boxes in that frame (each child's
 /// own transform applied; [`Aabb::INFINITE`] for an unbounded child). Leaves give `None`.
 ///
-/// Union: the hull. Smooth union: the hull grown by `blend_radius / 4` per fold (the
-/// polynomial smooth minimum lowers the value by at most k/4 below the children's minimum,
-/// Quilez 2013). Intersection: the common part. Subtraction: the first child. Repetition:
-/// the child's box spread over the copies, infinite along an axis repeated without end.
+/// Union: the hull. Smooth union: the hull grown by [`smooth_fold_deficit`] (at most the blend
+/// radius, whatever the child count): every child is at least its box's distance away from
+/// a point outside the hull grown by that much, so the fold is positive there (children
+/// whose values are bounds of this kind, as every composite's box makes them). Intersection
+/// (hard or smooth): the common part. Subtraction (hard or smooth): the first child. Repetition: the child's box spread over the
+/// copies, infinite along an axis repeated without end.
 pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
     let hull = || {
         let first = *children.first()?;
@@ -193,10 +243,20 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
     };
     match kind {
         NodeKind::Union(_) => hull(),
-        NodeKind::Smooth { blend_radius, .. } => {
-            let folds = children.len().saturating_sub(1) as f64;
-            hull().map(|h| h.grown(blend_radius * 0.25 * folds))
-        }
+        NodeKind::Smooth {
+            op, blend_radius, ..
+        } => match op {
+            crate::SmoothOp::Union => {
+                let deficit = smooth_fold_deficit(*blend_radius, children.len());
+                hull().map(|h| h.grown(deficit))
+            }
+            // A smooth maximum never lies below either argument, so the fold is at least
+            // every child (intersection) or at least the first child (subtraction): no growth.
+            crate::SmoothOp::Intersection => children.iter().fold(None, |acc: Option<Aabb>, b| {
+                Some(acc.map_or(*b, |a| a.intersect(b)))
+            }),
+            crate::SmoothOp::Subtraction => children.first().copied(),
+        },
         NodeKind::Intersection(_) => children.iter().fold(None, |acc: Option<Aabb>, b| {
             Some(acc.map_or(*b, |a| a.intersect(b)))
         }),
@@ -333,6 +393,28 @@ mod tests {
         assert_eq!(b.distance_to(DVec3::new(4.0, 0.0, 0.0)), 3.0);
     }
 
+    #[test]
+    fn the_fold_deficit_starts_at_a_quarter_and_never_reaches_the_blend_radius() {
+        let k = 0.026;
+        assert_eq!(smooth_fold_deficit(k, 0), 0.0);
+        assert_eq!(smooth_fold_deficit(k, 1), 0.0);
+        assert!((smooth_fold_deficit(k, 2) - k / 4.0).abs() < 1e-12 * k);
+        assert!((smooth_fold_deficit(k, 3) - 25.0 * k / 64.0).abs() < 1e-12 * k);
+        let mut last = 0.0;
+        for n in [4, 10, 100, 1000, 10_000, 65_536] {
+            let d = smooth_fold_deficit(k, n);
+            assert!(d > last && d < k, "n = {n}: {d}");
+            // 1 - D/k behaves like 4/n: within a factor 2 of it for large n.
+            let rest = 1.0 - d / k;
+            assert!(
+                rest < 8.0 / n as f64 && rest > 2.0 / n as f64,
+                "n = {n}: {rest}"
+            );
+            last = d;
+        }
+        assert_eq!(smooth_fold_deficit(k, 1 << 20), k);
+    }
+
     fn leaf(kind: NodeKind) -> Node {
         Node {
             transform: DAffine3::IDENTITY,
@@ -344,7 +426,7 @@ mod tests {
     }
 
     #[test]
-    fn smooth_unions_grow_per_fold_and_repeats_spread_over_their_copies() {
+    fn smooth_unions_grow_by_the_fold_deficit_and_repeats_spread_over_their_copies() {
         let sphere = || leaf(NodeKind::Leaf(Shape::Sphere { radius: 1.0 }));
         let smooth = leaf(NodeKind::Smooth {
             op: crate::SmoothOp::Union,
@@ -352,7 +434,10 @@ mod tests {
             blend_radius: 0.4,
         });
         let three = smooth.bounds_in_own_frame(&|_| None).expect("bounded");
-        assert!((three.hi.x - 1.2).abs() < 1e-12, "{three:?}");
+        assert!(
+            (three.hi.x - (1.0 + 0.4 * 25.0 / 64.0)).abs() < 1e-9,
+            "{three:?}"
+        );
         let repeat = leaf(NodeKind::Repeat {
             child: Box::new(sphere()),
             period: DVec3::new(4.0, 0.0, 3.0),

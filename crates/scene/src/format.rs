@@ -292,7 +292,7 @@ impl Default for ScaleSpec {
 ///
 /// A material given on a CSG or repeat node is inherited by every descendant that gives none;
 /// an object with no material anywhere up its tree gets the default [`MaterialSpec`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[derive(Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ObjectSpec {
     /// A label for messages and reports. Default none.
@@ -306,6 +306,77 @@ pub struct ObjectSpec {
     /// Appearance; default inherited from the parent, else [`MaterialSpec::default`].
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub material: Option<MaterialSpec>,
+}
+
+// Object trees nest as deep as the files do: the recursive impls go through `deep::guard`
+// once per level and dropping is iterative.
+impl Drop for ObjectSpec {
+    fn drop(&mut self) {
+        let children = self.take_children();
+        if !children.is_empty() {
+            crate::deep::drop_tree(children, ObjectSpec::take_children);
+        }
+    }
+}
+
+impl ObjectSpec {
+    /// Moves the direct children out (a repetition's child replaced by a unit sphere).
+    fn take_children(&mut self) -> Vec<ObjectSpec> {
+        match &mut self.shape {
+            ShapeSpec::Union(c) | ShapeSpec::Intersection(c) | ShapeSpec::Subtraction(c) => {
+                std::mem::take(&mut c.children)
+            }
+            ShapeSpec::SmoothUnion(s)
+            | ShapeSpec::SmoothIntersection(s)
+            | ShapeSpec::SmoothSubtraction(s) => std::mem::take(&mut s.children),
+            ShapeSpec::Repeat(r) => {
+                let leaf = ObjectSpec {
+                    name: None,
+                    shape: ShapeSpec::Sphere(SphereSpec { radius: 1.0 }),
+                    transform: TransformSpec::default(),
+                    material: None,
+                };
+                vec![std::mem::replace(&mut *r.child, leaf)]
+            }
+            // Leaves: nothing below.
+            _ => Vec::new(),
+        }
+    }
+}
+
+impl Clone for ObjectSpec {
+    fn clone(&self) -> Self {
+        crate::deep::guard(|| ObjectSpec {
+            name: self.name.clone(),
+            shape: self.shape.clone(),
+            transform: self.transform.clone(),
+            material: self.material.clone(),
+        })
+    }
+}
+
+impl PartialEq for ObjectSpec {
+    fn eq(&self, o: &Self) -> bool {
+        crate::deep::guard(|| {
+            self.name == o.name
+                && self.shape == o.shape
+                && self.transform == o.transform
+                && self.material == o.material
+        })
+    }
+}
+
+impl std::fmt::Debug for ObjectSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        crate::deep::guard(|| {
+            f.debug_struct("ObjectSpec")
+                .field("name", &self.name)
+                .field("shape", &self.shape)
+                .field("transform", &self.transform)
+                .field("material", &self.material)
+                .finish()
+        })
+    }
 }
 
 /// The shape of an object, in its local frame (before its transform).
@@ -327,6 +398,12 @@ pub enum ShapeSpec {
     Cylinder(CylinderSpec),
     /// A torus in the xz-plane around the y axis.
     Torus(TorusSpec),
+    /// An axis-aligned box centred on the origin with rounded edges and corners.
+    RoundedBox(RoundedBoxSpec),
+    /// The points within `radius` of a segment along y centred on the origin.
+    Capsule(CapsuleSpec),
+    /// A cone along y cut by two caps (a frustum), centred on the origin.
+    CappedCone(CappedConeSpec),
     /// A triangle mesh loaded from an OBJ or glTF (.gltf/.glb) file.
     Mesh(MeshSpec),
     /// Points inside any child.
@@ -337,6 +414,10 @@ pub enum ShapeSpec {
     Subtraction(CsgSpec),
     /// A union whose seams are rounded with a polynomial smooth minimum.
     SmoothUnion(SmoothUnionSpec),
+    /// An intersection whose seams are rounded with a polynomial smooth maximum.
+    SmoothIntersection(SmoothUnionSpec),
+    /// The first child minus the others, the cuts rounded with a polynomial smooth maximum.
+    SmoothSubtraction(SmoothUnionSpec),
     /// Domain repetition of one child on a grid.
     Repeat(RepeatSpec),
 }
@@ -412,6 +493,49 @@ pub struct TorusSpec {
     pub minor_radius: f64,
 }
 
+/// Rounded box parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RoundedBoxSpec {
+    /// Half the edge length along each axis, rounding included, all > 0. Default
+    /// `[0.5, 0.5, 0.5]`.
+    #[serde(default = "half3")]
+    pub half_extents: [f64; 3],
+    /// Radius of the rounded edges and corners, >= 0 and <= the smallest half extent (0: a
+    /// plain box; the smallest half extent: round along that axis). Default 0.1.
+    #[serde(default = "tenth")]
+    pub rounding_radius: f64,
+}
+
+/// Capsule parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CapsuleSpec {
+    /// Radius, > 0. Default 0.5.
+    #[serde(default = "half")]
+    pub radius: f64,
+    /// Length of the segment along y (from y = -height/2 to height/2) whose points within
+    /// `radius` make the capsule, >= 0 (0: a sphere); the capsule's total height is
+    /// `height + 2 radius`. Default 1.
+    #[serde(default = "one")]
+    pub height: f64,
+}
+
+/// Capped cone parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CappedConeSpec {
+    /// Total height along y, > 0 (caps at y = +-height/2). Default 1.
+    #[serde(default = "one")]
+    pub height: f64,
+    /// Radius of the cap at y = -height/2, >= 0. Default 0.5.
+    #[serde(default = "half")]
+    pub bottom_radius: f64,
+    /// Radius of the cap at y = +height/2, >= 0 (not both radii 0). Default 0.25.
+    #[serde(default = "quarter")]
+    pub top_radius: f64,
+}
+
 /// A mesh file reference.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -428,16 +552,20 @@ pub struct CsgSpec {
     pub children: Vec<ObjectSpec>,
 }
 
-/// Children of a smooth union.
+/// Children and blend radius of a smooth union, intersection or subtraction.
+///
+/// The children's values are folded left to right, `v = op(op(op(c0, c1), c2), ...)`, so a
+/// node with n children is exactly the left-deep binary tree of the same operator and blend
+/// radius. Union: the polynomial smooth minimum `smin(a, b) = min(a, b) - h^2 k / 4` with
+/// `h = max(k - |a - b|, 0) / k` (Quilez); intersection: `smax(a, b) = -smin(-a, -b)`;
+/// subtraction: `smax(a, -b)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SmoothUnionSpec {
-    /// At least one child.
+    /// At least one child (subtraction: the first is the base).
     pub children: Vec<ObjectSpec>,
-    /// Blend radius k, > 0, in the smooth union's local units (before its transform): a
-    /// `scale` on this node or an ancestor scales the blend with the shape, as every backend
-    /// renders it. The polynomial smooth minimum `h = max(k - |a - b|, 0) / k;
-    /// min(a, b) - h^2 k / 4` (Quilez).
+    /// Blend radius k, > 0, in the node's local units (before its transform): a `scale` on
+    /// this node or an ancestor scales the blend with the shape, as every backend renders it.
     pub blend_radius: f64,
 }
 
@@ -579,6 +707,10 @@ fn one() -> f64 {
 fn half() -> f64 {
     0.5
 }
+fn tenth() -> f64 {
+    0.1
+}
+
 fn quarter() -> f64 {
     0.25
 }

@@ -7,6 +7,7 @@
 //! [`json_schema`] gives its machine-readable schema.
 
 pub mod bounds;
+pub mod deep;
 pub mod format;
 pub mod resolved;
 mod strict;
@@ -72,8 +73,29 @@ pub enum SceneError {
 
 /// Parses JSON text into the serde model, reporting the JSON path of any error.
 pub fn parse_file_format(text: &str, source_name: &str) -> Result<SceneFile, SceneError> {
+    if let Some((line, column)) = deep::too_deep(text, validate::MAX_JSON_DEPTH) {
+        return Err(SceneError::Parse {
+            source_name: source_name.to_string(),
+            line,
+            column,
+            json_path: ".".into(),
+            message: format!(
+                "JSON nests deeper than {} levels (objects nest at most {} levels)",
+                validate::MAX_JSON_DEPTH,
+                validate::MAX_NESTING_DEPTH
+            ),
+        });
+    }
     let mut de = serde_json::Deserializer::from_str(text);
-    let parsed: Result<SceneFile, _> = serde_path_to_error::deserialize(strict::Strict(&mut de));
+    // The depth was checked above; each level of the recursive descent runs on a stack
+    // that `deep::guard` grows, whatever the thread.
+    de.disable_recursion_limit();
+    let stacked = serde_stacker::Deserializer {
+        de: &mut de,
+        red_zone: deep::RED_ZONE,
+        stack_size: deep::STACK_SEGMENT,
+    };
+    let parsed: Result<SceneFile, _> = serde_path_to_error::deserialize(strict::Strict(stacked));
     let file = parsed.map_err(|e| {
         let json_path = e.path().to_string();
         let inner = e.into_inner();

@@ -297,6 +297,10 @@ pub enum NodeKind {
 pub enum SmoothOp {
     /// `smin` fold: a union with rounded seams.
     Union,
+    /// `smax` fold: an intersection with rounded seams.
+    Intersection,
+    /// `smax(first, -child)` fold: the first child minus the others, cuts rounded.
+    Subtraction,
 }
 
 /// A primitive in its local frame, with validated parameters.
@@ -343,11 +347,60 @@ pub enum Shape {
         /// Minor radius in (0, major_radius].
         minor_radius: f64,
     },
+    /// Box at the origin with rounded edges and corners: the box of half extents
+    /// `half_extents - rounding_radius` grown by `rounding_radius`.
+    RoundedBox {
+        /// Outer half extents, all > 0.
+        half_extents: DVec3,
+        /// Rounding radius in [0, min(half_extents)].
+        rounding_radius: f64,
+    },
+    /// The points within `radius` of the segment `|y| <= half_height` on the y axis.
+    Capsule {
+        /// Radius > 0.
+        radius: f64,
+        /// Half the segment's length >= 0.
+        half_height: f64,
+    },
+    /// Cone along y cut at `y = -half_height` (radius `bottom_radius`) and `y = half_height`
+    /// (radius `top_radius`).
+    CappedCone {
+        /// Half the height > 0.
+        half_height: f64,
+        /// Radius at the bottom cap >= 0.
+        bottom_radius: f64,
+        /// Radius at the top cap >= 0 (not both radii 0).
+        top_radius: f64,
+    },
     /// Mesh file (existence is checked by the loader, not here).
     Mesh {
         /// Path resolved against the scene file's folder.
         path: PathBuf,
     },
+}
+
+impl NodeKind {
+    /// Moves the direct children out (a repetition's child replaced by a unit sphere), for
+    /// dismantling deep trees without recursion.
+    pub(crate) fn take_children(&mut self) -> Vec<Node> {
+        match self {
+            NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
+                std::mem::take(c)
+            }
+            NodeKind::Smooth { children, .. } => std::mem::take(children),
+            NodeKind::Repeat { child, .. } => {
+                let leaf = Node {
+                    transform: DAffine3::IDENTITY,
+                    material: 0,
+                    name: None,
+                    json_path: String::new(),
+                    kind: NodeKind::Leaf(Shape::Sphere { radius: 1.0 }),
+                };
+                vec![std::mem::replace(&mut **child, leaf)]
+            }
+            NodeKind::Leaf(_) => Vec::new(),
+        }
+    }
 }
 
 impl Shape {

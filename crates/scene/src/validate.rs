@@ -5,7 +5,7 @@
 
 use std::path::Path;
 
-use glam::DVec3;
+use glam::{DAffine3, DVec3};
 
 use crate::format::*;
 use crate::resolved::*;
@@ -14,20 +14,40 @@ use crate::resolved::*;
 pub const MAX_IMAGE_SIDE: u32 = 16_384;
 /// Largest accepted pixel count (width * height).
 pub const MAX_PIXELS: u64 = 64 * 1024 * 1024;
-/// Deepest accepted object nesting (CSG and repeat nodes). JSON itself stops at 128 levels
-/// (serde_json's recursion limit, about 31 object levels), with a parse error.
-pub const MAX_NESTING_DEPTH: usize = 24;
+/// Deepest accepted object nesting in a file (CSG and repeat nodes): a left-deep binary
+/// tree of 10,000 blended primitives, as modelling tools write them, is 10,000 levels deep.
+/// Parsing and validation walk it on stacks grown by [`crate::deep::guard`].
+pub const MAX_NESTING_DEPTH: usize = 16_384;
+/// Deepest accepted JSON nesting (objects and arrays): four per object level (the object,
+/// `shape`, the operator, `children`) and a few for the top level and leaf parameters.
+/// Deeper text is refused before parsing, with its line and column.
+pub const MAX_JSON_DEPTH: usize = 4 * MAX_NESTING_DEPTH + 16;
+/// Deepest accepted object nesting of the resolved scene, after every node whose first
+/// child is the same operation (same blend radius, no transform of its own) took over that
+/// child's children, which keeps the value: a fold is left to right. Every backend's
+/// compiler and evaluator recurses this deep on its caller's stack (a rayon worker's).
+pub const MAX_MERGED_DEPTH: usize = 64;
+/// Longest JSON path a node keeps for its messages: beyond it a run of one repeated step is
+/// written once with its count, `(.shape.union.children[0]){9999}`, and other long paths
+/// keep their start and end around `...`.
+pub const MAX_JSON_PATH_CHARS: usize = 256;
 /// Most nodes accepted in one scene.
 pub const MAX_NODES: usize = 100_000;
 /// Largest accepted finite repetition count on one axis.
 pub const MAX_REPEAT_COUNT_PER_AXIS: u32 = 1_000_000;
-/// Largest accepted product, over a chain of nested repeat nodes, of each node's work factor:
-/// 2 per repeated axis (a count of 1 counts 1). Evaluating a repetition visits at least two
-/// neighbouring copies per repeated axis and nested repetitions multiply, so 23 nested
-/// count-2 repeats cost 2^23 evaluations per query on every backend; 1024 keeps the worst
-/// accepted scene to about a thousand child evaluations per query (e.g. three nested 3-axis
-/// repeats plus one single-axis repeat).
+/// Largest accepted product, over a chain of nested repeat nodes, of the copies of each
+/// node's child evaluated per query ([`repeat_copies_per_query`]): nested repetitions
+/// multiply, so ten nested infinite repeats along one axis of a small child cost `2 * 5^9`
+/// (3.9 million) child evaluations per query on the sdf backend. 1024 keeps the worst
+/// accepted scene to about a thousand child evaluations per query (e.g. two nested 3-axis
+/// repeats whose children fit their periods, the inner one finite: 27 x 27 = 729).
 pub const MAX_NESTED_REPEAT_FACTOR: u64 = 1024;
+/// Most copies of a repeated child the sdf backend evaluates per repeated axis and query:
+/// the copies whose box overlaps a window around the point at most a period wide, so 3 for a
+/// child that fits its period, more for a wider one, this many for a child wider than
+/// `REPEAT_WINDOW - 1` periods or unbounded along the axis (another infinite repetition along
+/// it, a plane, a mesh whose box is not known before loading). The field compiler's window.
+pub const REPEAT_WINDOW: u64 = 5;
 /// Largest accepted magnitude of any coordinate or length (world units).
 pub const MAX_COORDINATE: f64 = 1e12;
 /// Most samples per pixel for the Whitted integrator (all samples of a row are traced as one
@@ -86,8 +106,6 @@ struct Ctx<'a> {
     problems: Vec<Problem>,
     materials: Vec<Material>,
     nodes: usize,
-    /// Product of the work factors of the repeat nodes enclosing the node being checked.
-    repeat_factor: u64,
 }
 
 impl Ctx<'_> {
@@ -119,6 +137,14 @@ impl Ctx<'_> {
             self.fail(path, format!("must be > 0, got {v}"));
         }
         v
+    }
+
+    fn non_negative(&mut self, path: &str, v: f64) -> f64 {
+        let v = self.finite(path, v);
+        if v < 0.0 {
+            self.fail(path, format!("must be >= 0, got {v}"));
+        }
+        v.max(0.0)
     }
 
     fn in_range(&mut self, path: &str, v: f64, lo: f64, hi: f64) -> f64 {
@@ -190,6 +216,17 @@ impl Ctx<'_> {
         inherited: MaterialId,
         depth: usize,
     ) -> Option<Node> {
+        crate::deep::guard(|| self.object_here(path, o, inherited, depth))
+    }
+
+    /// [`Ctx::object`] on the current stack.
+    fn object_here(
+        &mut self,
+        path: &str,
+        o: &ObjectSpec,
+        inherited: MaterialId,
+        depth: usize,
+    ) -> Option<Node> {
         self.nodes += 1;
         if self.nodes > MAX_NODES {
             if self.nodes == MAX_NODES + 1 {
@@ -221,7 +258,7 @@ impl Ctx<'_> {
             ),
         };
         let sp = format!("{path}.shape");
-        let kind = self.shape(&sp, &o.shape, material, depth)?;
+        let kind = merge_first_child(self.shape(&sp, &o.shape, material, depth)?);
         Some(Node {
             transform: compose_transform(translate, rotate, scale),
             material,
@@ -244,8 +281,30 @@ impl Ctx<'_> {
         children
             .iter()
             .enumerate()
-            .filter_map(|(i, c)| self.object(&format!("{path}[{i}]"), c, material, depth + 1))
+            .filter_map(|(i, c)| self.object(&child_path(path, i), c, material, depth + 1))
             .collect()
+    }
+
+    /// A smooth CSG node `{"key": {...}}` at `path`.
+    fn smooth(
+        &mut self,
+        path: &str,
+        key: &str,
+        op: SmoothOp,
+        s: &SmoothUnionSpec,
+        material: MaterialId,
+        depth: usize,
+    ) -> NodeKind {
+        NodeKind::Smooth {
+            op,
+            children: self.children(
+                &format!("{path}.{key}.children"),
+                &s.children,
+                material,
+                depth,
+            ),
+            blend_radius: self.positive(&format!("{path}.{key}.blend_radius"), s.blend_radius),
+        }
     }
 
     fn shape(
@@ -316,6 +375,45 @@ impl Ctx<'_> {
                     minor_radius: minor,
                 })
             }
+            ShapeSpec::RoundedBox(b) => {
+                let p = format!("{path}.rounded_box");
+                let half_extents = DVec3::new(
+                    self.positive(&format!("{p}.half_extents[0]"), b.half_extents[0]),
+                    self.positive(&format!("{p}.half_extents[1]"), b.half_extents[1]),
+                    self.positive(&format!("{p}.half_extents[2]"), b.half_extents[2]),
+                );
+                let rp = format!("{p}.rounding_radius");
+                let r = self.non_negative(&rp, b.rounding_radius);
+                let smallest = half_extents.min_element();
+                if r > smallest {
+                    self.fail(
+                        &rp,
+                        format!("must be <= the smallest half extent ({smallest}), got {r}"),
+                    );
+                }
+                NodeKind::Leaf(Shape::RoundedBox {
+                    half_extents,
+                    rounding_radius: r.min(smallest),
+                })
+            }
+            ShapeSpec::Capsule(c) => NodeKind::Leaf(Shape::Capsule {
+                radius: self.positive(&format!("{path}.capsule.radius"), c.radius),
+                half_height: 0.5 * self.non_negative(&format!("{path}.capsule.height"), c.height),
+            }),
+            ShapeSpec::CappedCone(c) => {
+                let p = format!("{path}.capped_cone");
+                let half_height = 0.5 * self.positive(&format!("{p}.height"), c.height);
+                let bottom = self.non_negative(&format!("{p}.bottom_radius"), c.bottom_radius);
+                let top = self.non_negative(&format!("{p}.top_radius"), c.top_radius);
+                if bottom == 0.0 && top == 0.0 {
+                    self.fail(&p, "bottom_radius and top_radius are both 0 (no volume)");
+                }
+                NodeKind::Leaf(Shape::CappedCone {
+                    half_height,
+                    bottom_radius: bottom,
+                    top_radius: top,
+                })
+            }
             ShapeSpec::Mesh(m) => {
                 let full = self.base_dir.join(&m.path);
                 if m.path.trim().is_empty() {
@@ -346,17 +444,25 @@ impl Ctx<'_> {
                 material,
                 depth,
             )),
-            ShapeSpec::SmoothUnion(s) => NodeKind::Smooth {
-                op: SmoothOp::Union,
-                children: self.children(
-                    &format!("{path}.smooth_union.children"),
-                    &s.children,
-                    material,
-                    depth,
-                ),
-                blend_radius: self
-                    .positive(&format!("{path}.smooth_union.blend_radius"), s.blend_radius),
-            },
+            ShapeSpec::SmoothUnion(s) => {
+                self.smooth(path, "smooth_union", SmoothOp::Union, s, material, depth)
+            }
+            ShapeSpec::SmoothIntersection(s) => self.smooth(
+                path,
+                "smooth_intersection",
+                SmoothOp::Intersection,
+                s,
+                material,
+                depth,
+            ),
+            ShapeSpec::SmoothSubtraction(s) => self.smooth(
+                path,
+                "smooth_subtraction",
+                SmoothOp::Subtraction,
+                s,
+                material,
+                depth,
+            ),
             ShapeSpec::Repeat(r) => {
                 let p = format!("{path}.repeat");
                 let mut period = DVec3::ZERO;
@@ -384,25 +490,24 @@ impl Ctx<'_> {
                         "at least one axis needs a period > 0",
                     );
                 }
-                let factor: u64 = (0..3)
-                    .filter(|&axis| period[axis] > 0.0 && r.count[axis] != Some(1))
-                    .map(|_| 2u64)
-                    .product();
-                let enclosing = self.repeat_factor;
-                self.repeat_factor = enclosing.saturating_mul(factor);
-                if self.repeat_factor > MAX_NESTED_REPEAT_FACTOR
-                    && enclosing <= MAX_NESTED_REPEAT_FACTOR
-                {
-                    self.fail(
-                        &p,
-                        format!(
-                            "nested repetitions multiply the work per query to {} (2 per repeated axis at every nesting level), over the limit of {MAX_NESTED_REPEAT_FACTOR}: nest fewer repeats or repeat fewer axes",
-                            self.repeat_factor
-                        ),
-                    );
-                }
                 let child = self.object(&format!("{p}.child"), &r.child, material, depth + 1);
-                self.repeat_factor = enclosing;
+                if let Some(child) = &child {
+                    // Counted from the innermost repeat out: the first (innermost) repeat whose
+                    // chain crosses the limit is the one reported.
+                    let below = nested_repeat_work(child);
+                    let copies =
+                        repeat_copies_per_query(period, r.count, child.bounds_in_parent(&|_| None));
+                    let work = below.saturating_mul(copies);
+                    if work > MAX_NESTED_REPEAT_FACTOR && below <= MAX_NESTED_REPEAT_FACTOR {
+                        self.fail(
+                            &p,
+                            format!(
+                                "nested repetitions evaluate {work} copies of the innermost child per query ({copies} copies of this repeat's child times {below} below it), over the limit of {MAX_NESTED_REPEAT_FACTOR}: the sdf backend evaluates up to 3 copies per repeated axis of a child that fits its period and {REPEAT_WINDOW} of one wider than {} periods or unbounded along the axis (such as another infinite repetition along it); nest fewer repeats, repeat fewer axes or give them counts",
+                                REPEAT_WINDOW - 1
+                            ),
+                        );
+                    }
+                }
                 let child = child?;
                 NodeKind::Repeat {
                     child: Box::new(child),
@@ -411,6 +516,169 @@ impl Ctx<'_> {
                 }
             }
         })
+    }
+}
+
+/// The JSON path of child `i` of the child list at `list` (`...children`): `list[i]`,
+/// with a trailing run of one repeated object step kept as `(step){n}` and long paths cut,
+/// so that paths stay short however deep the tree ([`MAX_JSON_PATH_CHARS`]).
+fn child_path(list: &str, i: usize) -> String {
+    let full = format!("{list}[{i}]");
+    if full.len() <= MAX_JSON_PATH_CHARS {
+        return full;
+    }
+    // The step from the parent object to this child: `.shape.<op>.children[i]`.
+    let Some(at) = list.rfind(".shape.") else {
+        return elide(&full);
+    };
+    let (parent, op_list) = list.split_at(at);
+    let step = format!("{op_list}[{i}]");
+    let run = format!("({step}){{");
+    if let Some(open) = parent.rfind(&run)
+        && let Some(n) = parent[open + run.len()..]
+            .strip_suffix('}')
+            .and_then(|n| n.parse::<u64>().ok())
+    {
+        return format!("{}{run}{}}}", &parent[..open], n + 1);
+    }
+    let mut head = parent;
+    let mut n = 1u64;
+    while let Some(h) = head.strip_suffix(step.as_str()) {
+        head = h;
+        n += 1;
+    }
+    if n > 1 {
+        return format!("{head}{run}{n}}}");
+    }
+    elide(&full)
+}
+
+/// `path` cut to its first and last characters around `...` when longer than
+/// [`MAX_JSON_PATH_CHARS`].
+fn elide(path: &str) -> String {
+    if path.len() <= MAX_JSON_PATH_CHARS {
+        return path.to_string();
+    }
+    let keep = MAX_JSON_PATH_CHARS / 2 - 2;
+    let mut a = keep;
+    while !path.is_char_boundary(a) {
+        a -= 1;
+    }
+    let mut b = path.len() - keep;
+    while !path.is_char_boundary(b) {
+        b += 1;
+    }
+    format!("{}...{}", &path[..a], &path[b..])
+}
+
+/// `kind` with its first child's children spliced in when that child is the same operation
+/// (the same blend radius for smooth ones) with the identity transform: every operation
+/// folds its children left to right, so `op(op(a, b), c)` is `op(a, b, c)` exactly, and a
+/// left-deep chain of N levels becomes one node of N + 1 children (built bottom-up, each
+/// level moves only its own further children).
+fn merge_first_child(mut kind: NodeKind) -> NodeKind {
+    let plain = |n: &Node| n.transform == DAffine3::IDENTITY;
+    let mergeable = match &kind {
+        NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
+            c.first().is_some_and(|f| {
+                plain(f) && std::mem::discriminant(&f.kind) == std::mem::discriminant(&kind)
+            })
+        }
+        NodeKind::Smooth {
+            op,
+            children,
+            blend_radius,
+        } => children.first().is_some_and(|f| {
+            plain(f)
+                && matches!(&f.kind, NodeKind::Smooth { op: o, blend_radius: k, .. }
+                    if o == op && k.to_bits() == blend_radius.to_bits())
+        }),
+        NodeKind::Leaf(_) | NodeKind::Repeat { .. } => false,
+    };
+    if let (
+        true,
+        NodeKind::Union(c)
+        | NodeKind::Intersection(c)
+        | NodeKind::Subtraction(c)
+        | NodeKind::Smooth { children: c, .. },
+    ) = (mergeable, &mut kind)
+    {
+        let rest = c.split_off(1);
+        if let Some(mut first) = c.pop() {
+            let mut merged = first.kind.take_children();
+            merged.extend(rest);
+            *c = merged;
+        }
+    }
+    kind
+}
+
+/// The first node (pre-order) deeper than `max` levels below the top, if any; walked with
+/// an explicit stack.
+fn deepest_beyond(objects: &[Node], max: usize) -> Option<&Node> {
+    let mut stack: Vec<(&Node, usize)> = objects.iter().map(|o| (o, 1)).collect();
+    while let Some((n, depth)) = stack.pop() {
+        if depth > max {
+            return Some(n);
+        }
+        stack.extend(n.children().iter().map(|c| (c, depth + 1)));
+    }
+    None
+}
+
+/// Copies of a repeat node's child the sdf backend evaluates per query (the most of any
+/// backend: the reference walks cells with its own bound on work per query, the mesh backend
+/// places instances under `max_instances`): per repeated axis, the copies whose box
+/// (`child_box`, in the repeat's frame; `None` when unknown, e.g. a mesh file) overlaps a
+/// window at most as wide as the smallest period, at most [`REPEAT_WINDOW`], and at most the
+/// axis's count.
+pub fn repeat_copies_per_query(
+    period: DVec3,
+    count: [Option<u32>; 3],
+    child_box: Option<crate::bounds::Aabb>,
+) -> u64 {
+    let smallest = (0..3)
+        .filter(|&a| period[a] > 0.0)
+        .map(|a| period[a])
+        .fold(f64::INFINITY, f64::min);
+    (0..3)
+        .filter(|&a| period[a] > 0.0)
+        .map(|a| {
+            let p = period[a];
+            let width = child_box.map_or(f64::INFINITY, |b| b.hi[a] - b.lo[a]);
+            let window = if width.is_finite() && width < (REPEAT_WINDOW - 1) as f64 * p {
+                // Lattice points in an interval of length `smallest + width`.
+                (((smallest + width) / p).floor() as u64 + 1).min(REPEAT_WINDOW)
+            } else {
+                REPEAT_WINDOW
+            };
+            count[a].map_or(window, |n| window.min(u64::from(n)))
+        })
+        .fold(1u64, u64::saturating_mul)
+}
+
+/// The largest product of [`repeat_copies_per_query`] over the chains of repeat nodes in
+/// `node`'s subtree (1 without repeats).
+fn nested_repeat_work(node: &Node) -> u64 {
+    // One guarded level per node: trees nest as deep as their files.
+    let below = crate::deep::guard(|| {
+        node.children()
+            .iter()
+            .map(nested_repeat_work)
+            .max()
+            .unwrap_or(1)
+    });
+    match &node.kind {
+        NodeKind::Repeat {
+            child,
+            period,
+            count,
+        } => below.saturating_mul(repeat_copies_per_query(
+            *period,
+            *count,
+            child.bounds_in_parent(&|_| None),
+        )),
+        _ => below,
     }
 }
 
@@ -439,7 +707,6 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
             reflectivity: 0.0,
         }],
         nodes: 0,
-        repeat_factor: 1,
     };
 
     let c = &file.camera;
@@ -613,6 +880,16 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
         .enumerate()
         .filter_map(|(i, o)| cx.object(&format!("objects[{i}]"), o, 0, 1))
         .collect();
+    if let Some(deep) = deepest_beyond(&objects, MAX_MERGED_DEPTH) {
+        cx.fail(
+            &deep.json_path,
+            format!(
+                "objects nest deeper than {MAX_MERGED_DEPTH} levels once chains of one operation are merged (a node whose first child is the same operation, same blend radius, no transform, takes over its children): write long chains left-deep, or group them"
+            ),
+        );
+        crate::deep::drop_nodes(objects);
+        return Err(cx.problems);
+    }
 
     match camera {
         Some(camera) if cx.problems.is_empty() => Ok(Scene {

@@ -83,8 +83,45 @@ fn item4_nested_repetition_work_is_bounded_with_a_clear_error() {
         msg.contains("deep.json") && msg.contains("nested repetitions") && msg.contains("1024"),
         "{msg}"
     );
-    // Reported once, at the outermost repeat that crosses the limit.
+    // Reported once, at the repeat whose chain crosses the limit.
     assert_eq!(msg.matches("nested repetitions").count(), 1, "{msg}");
+}
+
+fn nested_infinite_repeats(levels: usize) -> String {
+    let mut shape = r#"{"sphere": {"radius": 0.1}}"#.to_string();
+    for _ in 0..levels {
+        shape = format!(r#"{{"repeat": {{"child": {{"shape": {shape}}}, "period": [1, 0, 0]}}}}"#);
+    }
+    format!(r#"{{"objects": [{{"shape": {shape}}}]}}"#)
+}
+
+#[test]
+fn nested_infinite_repeats_count_the_copies_the_sdf_backend_evaluates() {
+    let base = std::path::Path::new(".");
+    // One infinite repeat of a child a fifth of its period wide: 2 copies per query.
+    marchmesh_scene::parse_scene(&nested_infinite_repeats(1), "one.json", base).expect("2");
+    // Every outer level's child is unbounded along the axis: 5 copies each.
+    marchmesh_scene::parse_scene(&nested_infinite_repeats(4), "four.json", base)
+        .expect("2 * 5^3 = 250 is within the limit");
+    // Ten levels were accepted as 2^10 although the sdf backend evaluates 2 * 5^9.
+    let msg = marchmesh_scene::parse_scene(&nested_infinite_repeats(10), "ten.json", base)
+        .expect_err("2 * 5^4 = 1250 is over the limit")
+        .to_string();
+    assert!(msg.contains("ten.json"), "{msg}");
+    assert!(
+        msg.contains("nested repetitions evaluate 1250 copies")
+            && msg.contains("5 copies of this repeat's child times 250 below it")
+            && msg.contains("limit of 1024")
+            && msg.contains("unbounded along the axis"),
+        "{msg}"
+    );
+    assert_eq!(msg.matches("nested repetitions").count(), 1, "{msg}");
+    // The same chain with counts evaluates at most the counts.
+    let counted = nested_infinite_repeats(10).replace(
+        r#""period": [1, 0, 0]"#,
+        r#""period": [1, 0, 0], "count": [2, null, null]"#,
+    );
+    marchmesh_scene::parse_scene(&counted, "counted.json", base).expect("2^10");
 }
 
 #[test]

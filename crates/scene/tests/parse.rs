@@ -186,20 +186,19 @@ fn up_parallel_to_view_is_rejected() {
 fn absurd_sizes_and_nesting_are_rejected() {
     let p = problems(r#"{"camera": {"width": 100000, "height": 100000}}"#);
     assert_eq!(p[0].0, "camera.width");
-    let mut nested = r#"{"shape": {"sphere": {}}}"#.to_string();
-    for _ in 0..28 {
-        nested = format!(r#"{{"shape": {{"union": {{"children": [{nested}]}}}}}}"#);
-    }
-    let p = problems(&format!(r#"{{"objects": [{nested}]}}"#));
-    assert!(p[0].1.contains("nest deeper"), "{p:?}");
-    // Far deeper: serde_json's recursion limit answers with an error, not a stack overflow.
-    for _ in 0..2000 {
-        nested = format!(r#"{{"shape": {{"union": {{"children": [{nested}]}}}}}}"#);
-    }
-    let msg = parse(&format!(r#"{{"objects": [{nested}]}}"#))
+    // Nesting that merging cannot flatten (alternating operations) stops at the merged
+    // depth limit, naming the deepest node.
+    let p = problems(&chain(
+        70,
+        |k| if k % 2 == 0 { "union" } else { "intersection" },
+        true,
+    ));
+    assert!(p[0].1.contains("nest deeper than 64"), "{p:?}");
+    // Beyond the file limit: refused before parsing, at the position where it goes too deep.
+    let msg = parse(&chain(17_000, |_| "union", true))
         .unwrap_err()
         .to_string();
-    assert!(msg.contains("recursion limit"), "{msg}");
+    assert!(msg.contains("JSON nests deeper than"), "{msg}");
 }
 
 #[test]
@@ -245,5 +244,111 @@ fn schema_lists_every_shape() {
         "repeat",
     ] {
         assert!(schema.contains(&format!("\"{shape}\"")), "{shape} missing");
+    }
+}
+
+/// `levels` nested nodes of operation `op(level)` around one sphere, each the first child
+/// of the next (`first = true`) or the last.
+fn chain(levels: usize, op: impl Fn(usize) -> &'static str, first: bool) -> String {
+    let leaf = r#"{"shape": {"sphere": {}}}"#;
+    let mut s = String::from(r#"{"objects": ["#);
+    for k in (0..levels).rev() {
+        s.push_str(&format!(r#"{{"shape": {{"{}": {{"children": ["#, op(k)));
+        if !first {
+            s.push_str(leaf);
+            s.push_str(", ");
+        }
+    }
+    s.push_str(leaf);
+    for _ in 0..levels {
+        if first {
+            s.push_str(", ");
+            s.push_str(leaf);
+        }
+        s.push_str("]}}}");
+    }
+    s.push_str("]}");
+    s
+}
+
+/// Runs `f` on a thread with a 256 KiB stack (rayon workers' are small too).
+fn on_small_stack<R: Send + 'static>(f: impl FnOnce() -> R + Send + 'static) -> R {
+    std::thread::Builder::new()
+        .stack_size(256 * 1024)
+        .spawn(f)
+        .expect("spawn")
+        .join()
+        .expect("no stack overflow")
+}
+
+#[test]
+fn ten_thousand_levels_load_on_a_small_stack_and_left_deep_chains_merge() {
+    let left = chain(10_000, |_| "union", true);
+    let right = chain(10_000, |_| "union", false);
+    let (merged, path, refused) = on_small_stack(move || {
+        let scene = parse(&left).expect("a left-deep chain loads");
+        let NodeKind::Union(children) = &scene.objects[0].kind else {
+            panic!("a union");
+        };
+        let last = children[1].json_path.clone();
+        let refused = match parse(&right) {
+            Err(SceneError::Invalid { problems, .. }) => problems[0].reason.clone(),
+            other => panic!("a right-deep chain is refused, got {other:?}"),
+        };
+        (children.len(), last, refused)
+    });
+    assert_eq!(merged, 10_001, "one node of every sphere");
+    assert_eq!(
+        path,
+        "objects[0](.shape.union.children[0]){9999}.shape.union.children[1]"
+    );
+    assert!(refused.contains("nest deeper than 64"), "{refused}");
+}
+
+#[test]
+fn merging_keeps_transforms_other_operations_and_blend_radii_apart() {
+    let scene = parse(
+        r#"{"objects": [{"shape": {"smooth_union": {"blend_radius": 0.1, "children": [
+            {"shape": {"smooth_union": {"blend_radius": 0.2, "children": [{"shape": {"sphere": {}}}]}}},
+            {"shape": {"sphere": {}}}]}}},
+          {"shape": {"union": {"children": [
+            {"shape": {"union": {"children": [{"shape": {"sphere": {}}}]}}, "transform": {"translate": [1, 0, 0]}},
+            {"shape": {"sphere": {}}}]}}},
+          {"shape": {"smooth_subtraction": {"blend_radius": 0.1, "children": [
+            {"shape": {"smooth_subtraction": {"blend_radius": 0.1, "children": [
+              {"shape": {"sphere": {}}}, {"shape": {"box": {}}}]}}},
+            {"shape": {"sphere": {}}}]}}}]}"#,
+    )
+    .expect("valid");
+    let counts: Vec<usize> = scene.objects.iter().map(|o| o.children().len()).collect();
+    assert_eq!(counts, [2, 2, 3]);
+}
+
+#[test]
+fn new_shapes_and_smooth_operators_check_their_parameters() {
+    let p = problems(
+        r#"{"objects": [
+        {"shape": {"rounded_box": {"half_extents": [1, 0.2, 1], "rounding_radius": 0.3}}},
+        {"shape": {"rounded_box": {"rounding_radius": -0.1}}},
+        {"shape": {"capsule": {"radius": 0, "height": -1}}},
+        {"shape": {"capped_cone": {"bottom_radius": 0, "top_radius": 0}}},
+        {"shape": {"capped_cone": {"height": 0, "top_radius": 1e300}}},
+        {"shape": {"smooth_intersection": {"blend_radius": 0, "children": []}}},
+        {"shape": {"smooth_subtraction": {"blend_radius": -1, "children": [{"shape": {"sphere": {}}}]}}}]}"#,
+    );
+    let paths: Vec<&str> = p.iter().map(|(path, _)| path.as_str()).collect();
+    for want in [
+        "objects[0].shape.rounded_box.rounding_radius",
+        "objects[1].shape.rounded_box.rounding_radius",
+        "objects[2].shape.capsule.radius",
+        "objects[2].shape.capsule.height",
+        "objects[3].shape.capped_cone",
+        "objects[4].shape.capped_cone.height",
+        "objects[4].shape.capped_cone.top_radius",
+        "objects[5].shape.smooth_intersection.children",
+        "objects[5].shape.smooth_intersection.blend_radius",
+        "objects[6].shape.smooth_subtraction.blend_radius",
+    ] {
+        assert!(paths.contains(&want), "{want} missing from {p:?}");
     }
 }

@@ -83,9 +83,8 @@ pub enum SdfError {
     },
 }
 
-/// Bytes per cell of a baked mesh grid for the memory estimate: the f32 sample plus the
-/// bake's per-cell working data (nearest-triangle search and sign).
-pub const BAKE_BYTES_PER_CELL: u64 = 12;
+/// Bytes per cell of a baked mesh grid for the memory estimate (the field compiler's).
+pub use marchmesh_field::BAKE_BYTES_PER_CELL;
 
 /// Rays per bundle restricted together by [`SdfOptions::cull`]: consecutive rays of a
 /// batch. The integrator hands 8x8-pixel screen tiles row-major, so at one sample per pixel a
@@ -99,30 +98,28 @@ pub const CULL_BUNDLE: usize = 32;
 /// a bundle's wedge to pay off. Measured: `docs/decisions/0013`.
 pub const CULL_MIN_NODES: usize = 8;
 
-/// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read: dense,
-/// [`BAKE_BYTES_PER_CELL`] per cell of the (at most cubic) lattice; sparse, the upper bound
-/// of [`marchmesh_field::bake::SparseOptions::max_bake_bytes`] (every brick cell holding a
-/// brick, which a surface cannot reach: the real grid is proportional to its area).
+/// Fields of fewer nodes are not pruned per region ([`SdfOptions::prune_depth`]); nor are
+/// fields without smooth unions, whose hard unions the per-bundle culling already restricts
+/// to a tape (see the decision record on pruning per region).
+pub const PRUNE_MIN_NODES: usize = 16;
+
+/// Deepest octree [`SdfOptions::prune_depth`] accepts (`2^8` finest cells per axis: a 64 MiB
+/// index).
+pub const MAX_PRUNE_DEPTH: u32 = 8;
+
+/// Estimated peak bytes of baking one mesh grid with `opts`, before any mesh is read
+/// ([`FieldOptions::mesh_grid_bytes_bound`]).
 pub fn mesh_grid_bytes_bound(opts: &SdfOptions) -> u64 {
-    match opts.mesh_grid() {
-        MeshGrid::Dense => {
-            // Cells on the longest side, plus the apron of one sample each side.
-            u64::from(opts.grid_res + 3)
-                .pow(3)
-                .saturating_mul(BAKE_BYTES_PER_CELL)
-        }
-        MeshGrid::Sparse {
-            band_voxels,
-            quantization,
-            reconstruction,
-        } => marchmesh_field::bake::SparseOptions {
-            resolution: opts.grid_res,
-            band_voxels,
-            quantization,
-            reconstruction,
-            cache_dir: None,
-        }
-        .max_bake_bytes(),
+    field_options(opts).mesh_grid_bytes_bound()
+}
+
+/// The field compiler's options for `opts`: mesh grids, cache and memory limit.
+fn field_options(opts: &SdfOptions) -> FieldOptions {
+    FieldOptions {
+        mesh_grid_resolution: opts.grid_res,
+        cache_dir: opts.cache_dir.clone(),
+        mesh_grid: opts.mesh_grid(),
+        memory_limit_bytes: opts.memory_limit_bytes,
     }
 }
 
@@ -251,17 +248,21 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     }
     check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
-    let field_opts = FieldOptions {
-        mesh_grid_resolution: opts.grid_res,
-        cache_dir: opts.cache_dir.clone(),
-        mesh_grid: opts.mesh_grid(),
-    };
+    let field_opts = field_options(opts);
     let field = Field::compile_scene(scene, &field_opts)?;
-    let field = if opts.bounds {
+    let mut field = if opts.bounds {
         field
     } else {
         field.without_bounds()
     };
+    check(
+        opts.prune_depth <= MAX_PRUNE_DEPTH,
+        "prune_depth",
+        &format!("must be in 0..={MAX_PRUNE_DEPTH}"),
+    )?;
+    if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
+        field.build_cells(opts.prune_depth);
+    }
     let inside = Inside::build(scene, &field, &field_opts)?;
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bounds = field.bounds().map(|(lo, hi)| {
@@ -322,7 +323,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         normal_step: (opts.normal_step * scene.camera.pixel_angle()) as f32,
         lockstep: opts.lockstep,
         // Without bounds (the naive level) nothing is culled either.
-        cull: opts.cull && opts.bounds,
+        cull: opts.cull && opts.bounds && !field.has_cells(),
         beams: opts.beams && opts.bounds,
         shortcuts: Shortcuts {
             cone_shadows: opts.cone_shadows,

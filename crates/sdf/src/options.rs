@@ -113,6 +113,17 @@ pub struct SdfOptions {
     /// the bundle cost, not what the scene's object count costs. Hits agree with the
     /// unrestricted field to the refinement threshold (the steps differ, so not bit for bit).
     pub cull: bool,
+    /// Prune the field per region of space: an octree of `2^prune_depth` finest cells per
+    /// axis, each cell holding only the nodes that matter in it (0 = off).
+    ///
+    /// `marchmesh_field::prune`, after Barbier, Sanchez et al. 2025 ("Lipschitz Pruning"):
+    /// each cell over the scene's box keeps only the nodes that can matter in it, smooth
+    /// unions included, or answers a far bound where no surface is (default 6; at most
+    /// [`crate::MAX_PRUNE_DEPTH`]). Built for fields holding a smooth union, of at least
+    /// [`crate::PRUNE_MIN_NODES`] nodes, with a finite box and no mesh grid; when built, point
+    /// queries read their cell's program (the whole program's value bit for bit) and bundles
+    /// are not culled ([`SdfOptions::cull`]).
+    pub prune_depth: u32,
     /// In lockstep batches, march one cone per run of four camera rays and start the rays
     /// where it stops (false: every ray from its origin).
     ///
@@ -197,8 +208,10 @@ pub struct SdfOptions {
     pub ao_taps: u32,
     /// The build refuses, before baking, grids whose estimated memory
     /// ([`crate::BAKE_BYTES_PER_CELL`] per cell of every distinct mesh's grid) exceeds this
-    /// ([`crate::SdfError::OverMemoryLimit`]). Not a `key=value` option: the registry sets it
-    /// from `--memory-limit-mib`. Default 4 GiB.
+    /// ([`crate::SdfError::OverMemoryLimit`]), and each mesh file whose load and bake would
+    /// exceed it with the grids (checked before the file is read and again before it is
+    /// decoded: `marchmesh_field::FieldOptions::memory_limit_bytes`). Not a `key=value`
+    /// option: the registry sets it from `--memory-limit-mib`. Default 4 GiB.
     #[serde(skip)]
     #[schemars(skip)]
     pub memory_limit_bytes: u64,
@@ -226,6 +239,7 @@ impl SdfOptions {
         normal_step: 0.02,
         lockstep: true,
         cull: true,
+        prune_depth: 6,
         beams: true,
         recede: true,
         segment: true,

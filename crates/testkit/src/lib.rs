@@ -135,3 +135,35 @@ pub fn run_program(bin: &str, args: &[&str], cwd: &Path) -> (bool, String, Strin
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
 }
+
+/// A scene of `levels` nested smooth unions written left-deep, as modelling tools fold a
+/// list of primitives: level `k` blends the tree below it (its first child) with one more
+/// sphere of radius 0.06, the spheres on a spiral inside the unit box, blend radius 0.0004
+/// (tiny, so the bounds grown per fold stay small), camera 3 units away. `levels + 1`
+/// spheres in all; the JSON is `levels` levels deep.
+pub fn left_deep_smooth_union(levels: usize) -> String {
+    let sphere = |k: usize| {
+        let t = k as f64 * 0.002;
+        let (s, c) = (t * 40.0).sin_cos();
+        format!(
+            r#"{{"shape": {{"sphere": {{"radius": 0.06}}}}, "transform": {{"translate": [{:.5}, {:.5}, {:.5}]}}}}"#,
+            0.7 * c * (1.0 - t / 30.0),
+            (t / 10.0).min(1.0) - 0.5,
+            0.7 * s * (1.0 - t / 30.0),
+        )
+    };
+    let mut json = String::from(
+        r#"{"camera": {"position": [0, 1, -3], "look_at": [0, 0, 0], "vfov_deg": 45}, "objects": ["#,
+    );
+    for _ in 0..levels {
+        json.push_str(r#"{"shape": {"smooth_union": {"blend_radius": 0.0004, "children": ["#);
+    }
+    json.push_str(&sphere(0));
+    for k in 1..=levels {
+        json.push_str(", ");
+        json.push_str(&sphere(k));
+        json.push_str("]}}}");
+    }
+    json.push_str("]}");
+    json
+}

@@ -109,22 +109,30 @@ fn absolute_paths(file: &mut SceneFile, base: &Path) {
     if let BackgroundSpec::Environment(env) = &mut file.background {
         fix(&mut env.path);
     }
+    // One guarded level per object: scene trees nest as deep as their files.
     fn visit(o: &mut ObjectSpec, fix: &dyn Fn(&mut String)) {
-        match &mut o.shape {
+        marchmesh_scene::deep::guard(|| match &mut o.shape {
             ShapeSpec::Mesh(m) => fix(&mut m.path),
             ShapeSpec::Union(c) | ShapeSpec::Intersection(c) | ShapeSpec::Subtraction(c) => {
                 c.children.iter_mut().for_each(|c| visit(c, fix));
             }
-            ShapeSpec::SmoothUnion(s) => s.children.iter_mut().for_each(|c| visit(c, fix)),
+            ShapeSpec::SmoothUnion(s)
+            | ShapeSpec::SmoothIntersection(s)
+            | ShapeSpec::SmoothSubtraction(s) => {
+                s.children.iter_mut().for_each(|c| visit(c, fix));
+            }
             ShapeSpec::Repeat(r) => visit(&mut r.child, fix),
             ShapeSpec::Sphere(_)
             | ShapeSpec::Plane(_)
             | ShapeSpec::Triangle(_)
             | ShapeSpec::Box(_)
+            | ShapeSpec::RoundedBox(_)
+            | ShapeSpec::Capsule(_)
+            | ShapeSpec::CappedCone(_)
             | ShapeSpec::Ellipsoid(_)
             | ShapeSpec::Cylinder(_)
             | ShapeSpec::Torus(_) => {}
-        }
+        })
     }
     for o in &mut file.objects {
         visit(o, &fix);

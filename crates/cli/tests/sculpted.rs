@@ -1,0 +1,147 @@
+//! Sculpted content end to end: trees as deep as modelling tools write them render on every
+//! backend, and the backends agree on what they see.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn tmp(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("marchmesh-sculpted-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+fn marchmesh(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .expect("run marchmesh")
+}
+
+/// A left-deep binary tree of `levels` two-child `op` nodes over `levels + 1` spheres of
+/// radius 0.05 along a helix, written as JSON text (no recursion anywhere).
+fn left_deep_chain(levels: usize, op: &str) -> String {
+    let leaf = |i: usize| {
+        let a = i as f64 * 0.37;
+        let y = -0.8 + 1.6 * i as f64 / levels as f64;
+        format!(
+            r#"{{"shape":{{"sphere":{{"radius":0.05}}}},"transform":{{"translate":[{:.5},{y:.5},{:.5}]}}}}"#,
+            0.5 * a.cos(),
+            0.5 * a.sin()
+        )
+    };
+    let opener = format!(r#"{{"shape":{{"{op}":{{"blend_radius":0.03,"children":["#);
+    let mut tree = opener.repeat(levels);
+    tree.push_str(&leaf(0));
+    for i in 1..=levels {
+        tree.push(',');
+        tree.push_str(&leaf(i));
+        tree.push_str("]}}}");
+    }
+    format!(
+        r#"{{"camera":{{"position":[0,0,-3.2],"look_at":[0,0,0],"vfov_deg":45,"width":24,"height":24}},
+"lights":[{{"ambient":{{"intensity":1}}}}],"objects":[{tree}]}}"#
+    )
+}
+
+/// The `mask.pfm` AOV of a render: one value per pixel, 1 hit, 0 miss.
+fn read_mask(dir: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(dir.join("mask.pfm")).expect("mask.pfm written");
+    // Header: three text lines ("Pf", "W H", scale), then little-endian f32 rows.
+    let mut lines = 0;
+    let start = bytes
+        .iter()
+        .position(|&b| {
+            if b == b'\n' {
+                lines += 1;
+            }
+            lines == 3
+        })
+        .expect("a PFM header")
+        + 1;
+    bytes[start..]
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+#[test]
+fn a_ten_thousand_level_left_deep_tree_renders_on_every_backend_alike() {
+    let dir = tmp("deep");
+    let scene = dir.join("chain.json");
+    std::fs::write(&scene, left_deep_chain(10_000, "smooth_union")).expect("write scene");
+    let out = marchmesh(&["validate", "chain.json"], &dir);
+    assert!(
+        out.status.success(),
+        "validate: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut masks = Vec::new();
+    for backend in ["reference", "sdf", "mesh"] {
+        let aov = format!("aov-{backend}");
+        let png = format!("{backend}.png");
+        let out = marchmesh(
+            &[
+                "render",
+                "chain.json",
+                "--backend",
+                backend,
+                "--out",
+                &png,
+                "--aov",
+                &aov,
+                "--threads",
+                "2",
+            ],
+            &dir,
+        );
+        assert!(
+            out.status.success(),
+            "{backend}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mask = read_mask(&dir.join(&aov));
+        assert_eq!(mask.len(), 24 * 24, "{backend}");
+        let hits = mask.iter().filter(|&&m| m > 0.5).count();
+        // The helix covers part of the image, not all of it.
+        assert!(hits > 20 && hits < 24 * 24 - 20, "{backend}: {hits} hits");
+        masks.push((backend, mask));
+    }
+    let (_, truth) = &masks[0];
+    for (backend, mask) in &masks[1..] {
+        let differ = truth
+            .iter()
+            .zip(mask)
+            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
+            .count();
+        // Silhouette pixels may differ where a pixel centre grazes the blend; no more.
+        assert!(
+            differ <= 12,
+            "{backend}: {differ} of {} pixels differ from the reference",
+            truth.len()
+        );
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn every_scene_of_the_sculpted_suite_validates() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/generated/sculpted");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&root).expect("scenes/generated/sculpted") {
+        let path = entry.expect("entry").path();
+        if path.extension().is_some_and(|e| e == "json") {
+            let out = marchmesh(&["validate", &path.display().to_string()], &root);
+            assert!(
+                out.status.success(),
+                "{}: {}",
+                path.display(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+            seen += 1;
+        }
+    }
+    assert!(seen >= 7, "only {seen} sculpted scenes found");
+}

@@ -1,0 +1,250 @@
+//! Pruning per region (`marchmesh_field::prune`): the pruned cells give the whole program's
+//! value bit for bit wherever they hold a program, and elsewhere a positive lower bound of the
+//! distance to the surfaces; on random trees of every operator.
+
+use glam::{DAffine3, DVec3, Vec3};
+use marchmesh_field::prune::prune;
+use marchmesh_field::{Field, FieldOptions};
+use marchmesh_scene::{Node, NodeKind, Shape, SmoothOp};
+use proptest::prelude::*;
+
+fn node(kind: NodeKind, t: DVec3) -> Node {
+    Node {
+        transform: DAffine3::from_translation(t),
+        material: 0,
+        name: None,
+        json_path: "test".into(),
+        kind,
+    }
+}
+
+fn sphere(r: f64, c: DVec3) -> Node {
+    node(NodeKind::Leaf(Shape::Sphere { radius: r }), c)
+}
+
+/// A random walk of `n` spheres of radius 0.032, steps of 0.04 (the sculpted molecule).
+fn molecule(n: usize, seed: u64, k: f64) -> Node {
+    let mut rng = seed;
+    let mut next = move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut c = DVec3::ZERO;
+    let children = (0..n)
+        .map(|_| {
+            let d = DVec3::new(next(), next(), next()).normalize_or_zero();
+            c += d * 0.04;
+            if c.length() > 0.3 {
+                c -= d * 0.08;
+            }
+            sphere(0.032, c)
+        })
+        .collect();
+    node(
+        NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children,
+            blend_radius: k,
+        },
+        DVec3::ZERO,
+    )
+}
+
+fn compile(n: &Node) -> Field {
+    Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default()).expect("compiles")
+}
+
+/// Points on a lattice over the box grown by 0.2, jittered.
+fn probes(n: usize) -> Vec<DVec3> {
+    let mut out = Vec::new();
+    for i in 0..n * n * n {
+        let (x, y, z) = (i % n, i / n % n, i / (n * n));
+        let f = |v: usize, j: f64| -0.5 + (v as f64 + 0.5 + 0.37 * j) / n as f64;
+        out.push(DVec3::new(f(x, 0.3), f(y, -0.7), f(z, 0.1)));
+    }
+    out
+}
+
+fn check_cells(n: &Node, depth: u32) {
+    let whole = compile(n);
+    let mut cells = compile(n);
+    let stats = cells.build_cells(depth).expect("bounded, no meshes");
+    assert!(stats.program_cells > 0);
+    let mut exact = 0;
+    for p in probes(24) {
+        // f64: pruned programs where they exist, the whole program elsewhere: identical.
+        assert_eq!(
+            whole.distance_f64(p).to_bits(),
+            cells.distance_f64(p).to_bits(),
+            "{p}"
+        );
+        let (w, c) = (whole.distance(p.as_vec3()), cells.distance(p.as_vec3()));
+        if w.to_bits() == c.to_bits() {
+            exact += 1;
+        } else {
+            // A far cell or outside the box: a bound of the distance with the field's sign
+            // (the whole field is a bound of it too, so only the signs can be compared).
+            assert!(
+                c != 0.0 && (c > 0.0) == (w > 0.0),
+                "{p}: cells {c}, whole {w}"
+            );
+            let b = cells.distance_bound_f64(p);
+            assert!(
+                (b > 0.0) == (c > 0.0) && b.abs() <= f64::from(c.abs()) + 1e-6,
+                "{p}: {b} vs {c}"
+            );
+        }
+        // Materials come from the whole program outside program cells.
+        assert_eq!(
+            whole.distance_material(p.as_vec3()).1,
+            cells.distance_material(p.as_vec3()).1
+        );
+    }
+    assert!(exact > 0);
+    // Eight lanes: per lane what the single query gives.
+    let pts: Vec<Vec3> = probes(8).iter().map(|p| p.as_vec3()).collect();
+    for chunk in pts.chunks_exact(8) {
+        let p: [Vec3; 8] = std::array::from_fn(|i| chunk[i]);
+        let lanes = cells.distance_x8(p);
+        let (dm, mm) = cells.distance_material_x8(p);
+        for i in 0..8 {
+            assert_eq!(lanes[i].to_bits(), cells.distance(p[i]).to_bits());
+            assert_eq!(mm[i], whole.distance_material(p[i]).1);
+            let _ = dm;
+        }
+    }
+}
+
+#[test]
+fn a_pruned_molecule_is_the_whole_molecule_where_surfaces_are() {
+    check_cells(&molecule(300, 7, 0.026), 5);
+}
+
+#[test]
+fn the_hard_true_distance_bounds_the_far_cells() {
+    // A hard union of spheres: its field is the exact distance outside, so the far bound
+    // must stay below it there, and have its sign inside.
+    let m = molecule(200, 3, 0.026);
+    let NodeKind::Smooth {
+        op: SmoothOp::Union,
+        children,
+        ..
+    } = m.kind
+    else {
+        unreachable!()
+    };
+    let centres: Vec<DVec3> = children.iter().map(|c| c.transform.translation).collect();
+    let hard = node(NodeKind::Union(children), DVec3::ZERO);
+    let mut f = compile(&hard);
+    f.build_cells(5).expect("cells");
+    for p in probes(20) {
+        let exact = centres
+            .iter()
+            .map(|c| (p - *c).length() - 0.032)
+            .fold(f64::INFINITY, f64::min);
+        let b = f.distance_bound_f64(p);
+        if exact > 0.0 {
+            assert!(
+                b <= exact + 1e-9,
+                "{p}: bound {b} above the distance {exact}"
+            );
+            assert!(f64::from(f.distance(p.as_vec3())) <= exact + 1e-5);
+        } else {
+            assert!(b <= 0.0, "{p}: bound {b} inside");
+        }
+    }
+}
+
+#[test]
+fn a_smooth_fold_keeps_what_comes_before_a_near_child() {
+    // Two far children then a near one: dropping the far ones would change the fold (the
+    // pair lowers itself by k/4 into the near child's blend range when they are within
+    // 2k); the pruner must keep them where that happens.
+    let k = 1.0;
+    let n = node(
+        NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children: vec![
+                sphere(0.1, DVec3::new(1.1, 0.0, 0.0)),
+                sphere(0.1, DVec3::new(1.1, 0.0, 0.0)),
+                sphere(0.1, DVec3::ZERO),
+            ],
+            blend_radius: k,
+        },
+        DVec3::ZERO,
+    );
+    let whole = compile(&n);
+    let prog = whole_program(&n);
+    for r in [0.01, 0.1, 0.5] {
+        let p = DVec3::new(0.1, 0.0, 0.0);
+        let pruned = prune(&prog, &[], p, r);
+        let got = eval64(&pruned.program, p);
+        assert_eq!(got.to_bits(), whole.distance_f64(p).to_bits(), "r = {r}");
+        assert!(pruned.lo <= got && got <= pruned.hi);
+    }
+}
+
+fn whole_program(n: &Node) -> marchmesh_field::program::Program<f64> {
+    compile(n).program_f64().clone()
+}
+
+fn eval64(p: &marchmesh_field::program::Program<f64>, q: DVec3) -> f64 {
+    p.eval::<f64, false>(marchmesh_field::V3::new(q.x, q.y, q.z), &[])
+        .0
+}
+
+fn arb_tree() -> impl Strategy<Value = Node> {
+    let leaf = (0.02f64..0.2, -0.4f64..0.4, -0.4f64..0.4, -0.4f64..0.4)
+        .prop_map(|(r, x, y, z)| sphere(r, DVec3::new(x, y, z)));
+    leaf.prop_recursive(4, 48, 8, |inner| {
+        (
+            0u8..6,
+            proptest::collection::vec(inner, 2..8),
+            0.005f64..0.2,
+            -0.1f64..0.1,
+        )
+            .prop_map(|(op, children, k, shift)| {
+                let kind = match op {
+                    0 => NodeKind::Union(children),
+                    1 => NodeKind::Intersection(children),
+                    2 => NodeKind::Subtraction(children),
+                    3 => NodeKind::Smooth {
+                        op: SmoothOp::Intersection,
+                        children,
+                        blend_radius: k,
+                    },
+                    4 => NodeKind::Smooth {
+                        op: SmoothOp::Subtraction,
+                        children,
+                        blend_radius: k,
+                    },
+                    _ => NodeKind::Smooth {
+                        op: SmoothOp::Union,
+                        children,
+                        blend_radius: k,
+                    },
+                };
+                node(kind, DVec3::new(shift, -shift, 0.5 * shift))
+            })
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn random_trees_prune_exactly(tree in arb_tree(), depth in 1u32..5) {
+        let whole = compile(&tree);
+        let mut cells = compile(&tree);
+        if cells.build_cells(depth).is_none() {
+            return Ok(());
+        }
+        for p in probes(10) {
+            prop_assert_eq!(whole.distance_f64(p).to_bits(), cells.distance_f64(p).to_bits());
+            let (w, c) = (whole.distance(p.as_vec3()), cells.distance(p.as_vec3()));
+            prop_assert!(w.to_bits() == c.to_bits() || (c != 0.0 && (c > 0.0) == (w > 0.0)), "{} vs {}", w, c);
+        }
+    }
+}
