@@ -33,6 +33,81 @@ pub fn root() -> Result<PathBuf> {
     extracted()
 }
 
+/// The names of the built-in scenes (`seed-spheres` for `scenes/seed-spheres.json`; scenes
+/// in subfolders as `folder/name`), sorted.
+pub fn scene_names() -> Vec<String> {
+    let mut v: Vec<String> = EMBEDDED_SCENES
+        .iter()
+        .filter(|(n, _)| !n.starts_with("suites/"))
+        .filter_map(|(n, _)| n.strip_suffix(".json"))
+        .map(str::to_string)
+        .collect();
+    v.sort();
+    v
+}
+
+/// The names of the built-in suites (`default` for `scenes/suites/default.json`), sorted.
+pub fn suite_names() -> Vec<String> {
+    let mut v: Vec<String> = EMBEDDED_SCENES
+        .iter()
+        .filter_map(|(n, _)| n.strip_prefix("suites/")?.strip_suffix(".json"))
+        .map(str::to_string)
+        .collect();
+    v.sort();
+    v
+}
+
+/// Every embedded file: its path under `scenes/` and its bytes.
+pub fn embedded_files() -> &'static [(&'static str, &'static [u8])] {
+    EMBEDDED_SCENES
+}
+
+/// Whether `arg` names something rather than being a path: no extension and no folder.
+fn is_bare_name(arg: &Path) -> bool {
+    arg.extension().is_none() && arg.components().count() == 1
+}
+
+/// A scene argument as a file: an existing path as given; otherwise a bare name
+/// (`seed-spheres`, no extension or folder) is a built-in scene, found under [`root`].
+///
+/// Errors: an unknown bare name (the error lists the built-in scenes); the built-in copy
+/// cannot be extracted.
+pub fn scene_file(arg: &Path) -> Result<PathBuf> {
+    if arg.exists() || !is_bare_name(arg) {
+        return Ok(arg.to_path_buf());
+    }
+    let name = arg.to_string_lossy();
+    if !scene_names().iter().any(|n| *n == name) {
+        anyhow::bail!(
+            "{name}: no such scene file, nor a built-in scene; built-in scenes: {} (`marchmesh scenes` lists them)",
+            scene_names().join(", ")
+        );
+    }
+    Ok(root()?.join("scenes").join(format!("{name}.json")))
+}
+
+/// A suite argument as a file: a path (with an extension or a folder) as given, else the
+/// built-in suite of that name under [`root`].
+///
+/// Errors: an unknown suite name or a missing suite file (the error lists the built-in
+/// suites); the built-in copy cannot be extracted.
+pub fn suite_file(arg: &str) -> Result<PathBuf> {
+    let path = marchmesh_harness::suite::locate(arg, root)?;
+    if path.is_file() {
+        return Ok(path);
+    }
+    if is_bare_name(Path::new(arg)) {
+        anyhow::bail!(
+            "no suite named {arg:?}; built-in suites: {} (or give the path of a suite file)",
+            suite_names().join(", ")
+        );
+    }
+    anyhow::bail!(
+        "suite file {arg} does not exist; built-in suites by name: {}",
+        suite_names().join(", ")
+    )
+}
+
 /// FNV-1a over every embedded file's name and bytes: a new build with other scenes gets
 /// its own cache folder.
 fn content_hash() -> u64 {
@@ -202,5 +277,27 @@ mod tests {
             assert!(names.contains(&must), "{must} not embedded: {names:?}");
         }
         assert!(EMBEDDED_SCENES.iter().all(|(_, b)| !b.is_empty()));
+    }
+
+    #[test]
+    fn built_in_names_list_scenes_and_suites_apart() {
+        let scenes = scene_names();
+        assert!(scenes.iter().any(|n| n == "seed-spheres"), "{scenes:?}");
+        assert!(
+            !scenes.iter().any(|n| n.starts_with("suites/")),
+            "{scenes:?}"
+        );
+        let suites = suite_names();
+        assert!(suites.iter().any(|n| n == "default"), "{suites:?}");
+        assert!(is_bare_name(Path::new("csg")));
+        assert!(!is_bare_name(Path::new("csg.json")));
+        assert!(!is_bare_name(Path::new("scenes/csg")));
+        let e = scene_file(Path::new("no-such-scene"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("built-in scenes: ") && e.contains("seed-spheres"),
+            "{e}"
+        );
     }
 }

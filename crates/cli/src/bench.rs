@@ -37,18 +37,20 @@ struct Bars {
     overall: ProgressBar,
     current: Option<ProgressBar>,
     started: Instant,
+    eta: bench::Eta,
 }
+
+/// The overall bar counts hundredths of a configuration, so it moves with every timed round.
+const BAR_STEPS: f64 = 100.0;
 
 impl Bars {
     fn new() -> Self {
         let multi = MultiProgress::new();
         let overall = multi.add(ProgressBar::new(0));
         overall.set_style(
-            ProgressStyle::with_template(
-                "{prefix} [{bar:30}] {pos}/{len} configurations, {elapsed} elapsed, eta {eta}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+            ProgressStyle::with_template("{prefix} [{bar:30}] {msg}")
+                .unwrap_or_else(|_| ProgressStyle::default_bar())
+                .progress_chars("=> "),
         );
         overall.set_prefix("bench");
         Self {
@@ -56,7 +58,35 @@ impl Bars {
             overall,
             current: None,
             started: Instant::now(),
+            eta: bench::Eta::new(0),
         }
+    }
+
+    /// Moves the overall bar to the work done and says it with the elapsed time and the ETA.
+    fn show(&self) {
+        self.overall
+            .set_position((self.eta.done() * BAR_STEPS).round() as u64);
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let eta = self
+            .eta
+            .remaining_s(elapsed)
+            .map_or_else(|| "estimating".to_string(), duration);
+        self.overall.set_message(format!(
+            "{:.1}/{} configurations, {} elapsed, eta {eta}",
+            self.eta.done(),
+            self.eta.total(),
+            duration(elapsed)
+        ));
+    }
+}
+
+/// Seconds as `42s`, `3m05s` or `1h02m`.
+fn duration(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..60 => format!("{s}s"),
+        60..3600 => format!("{}m{:02}s", s / 60, s % 60),
+        _ => format!("{}h{:02}m", s / 3600, s / 60 % 60),
     }
 }
 
@@ -83,6 +113,9 @@ impl Progress for Checkpointing<'_> {
     }
     fn note(&mut self, message: &str) {
         self.bars.note(message);
+    }
+    fn advanced(&mut self, index: usize, fraction: f64) {
+        self.bars.advanced(index, fraction);
     }
     fn checkpoint(&mut self, so_far: &bench::Outcome) {
         let mut results = results_of(self.template.clone(), so_far.clone());
@@ -116,7 +149,9 @@ fn results_of(template: Results, outcome: bench::Outcome) -> Results {
 
 impl Progress for Bars {
     fn start(&mut self, total: usize) {
-        self.overall.set_length(total as u64);
+        self.eta = bench::Eta::new(total);
+        self.overall.set_length(total as u64 * BAR_STEPS as u64);
+        self.show();
     }
     fn config(&mut self, index: usize, id: &str) {
         if let Some(b) = self.current.take() {
@@ -137,11 +172,16 @@ impl Progress for Bars {
             b.set_message(what.to_string());
         }
     }
-    fn done(&mut self, _index: usize) {
-        self.overall.inc(1);
+    fn done(&mut self, index: usize) {
+        self.eta.advance(index, 1.0);
+        self.show();
     }
     fn note(&mut self, message: &str) {
         let _ = self.multi.println(format!("note: {message}"));
+    }
+    fn advanced(&mut self, index: usize, fraction: f64) {
+        self.eta.advance(index, fraction);
+        self.show();
     }
 }
 
@@ -167,7 +207,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         return resume(&args, run);
     }
     // The built-in scenes are needed only for a suite given by name.
-    let suite_path = suite::locate(&args.suite, crate::assets::root)?;
+    let suite_path = crate::assets::suite_file(&args.suite)?;
     let suite = suite::load(&suite_path)?;
     if let Some(t) = args.threads.filter(|&t| t > marchmesh_core::MAX_THREADS) {
         bail!(
@@ -221,8 +261,8 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         .map(|p| marchmesh_harness::anchors::read_anchor(p))
         .collect::<Result<Vec<_>, _>>()
         .context("--anchor")?;
-    let (run_id, dir) = report::create_run_dir(&args.out, &suite.name)
-        .with_context(|| format!("creating a run folder in {}", args.out.display()))?;
+    let (run_id, dir) = report::create_run_dir(&args.results_dir, &suite.name)
+        .with_context(|| format!("creating a run folder in {}", args.results_dir.display()))?;
     eprintln!(
         "suite {} ({}){}: {} configurations, rotation seed {seed} -> {}",
         suite.name,
@@ -460,6 +500,7 @@ fn measure(
         elapsed.as_secs_f64(),
         plots.len()
     );
+    print_answer(&results, dir);
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
@@ -493,6 +534,22 @@ fn measure(
         );
     }
     Ok(())
+}
+
+/// Prints the answer of a run: per scene setting, the verdict at each accuracy target (the
+/// decision chart of its summary), then where the report is.
+fn print_answer(results: &Results, dir: &Path) {
+    let chart = marchmesh_harness::decision::DecisionChart::of_run(results);
+    if chart.is_empty() {
+        out!("answer: no configuration measured accuracy, so no verdict at matched accuracy");
+    } else {
+        out!(
+            "answer: the fastest backend among the configurations reaching each accuracy target (PSNR vs the reference), runner-up time / winner time with its 95% CI:"
+        );
+        let text = chart.terminal();
+        out!("{}", text.trim_end_matches('\n'));
+    }
+    out!("report: {}", dir.join("report.html").display());
 }
 
 /// `marchmesh findings RUN... --out FILE [--force]`.
@@ -530,15 +587,28 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         }
         refuse_non_empty(&plots_dir, "plots folder")?;
     }
+    let doc_dir = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."))
+        .to_path_buf();
     let inputs = runs
         .iter()
         .map(|r| {
             let json = results_path(r);
             let results = Results::read_json(&json)?;
-            let name = json.parent().and_then(Path::file_name).map_or_else(
-                || results.run_id.clone(),
-                |n| n.to_string_lossy().into_owned(),
-            );
+            // The run as the document links it: its folder relative to the document's.
+            let folder = json
+                .parent()
+                .filter(|p| !p.as_os_str().is_empty())
+                .unwrap_or(Path::new("."));
+            let name = run_link(&doc_dir, folder).with_context(|| {
+                format!(
+                    "--out {}: cannot link run {} from there (nothing was written)",
+                    out.display(),
+                    r.display()
+                )
+            })?;
             Ok(marchmesh_harness::findings::Run {
                 name,
                 results: results.markdown_safe(),
@@ -589,6 +659,43 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         );
     }
     Ok(())
+}
+
+/// The path of run folder `run` as seen from folder `doc_dir` (both resolved: symlinks,
+/// `..`), `/`-separated, for the findings' links to `RUN/summary.md`.
+///
+/// Errors: a folder cannot be resolved (it does not exist), or the path is not valid UTF-8.
+fn run_link(doc_dir: &Path, run: &Path) -> Result<String> {
+    let from = std::fs::canonicalize(doc_dir)
+        .with_context(|| format!("resolving the folder {}", doc_dir.display()))?;
+    let to = std::fs::canonicalize(run)
+        .with_context(|| format!("resolving the run folder {}", run.display()))?;
+    let rel = relative_path(&from, &to);
+    let parts: Vec<&str> = rel
+        .components()
+        .map(|c| c.as_os_str().to_str())
+        .collect::<Option<_>>()
+        .with_context(|| format!("{} is not valid UTF-8", rel.display()))?;
+    Ok(if parts.is_empty() {
+        ".".to_string()
+    } else {
+        parts.join("/")
+    })
+}
+
+/// `to` relative to `from` (both absolute and resolved): `..` up to their common ancestor,
+/// then down.
+fn relative_path(from: &Path, to: &Path) -> PathBuf {
+    let (f, t): (Vec<_>, Vec<_>) = (from.components().collect(), to.components().collect());
+    let common = f.iter().zip(&t).take_while(|(a, b)| a == b).count();
+    let mut rel = PathBuf::new();
+    for _ in common..f.len() {
+        rel.push("..");
+    }
+    for c in &t[common..] {
+        rel.push(c.as_os_str());
+    }
+    rel
 }
 
 /// `marchmesh merge RUN... --out DIR`.
@@ -718,6 +825,8 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
         rb.provenance.git_commit
     );
     let (pa, pb) = (&ra.provenance, &rb.provenance);
+    outln!(out, "{}", clocks_and_loads(&ra, &rb));
+    let clock = ratio_clock(&ra, &rb);
     if pa.cpu_model != pb.cpu_model || pa.machine != pb.machine {
         outln!(
             out,
@@ -754,7 +863,7 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
             continue;
         };
         matched += 1;
-        let render = ratio(y.render_ms_median, x.render_ms_median);
+        let render = ratio(clock.median_ms(y), clock.median_ms(x));
         if let Some(r) = render {
             ratios += 1;
             log_sum += r.ln();
@@ -767,8 +876,8 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
             out,
             "{:<60} {:>8.2}ms {:>8.2}ms {:>9} {:>9} {:>9} {:>10}",
             x.config_id,
-            x.render_ms_median,
-            y.render_ms_median,
+            clock.median_ms(x),
+            clock.median_ms(y),
             show(render),
             show(ratio(y.build_ms_total, x.build_ms_total)),
             show(ratio(y.memory_bytes as f64, x.memory_bytes as f64)),
@@ -791,6 +900,43 @@ pub fn compare(a: &Path, b: &Path) -> Result<()> {
     );
     verdict_view(&mut out, &ra, &rb);
     print_ignoring_broken_pipe(&out)
+}
+
+/// The line `compare` prints before its ratios: each run's verdict clock and the load average
+/// it ran under (start -> end, on how many logical cores), so a ratio read between a quiet
+/// and a busy run is read as such.
+fn clocks_and_loads(a: &Results, b: &Results) -> String {
+    use marchmesh_harness::verdicts::Clock;
+    let one = |name: &str, r: &Results| {
+        let p = &r.provenance;
+        let load = match (p.load_average_1m, p.load_average_1m_end) {
+            (Some(s), Some(e)) => format!("load {s:.2} -> {e:.2}"),
+            (Some(s), None) => format!("load {s:.2} at the start"),
+            _ => "load not recorded".to_string(),
+        };
+        format!(
+            "{name} on {} time ({load} on {} logical cores)",
+            Clock::for_run(r).name(),
+            p.logical_cores
+        )
+    };
+    format!(
+        "clocks: {}, {}; per-configuration render times below on {} time (CPU only when both runs are judged on it)",
+        one("A", a),
+        one("B", b),
+        ratio_clock(a, b).name()
+    )
+}
+
+/// The clock of `compare`'s per-configuration ratios: CPU time when both runs' verdicts use
+/// it, else wall time.
+fn ratio_clock(a: &Results, b: &Results) -> marchmesh_harness::verdicts::Clock {
+    use marchmesh_harness::verdicts::Clock;
+    if Clock::for_run(a) == Clock::Cpu && Clock::for_run(b) == Clock::Cpu {
+        Clock::Cpu
+    } else {
+        Clock::Wall
+    }
 }
 
 /// Whether every verdict of A (headlines at `HEADLINE_MIN_PSNR_DB` and matched-accuracy claims) holds
@@ -986,5 +1132,25 @@ fn refuse_non_empty(dir: &std::path::Path, flag: &str) -> Result<()> {
         }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(e).with_context(|| format!("{flag} {}", dir.display())),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relative_paths_climb_to_the_common_folder() {
+        let p = |s: &str| PathBuf::from(s);
+        assert_eq!(relative_path(&p("/a/b"), &p("/a/b/run")), p("run"));
+        assert_eq!(relative_path(&p("/a/docs"), &p("/a/b/run")), p("../b/run"));
+        assert_eq!(relative_path(&p("/a/b/run"), &p("/a/b/run")), p(""));
+    }
+
+    #[test]
+    fn the_bar_reads_durations_compactly() {
+        assert_eq!(duration(42.4), "42s");
+        assert_eq!(duration(185.0), "3m05s");
+        assert_eq!(duration(3720.0), "1h02m");
     }
 }

@@ -21,6 +21,7 @@ macro_rules! out {
 
 mod assets;
 mod bench;
+mod exr_aov;
 mod view;
 
 #[derive(Parser)]
@@ -40,9 +41,17 @@ enum Command {
     Render(RenderArgs),
     /// Check a scene file and print a summary, or every problem found.
     Validate {
-        /// Scene files to check.
+        /// Scene files (or built-in scene names) to check.
         #[arg(required = true)]
         scenes: Vec<PathBuf>,
+    },
+    /// List the built-in scenes and suites (usable by name from any folder), or extract
+    /// them with -o.
+    Scenes {
+        /// Write every built-in scene, mesh and suite into this folder (new or empty), laid
+        /// out as the repository's scenes/ folder.
+        #[arg(long, short = 'o', value_name = "DIR")]
+        out: Option<PathBuf>,
     },
     /// Print the JSON Schema of the scene format.
     Schema,
@@ -55,9 +64,10 @@ enum Command {
         /// measured twice.
         #[arg(required = true)]
         runs: Vec<PathBuf>,
-        /// The Markdown file to write; plots go to `<FILE stem>-plots/` beside it. Links point
-        /// to `RUN/summary.md`, so write it in the folder holding the runs.
-        #[arg(long)]
+        /// The Markdown file to write; plots go to `<FILE stem>-plots/` beside it. Links to
+        /// each run's summary.md are relative to FILE's folder (any folder on the same file
+        /// system tree works).
+        #[arg(long, short = 'o', value_name = "FILE")]
         out: PathBuf,
         /// Replace an existing FILE and its plots.
         #[arg(long)]
@@ -78,7 +88,7 @@ enum Command {
         #[arg(required = true)]
         runs: Vec<PathBuf>,
         /// The merged run folder (created; must be new or empty: nothing is overwritten).
-        #[arg(long)]
+        #[arg(long, short = 'o', value_name = "DIR")]
         out: PathBuf,
     },
     /// Print the ratios of two runs, configuration by configuration (B / A), then whether
@@ -100,12 +110,18 @@ enum Command {
 
 #[derive(clap::Args)]
 struct BenchArgs {
-    /// Suite name (scenes/suites/NAME.json) or path to a suite file.
+    /// Suite name (built-in, `marchmesh scenes` lists them) or path to a suite file.
     #[arg(long, default_value = "default")]
     suite: String,
-    /// Folder the run folder is created in.
-    #[arg(long, default_value = "bench-results")]
-    out: PathBuf,
+    /// Folder the run folder (`<UTC time>-<suite>`) is created in. (`--out` is an older
+    /// spelling, kept for scripts.)
+    #[arg(
+        long = "results-dir",
+        alias = "out",
+        value_name = "DIR",
+        default_value = "bench-results"
+    )]
+    results_dir: PathBuf,
     /// Only configurations whose id (group/scene/backend:quality/size/tN) matches this glob
     /// (without * or ?: substring match).
     #[arg(long)]
@@ -144,8 +160,8 @@ struct BenchArgs {
 
 #[derive(clap::Args)]
 struct StabilityArgs {
-    /// Output folder (default bench-results/stability-TIMESTAMP/ in UTC).
-    #[arg(long)]
+    /// Output folder, new or empty (default bench-results/stability-TIMESTAMP/ in UTC).
+    #[arg(long, short = 'o', value_name = "DIR")]
     out: Option<PathBuf>,
     /// Only cases whose id contains this.
     #[arg(long)]
@@ -170,16 +186,16 @@ struct StabilityArgs {
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// Scene file (JSON).
+    /// Scene file (JSON), or the name of a built-in scene (`marchmesh scenes` lists them).
     scene: PathBuf,
     /// Geometry backend: reference (exact, f64), sdf (sphere tracing) or mesh (BVH).
     #[arg(long, short, default_value = "reference")]
     backend: String,
     /// Backend option as key=value (repeatable); `--opt help` lists them.
-    #[arg(long = "opt", short = 'o', value_name = "KEY=VALUE")]
+    #[arg(long = "opt", short = 'O', value_name = "KEY=VALUE")]
     options: Vec<String>,
-    /// Output PNG path.
-    #[arg(long, default_value = "out.png")]
+    /// Output image: .png, .jpg or .jpeg.
+    #[arg(long, short = 'o', value_name = "FILE", default_value = "out.png")]
     out: PathBuf,
     /// Override the scene's image width in pixels.
     #[arg(long)]
@@ -193,7 +209,8 @@ struct RenderArgs {
     /// Worker threads (0 = one per logical core).
     #[arg(long, default_value_t = 0)]
     threads: usize,
-    /// Also write float AOVs (depth, normal, mask, work, termination) as PFM into this folder.
+    /// Also write float AOVs (depth, normal, mask, work, termination) into this folder: one
+    /// PFM per AOV and all of them as layers of one OpenEXR file, aovs.exr.
     #[arg(long, value_name = "DIR")]
     aov: Option<PathBuf>,
     /// Overwrite existing output files.
@@ -250,6 +267,7 @@ fn main() {
     let result = match cli.command {
         Command::Render(args) => render(args),
         Command::Validate { scenes } => validate(&scenes),
+        Command::Scenes { out } => scenes(out.as_deref()),
         Command::Schema => {
             say(format_args!("{}", marchmesh_scene::json_schema()));
             Ok(())
@@ -306,8 +324,16 @@ pub(crate) fn say(line: std::fmt::Arguments) {
 
 fn validate(paths: &[PathBuf]) -> Result<()> {
     let mut failed = 0;
-    for p in paths {
-        match marchmesh_scene::load(p) {
+    for arg in paths {
+        let p = match assets::scene_file(arg) {
+            Ok(p) => p,
+            Err(e) => {
+                failed += 1;
+                eprintln!("{}", error_chain(&e));
+                continue;
+            }
+        };
+        match marchmesh_scene::load(&p) {
             Ok(s) => {
                 let mut nodes = 0;
                 s.visit_nodes(|_| nodes += 1);
@@ -321,15 +347,11 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
                     nodes,
                     s.mesh_paths().len()
                 ));
-                let mut missing: Vec<String> = s
+                let mut problems: Vec<String> = s
                     .mesh_paths()
                     .iter()
                     .filter(|m| !m.exists())
-                    .map(|m| format!("mesh file {}", m.display()))
-                    .collect();
-                let mut problems: Vec<String> = missing
-                    .drain(..)
-                    .map(|m| format!("{m} does not exist"))
+                    .map(|m| format!("mesh file {} does not exist", m.display()))
                     .collect();
                 if let marchmesh_scene::Background::Environment { path, .. } = &s.background
                     && !path.exists()
@@ -351,12 +373,156 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
             Err(e) => {
                 failed += 1;
                 eprintln!("{e}");
+                if matches!(e, marchmesh_scene::SceneError::Parse { .. }) {
+                    for more in further_problems(&p) {
+                        eprintln!("{more}");
+                    }
+                }
             }
         }
     }
     if failed > 0 {
         bail!("{failed} of {} scene(s) are invalid", paths.len());
     }
+    Ok(())
+}
+
+/// Most problems [`further_problems`] looks for after a parse error.
+const MAX_PROBLEMS: usize = 64;
+
+/// The problems of a scene file beyond its first parse error: serde stops at the first wrong
+/// value, so each is taken out of the JSON (by its JSON path) and the rest parsed again, until
+/// the file parses (then its validation problems follow) or a problem cannot be taken out (a
+/// missing field, malformed JSON). Line numbers are those of the first error only: the later
+/// ones are found in the edited document, so they are given by JSON path.
+fn further_problems(path: &Path) -> Vec<String> {
+    let Ok(bytes) =
+        marchmesh_safeio::read_regular_within(path, marchmesh_scene::MAX_SCENE_FILE_BYTES)
+    else {
+        return Vec::new();
+    };
+    let Ok(mut doc) = serde_json::from_slice::<serde_json::Value>(&bytes) else {
+        return Vec::new();
+    };
+    let name = path.display().to_string();
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut out = Vec::new();
+    let mut first = true;
+    while out.len() < MAX_PROBLEMS {
+        let text = doc.to_string();
+        match marchmesh_scene::parse_scene(&text, &name, base) {
+            Ok(_) => break,
+            Err(marchmesh_scene::SceneError::Parse {
+                json_path, message, ..
+            }) => {
+                if !first {
+                    out.push(format!("{name}: at `{json_path}`: {message}"));
+                }
+                first = false;
+                if message.starts_with("missing field") || !remove_at(&mut doc, &json_path) {
+                    break;
+                }
+            }
+            Err(e @ marchmesh_scene::SceneError::Invalid { .. }) => {
+                out.push(e.to_string());
+                break;
+            }
+            Err(_) => break,
+        }
+    }
+    out
+}
+
+/// Removes the value at `json_path` (serde_path_to_error's `a.b[2].c`) from `doc`; false when
+/// the path does not lead to a removable value.
+fn remove_at(doc: &mut serde_json::Value, json_path: &str) -> bool {
+    let mut segments: Vec<Result<usize, &str>> = Vec::new();
+    for part in json_path.split('.') {
+        let (key, rest) = match part.find('[') {
+            Some(i) => (&part[..i], &part[i..]),
+            None => (part, ""),
+        };
+        if !key.is_empty() {
+            segments.push(Err(key));
+        }
+        for index in rest.split('[').filter(|x| !x.is_empty()) {
+            match index.trim_end_matches(']').parse::<usize>() {
+                Ok(i) => segments.push(Ok(i)),
+                Err(_) => return false,
+            }
+        }
+    }
+    let Some((last, parents)) = segments.split_last() else {
+        return false;
+    };
+    let mut at = doc;
+    for seg in parents {
+        let next = match (seg, at) {
+            (Ok(i), serde_json::Value::Array(a)) => a.get_mut(*i),
+            (Err(k), serde_json::Value::Object(o)) => o.get_mut(*k),
+            _ => None,
+        };
+        match next {
+            Some(n) => at = n,
+            None => return false,
+        }
+    }
+    match (last, at) {
+        (Ok(i), serde_json::Value::Array(a)) if *i < a.len() => {
+            a.remove(*i);
+            true
+        }
+        (Err(k), serde_json::Value::Object(o)) => o.remove(*k).is_some(),
+        _ => false,
+    }
+}
+
+/// `marchmesh scenes [-o DIR]`: lists the built-in scenes and suites, or writes them all into
+/// DIR (new or empty) as the repository's `scenes/` folder is laid out.
+fn scenes(out: Option<&Path>) -> Result<()> {
+    let Some(dir) = out else {
+        say(format_args!(
+            "built-in scenes (marchmesh render NAME, validate NAME, view NAME):"
+        ));
+        for n in assets::scene_names() {
+            say(format_args!("  {n}"));
+        }
+        say(format_args!(
+            "built-in suites (marchmesh bench --suite NAME):"
+        ));
+        for n in assets::suite_names() {
+            say(format_args!("  {n}"));
+        }
+        say(format_args!(
+            "marchmesh scenes -o DIR writes them (with their meshes) into DIR"
+        ));
+        return Ok(());
+    };
+    if let Ok(mut entries) = std::fs::read_dir(dir)
+        && entries.next().is_some()
+    {
+        bail!(
+            "-o {}: folder is not empty; choose a new or empty folder (nothing was written)",
+            dir.display()
+        );
+    }
+    let files = assets::embedded_files();
+    for (name, bytes) in files {
+        let path = dir.join(name);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent)
+                .with_context(|| format!("creating {}", parent.display()))?;
+        }
+        marchmesh_safeio::publish_new(&path, bytes)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    out!(
+        "{}: {} files ({} scenes, {} suites)",
+        dir.display(),
+        files.len(),
+        assets::scene_names().len(),
+        assets::suite_names().len()
+    );
     Ok(())
 }
 
@@ -422,7 +588,8 @@ fn render(args: RenderArgs) -> Result<()> {
         check_writable(t, args.force)?;
     }
     let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
-    let mut scene = marchmesh_scene::load(&args.scene)?;
+    let scene_path = assets::scene_file(&args.scene)?;
+    let mut scene = marchmesh_scene::load(&scene_path)?;
     let (w, h) = (
         args.width.unwrap_or(scene.camera.width),
         args.height.unwrap_or(scene.camera.height),
@@ -438,12 +605,12 @@ fn render(args: RenderArgs) -> Result<()> {
             .context("--spp")?;
     }
     let background = BackgroundSampler::load_within(&scene.background, memory_limit_bytes)
-        .with_context(|| format!("scene {}", args.scene.display()))?;
+        .with_context(|| format!("scene {}", scene_path.display()))?;
 
     let t0 = Instant::now();
     let spec = BackendSpec { kind, options };
     let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
-        .with_context(|| format!("building scene {}", args.scene.display()))?;
+        .with_context(|| format!("building scene {}", scene_path.display()))?;
     let build_time = t0.elapsed();
 
     if let Some(limit) = args.max_seconds
@@ -523,6 +690,10 @@ fn render(args: RenderArgs) -> Result<()> {
         for (name, bytes) in image_io::aov_files(&out.framebuffer) {
             files.push((dir.join(name), bytes));
         }
+        files.push((
+            dir.join(exr_aov::AOV_EXR_NAME),
+            exr_aov::encode(&out.framebuffer)?,
+        ));
     }
     publish_all(&files, args.force)?;
     let report = geometry.report();
@@ -612,6 +783,7 @@ fn render_targets(out: &Path, aov: Option<&Path>) -> Vec<PathBuf> {
     let mut v = vec![out.to_path_buf()];
     if let Some(dir) = aov {
         v.extend(image_io::AOV_FILE_NAMES.iter().map(|n| dir.join(n)));
+        v.push(dir.join(exr_aov::AOV_EXR_NAME));
     }
     v
 }

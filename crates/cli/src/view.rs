@@ -34,7 +34,7 @@ Nothing is overwritten: existing frame files are an error before anything is ren
 /// Arguments of `marchmesh view`.
 #[derive(clap::Args)]
 pub struct ViewArgs {
-    /// Scene file (JSON).
+    /// Scene file (JSON), or the name of a built-in scene (`marchmesh scenes` lists them).
     scene: PathBuf,
     /// Backend shown first: sdf, mesh or reference.
     #[arg(long, short, default_value = "sdf")]
@@ -42,7 +42,7 @@ pub struct ViewArgs {
     /// Backend option as `[BACKEND:]key=value` (repeatable), e.g. `mesh:bvh=bvh2`; without
     /// BACKEND: for the --backend one. `--opt sdf:help` lists a backend's options. The
     /// quality knob's key applies on top.
-    #[arg(long = "opt", short = 'o', value_name = "[BACKEND:]KEY=VALUE")]
+    #[arg(long = "opt", short = 'O', value_name = "[BACKEND:]KEY=VALUE")]
     options: Vec<String>,
     /// Window width in pixels (default: the scene's image width).
     #[arg(long)]
@@ -128,7 +128,7 @@ pub fn view(args: ViewArgs) -> Result<()> {
         None => None,
     };
     let opts = SessionOptions {
-        scene: args.scene.clone(),
+        scene: crate::assets::scene_file(&args.scene)?,
         backend: kind,
         options,
         width: args.width,

@@ -34,12 +34,29 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
     let anchor = "bench-results/anchors/fidget-20261123T231703Z.json";
     let (ok, stdout, stderr) = marchmesh(
         &[
-            "bench", "--suite", "smoke", "--out", out_s, "--anchor", anchor,
+            "bench",
+            "--suite",
+            "smoke",
+            "--results-dir",
+            out_s,
+            "--anchor",
+            anchor,
         ],
         &repo(),
     );
     assert!(ok, "bench failed:\n{stdout}\n{stderr}");
     let run = only_run(&out);
+    // The terminal gives the answer: a verdict per scene at each accuracy target, then
+    // where the report is.
+    assert!(stdout.contains("answer: the fastest backend"), "{stdout}");
+    assert!(
+        stdout.contains(">=30 dB: ") && stdout.contains(">=50 dB: "),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains(&format!("report: {}", run.join("report.html").display())),
+        "{stdout}"
+    );
     let name = run.file_name().unwrap().to_string_lossy().into_owned();
     assert!(name.ends_with("-smoke"), "{name}");
 
@@ -83,6 +100,14 @@ fn smoke_suite_writes_complete_results_and_report_reproduces_them() {
         summary.contains("## Each backend against its anchor") && summary.contains(anchor),
         "{summary}"
     );
+
+    // Scene paths are recorded from the scenes folder on, not as this machine's path.
+    for r in &res.rows {
+        assert!(r.scene_file.starts_with("scenes/"), "{}", r.scene_file);
+    }
+    // The summary opens with the answer, the method after it.
+    let answer = summary.find("## Answer").expect("an answer section");
+    assert!(answer < summary.find("## Method").unwrap(), "{summary}");
 
     // CSV: same rows, every column filled unless the row says why it may be empty.
     let csv_rows = results::read_csv(&run.join("results.csv")).unwrap();
@@ -236,6 +261,14 @@ fn bad_suites_and_filters_are_clear_errors() {
     );
     assert!(!ok);
     assert!(stderr.contains("no configuration"), "{stderr}");
+    // An unknown suite name lists the built-in suites, and says it once.
+    let (ok, _, stderr) = marchmesh(&["bench", "--suite", "nosuch"], &dir);
+    assert!(!ok);
+    assert!(
+        stderr.contains("no suite named \"nosuch\"") && stderr.contains("default, "),
+        "{stderr}"
+    );
+    assert_eq!(stderr.lines().count(), 1, "{stderr}");
     let (ok, _, stderr) = marchmesh(&["report", dir.to_str().unwrap()], &dir);
     assert!(!ok && stderr.contains("results.json"), "{stderr}");
     // A bad anchor file fails before any run folder is made.
@@ -291,7 +324,7 @@ fn render_works_with_every_backend_and_rejects_unknown_options() {
             "scenes/seed-spheres.json",
             "-b",
             "mesh",
-            "-o",
+            "-O",
             "tess=3",
             "--out",
             dir.join("x.png").to_str().unwrap(),

@@ -32,13 +32,22 @@ fn committed_findings_regenerate_byte_identically() {
     let dir = std::env::temp_dir().join(format!("marchmesh-findings-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
+    // The runs' results.json copied into a folder of their own: links are relative to the
+    // document's folder, so the document is written beside the runs, as the committed one.
+    for a in args.iter().filter(|a| !a.starts_with("--")) {
+        let from = results.join(a).join("results.json");
+        if from.is_file() {
+            std::fs::create_dir_all(dir.join(a)).unwrap();
+            std::fs::copy(&from, dir.join(a).join("results.json")).unwrap();
+        }
+    }
     let out = dir.join("FINDINGS.md");
     let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
         .arg("findings")
         .args(&args)
         .arg("--out")
         .arg(&out)
-        .current_dir(&results)
+        .current_dir(&dir)
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -59,12 +68,29 @@ fn committed_findings_regenerate_byte_identically() {
         .args(&args)
         .arg("--out")
         .arg(&out)
-        .current_dir(&results)
+        .current_dir(&dir)
         .output()
         .unwrap();
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--force"));
     assert_eq!(std::fs::read_to_string(&out).unwrap(), committed);
+    // Written into another folder, the links climb to the runs from there.
+    std::fs::create_dir_all(dir.join("docs")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .arg("findings")
+        .args(&args)
+        .arg("-o")
+        .arg(dir.join("docs/F.md"))
+        .current_dir(&dir)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let elsewhere = std::fs::read_to_string(dir.join("docs/F.md")).unwrap();
+    assert!(
+        elsewhere.contains(&format!("](../{}/summary.md)", args[0])),
+        "{elsewhere}"
+    );
+    assert!(elsewhere.contains("](F-plots/decision.svg)"), "{elsewhere}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

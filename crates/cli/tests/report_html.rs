@@ -155,7 +155,13 @@ fn console_errors(stderr: &str) -> Vec<&str> {
 fn report_html_is_self_contained_and_its_viewer_flips_images_in_a_browser() {
     let out = tmp("report-html");
     let (ok, stdout, stderr) = marchmesh(
-        &["bench", "--suite", "smoke", "--out", out.to_str().unwrap()],
+        &[
+            "bench",
+            "--suite",
+            "smoke",
+            "--results-dir",
+            out.to_str().unwrap(),
+        ],
         &repo(),
     );
     assert!(ok, "bench failed:\n{stdout}\n{stderr}");
@@ -239,6 +245,30 @@ fn report_html_is_self_contained_and_its_viewer_flips_images_in_a_browser() {
     );
     assert!(
         attribute(&dom, "button", "id=\"show-diff\"", "aria-pressed").as_deref() == Some("true")
+    );
+
+    // The page reads at 1400 pixels without sideways scrolling, the decision chart first.
+    let (dom, log) = headless(
+        &browser,
+        &profile,
+        &["--window-size=1400,1000", "--dump-dom"],
+        &url(""),
+    );
+    let width = |name: &str| {
+        attribute(&dom, "html", "", name)
+            .and_then(|v| v.parse::<u32>().ok())
+            .unwrap_or_else(|| panic!("no {name}:\n{log}"))
+    };
+    assert!(
+        width("data-scroll-width") <= width("data-client-width"),
+        "the page scrolls sideways at 1400 px: {} > {}",
+        width("data-scroll-width"),
+        width("data-client-width")
+    );
+    let chart = dom.find("id=\"decision-chart\"").expect("a decision chart");
+    assert!(
+        chart < dom.find(">Method</h2>").unwrap_or(usize::MAX),
+        "chart before the method"
     );
 
     // Selecting a configuration and the reference by fragment.

@@ -100,9 +100,97 @@ pub trait Progress {
     fn done(&mut self, index: usize);
     /// A message for the user.
     fn note(&mut self, message: &str);
+    /// Configuration `index` is this far (0 to 1) through its work: half when it is built and
+    /// warmed up, the other half over its timed rounds as its repeat policy is met
+    /// ([`RepeatPolicy::progress`]); [`Progress::done`] means 1. The CLI's ETA ([`Eta`])
+    /// counts these, so it moves with every round rather than once per rotation block.
+    fn advanced(&mut self, _index: usize, _fraction: f64) {}
     /// Everything measured so far, after each rotation block: the CLI writes it to disk so a
     /// crash or kill loses at most one block.
     fn checkpoint(&mut self, _so_far: &Outcome) {}
+}
+
+/// A scene path as results record it, the same on every machine: from the nearest folder
+/// named `scenes` on (`scenes/csg.json`, wherever the checkout or the extracted built-in copy
+/// is), else relative to the current folder when below it, else as given; `..` and `.`
+/// resolved lexically, `/`-separated.
+pub fn portable_scene_path(path: &Path) -> String {
+    use std::path::Component;
+    let mut parts: Vec<String> = Vec::new();
+    let mut absolute = false;
+    for c in path.components() {
+        match c {
+            Component::ParentDir => {
+                if parts.pop().is_none() && !absolute {
+                    parts.push("..".into());
+                }
+            }
+            Component::CurDir => {}
+            Component::RootDir | Component::Prefix(_) => absolute = true,
+            Component::Normal(n) => parts.push(n.to_string_lossy().into_owned()),
+        }
+    }
+    if let Some(i) = parts.iter().rposition(|p| p == "scenes") {
+        return parts[i..].join("/");
+    }
+    if absolute
+        && let Ok(cwd) = std::env::current_dir()
+        && let Ok(rel) = Path::new(&format!("/{}", parts.join("/"))).strip_prefix(&cwd)
+    {
+        return rel.to_string_lossy().replace('\\', "/");
+    }
+    let joined = parts.join("/");
+    if absolute {
+        format!("/{joined}")
+    } else {
+        joined
+    }
+}
+
+/// The share of a configuration's work [`Progress::advanced`] reports once it is built and
+/// warmed up (the rest is its timed rounds).
+pub const PREPARED_FRACTION: f64 = 0.5;
+
+/// The remaining time of a run from how far its configurations are ([`Progress::advanced`]):
+/// the time so far per unit of work done, times the work left. It moves with every timed
+/// round, so it is meaningful from the first prepared configuration on, and the reference
+/// renders and builds of the first block are spread over every configuration.
+#[derive(Debug, Clone)]
+pub struct Eta {
+    fractions: Vec<f64>,
+}
+
+impl Eta {
+    /// A run of `total` configurations, none started.
+    pub fn new(total: usize) -> Self {
+        Self {
+            fractions: vec![0.0; total],
+        }
+    }
+
+    /// Configuration `index` is `fraction` (clamped to 0..=1; never moving back) through its
+    /// work.
+    pub fn advance(&mut self, index: usize, fraction: f64) {
+        if let Some(f) = self.fractions.get_mut(index) {
+            *f = f.max(fraction.clamp(0.0, 1.0));
+        }
+    }
+
+    /// The work done, in configurations (fractional).
+    pub fn done(&self) -> f64 {
+        self.fractions.iter().sum()
+    }
+
+    /// The number of configurations.
+    pub fn total(&self) -> usize {
+        self.fractions.len()
+    }
+
+    /// Seconds left after `elapsed_s` seconds; `None` before any work is done.
+    pub fn remaining_s(&self, elapsed_s: f64) -> Option<f64> {
+        let done = self.done();
+        (done > 1e-9).then(|| elapsed_s * (self.total() as f64 - done).max(0.0) / done)
+    }
 }
 
 /// A progress sink that ignores everything.
@@ -401,6 +489,7 @@ pub fn run(
             };
             match prepared {
                 Ok(p) => {
+                    progress.advanced(index, PREPARED_FRACTION);
                     let bytes = p.row.memory_bytes;
                     if !held.is_empty()
                         && held_bytes.saturating_add(bytes) > options.hold_memory_bytes
@@ -507,6 +596,12 @@ fn rotate_and_finish(
                 }),
                 Err(e) => p.error = Some(e),
             }
+            let total_s: f64 = p.samples.iter().map(|s| s.wall_ms).sum::<f64>() * 1e-3;
+            let timed = c.repeats.progress(p.samples.len() as u32, total_s);
+            progress.advanced(
+                p.index,
+                PREPARED_FRACTION + (1.0 - PREPARED_FRACTION) * timed,
+            );
         }
         round += 1;
     }
@@ -751,7 +846,7 @@ fn prepare(
         config_id: c.id.clone(),
         group: c.group.clone(),
         scene: c.scene.clone(),
-        scene_file: c.scene_path.display().to_string(),
+        scene_file: portable_scene_path(&c.scene_path),
         backend: kind.to_string(),
         quality: c.label.clone(),
         options: c
@@ -910,6 +1005,78 @@ pub fn shard(configs: &[Config], shard: Shard) -> Result<Vec<Config>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A simulated run of `blocks` rotation blocks of `per_block` configurations: each built
+    /// in 2 s (the block's first also renders its reference, 10 s), then 3 rounds of 1 s per
+    /// configuration. Returns (elapsed, estimated remaining, true remaining) at every event.
+    fn simulate_eta(blocks: usize, per_block: usize) -> Vec<(f64, f64, f64)> {
+        let policy = RepeatPolicy::default();
+        let total = blocks * per_block;
+        let mut eta = Eta::new(total);
+        let mut t = 0.0;
+        let mut events = Vec::new();
+        for b in 0..blocks {
+            for k in 0..per_block {
+                t += if k == 0 { 12.0 } else { 2.0 };
+                eta.advance(b * per_block + k, PREPARED_FRACTION);
+                events.push((t, eta.remaining_s(t)));
+            }
+            for round in 1..=3u32 {
+                for k in 0..per_block {
+                    t += 1.0;
+                    let timed = policy.progress(round, f64::from(round));
+                    eta.advance(
+                        b * per_block + k,
+                        PREPARED_FRACTION + (1.0 - PREPARED_FRACTION) * timed,
+                    );
+                    events.push((t, eta.remaining_s(t)));
+                }
+            }
+        }
+        events
+            .into_iter()
+            .map(|(at, est)| (at, est.unwrap_or(f64::NAN), t - at))
+            .collect()
+    }
+
+    #[test]
+    fn results_record_scene_paths_from_the_scenes_folder() {
+        assert_eq!(
+            portable_scene_path(Path::new("/work/main/scenes/suites/../csg.json")),
+            "scenes/csg.json"
+        );
+        assert_eq!(
+            portable_scene_path(Path::new(
+                "/home/u/.cache/marchmesh/0.1-ab/scenes/meshes/../seed-spheres.json"
+            )),
+            "scenes/seed-spheres.json"
+        );
+        assert_eq!(
+            portable_scene_path(Path::new("mine/./x.json")),
+            "mine/x.json"
+        );
+        assert_eq!(
+            portable_scene_path(Path::new("/elsewhere/x.json")),
+            "/elsewhere/x.json"
+        );
+    }
+
+    #[test]
+    fn the_eta_is_within_30_percent_after_the_first_block() {
+        let per_block = 6;
+        let events = simulate_eta(8, per_block);
+        // The first block's events: its builds, then three rounds.
+        let first_block = per_block + 3 * per_block;
+        for (at, est, truth) in &events[first_block - 1..events.len() - 1] {
+            let err = (est - truth).abs() / truth.max(1.0);
+            assert!(
+                err <= 0.3 || (est - truth).abs() < 5.0,
+                "at {at} s: estimated {est:.0} s left, truly {truth:.0} s"
+            );
+        }
+        // Before any configuration is built there is no estimate (not "eta 0s").
+        assert!(Eta::new(3).remaining_s(40.0).is_none());
+    }
 
     fn config(scene: &str, backend: &str) -> Config {
         Config {

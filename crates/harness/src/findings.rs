@@ -21,6 +21,9 @@ use crate::report::bytes;
 use crate::results::{Results, Row};
 use crate::verdicts::{Clock, HEADLINE_MIN_PSNR_DB, Timing, headlines, matched_accuracy};
 
+/// The decision chart's file in the plots folder.
+const DECISION_SVG: &str = "decision.svg";
+
 /// One run given to `findings`: its folder name (links are `NAME/summary.md`, relative to the
 /// folder holding the runs, where `FINDINGS.md` belongs) and its results.
 #[derive(Debug, Clone)]
@@ -350,9 +353,17 @@ fn scene_axis(
     });
     let labels = distinct(points, Point::label);
     let mut body = String::new();
+    // Speed is compared only between configurations reaching the same accuracy target.
+    let target = HEADLINE_MIN_PSNR_DB;
+    let reaches = |p: &Point<'_>| {
+        p.row.psnr_db.is_some_and(|q| {
+            crate::verdicts::psnr_target_level(q)
+                >= target - crate::verdicts::PSNR_TARGET_STEP_DB / 2.0
+        })
+    };
     let _ = writeln!(
         body,
-        "| {axis} | {} | winner (fastest vs runner-up backend) |",
+        "| {axis} | {} | at >= {target:.0} dB: fastest vs runner-up among the configurations reaching it |",
         labels.join(" | ")
     );
     let _ = writeln!(body, "|---|{}---|", "---|".repeat(labels.len()));
@@ -387,13 +398,35 @@ fn scene_axis(
                 }
             }
         }
+        let matched: Vec<Point<'_>> = at.iter().filter(|p| reaches(p)).copied().collect();
         // Speed is compared only within one machine.
         let d = if machines_differ(runs, points) {
             None
         } else {
-            duel(&at)
+            duel(&matched)
         };
-        let best = fastest_per_backend(&at);
+        let best = fastest_per_backend(&matched);
+        let alone = match best.as_slice() {
+            [one] => Some(format!("{} alone reaches {target:.0} dB", one.row.backend)),
+            [] => Some(format!("none reaches {target:.0} dB")),
+            _ => None,
+        };
+        let others_best: Vec<String> = distinct(&at, |p| p.row.backend.clone())
+            .into_iter()
+            .filter(|b| !best.iter().any(|p| &p.row.backend == b))
+            .map(|b| {
+                let top = at
+                    .iter()
+                    .filter(|p| p.row.backend == b)
+                    .filter_map(|p| p.row.psnr_db)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                if top.is_finite() {
+                    format!("{b} at most {top:.1} dB")
+                } else {
+                    format!("{b} without accuracy")
+                }
+            })
+            .collect();
         let log_ratio = match best.as_slice() {
             [a, b, ..] => Some(Duel::log_ratio(a, b)),
             _ => None,
@@ -404,16 +437,27 @@ fn scene_axis(
             .map(|p| p.row.backend.clone())
             .collect::<Vec<_>>()
             .join("/");
+        let verdict = match (&d, &alone) {
+            (Some(d), _) => d.describe(),
+            (None, Some(a)) if !others_best.is_empty() => {
+                format!("{a} ({})", others_best.join(", "))
+            }
+            (None, Some(a)) => a.clone(),
+            (None, None) => "n/a".into(),
+        };
         let _ = writeln!(
             body,
-            "| {} | {} | {} |",
+            "| {} | {} | {verdict} |",
             xs[i].show(),
             cells.join(" | "),
-            d.as_ref().map_or("n/a".into(), Duel::describe)
         );
         winners.push((
             xs[i],
-            d.as_ref().map_or("n/a".into(), |d| d.winner().to_string()),
+            match (&d, alone) {
+                (Some(d), _) => d.winner().to_string(),
+                (None, Some(a)) => a,
+                (None, None) => "n/a".into(),
+            },
             log_ratio,
             pair,
         ));
@@ -448,18 +492,42 @@ fn scene_axis(
             )),
         }
     }
-    let first = winners.first().map(|w| w.1.clone()).unwrap_or_default();
+    // Runs of the same verdict along the axis, in order.
+    let mut stretches: Vec<(String, AxisValue, AxisValue)> = Vec::new();
+    for w in &winners {
+        match stretches.last_mut() {
+            Some(last) if last.0 == w.1 => last.2 = w.0,
+            _ => stretches.push((w.1.clone(), w.0, w.0)),
+        }
+    }
+    let said: Vec<String> = stretches
+        .iter()
+        .map(|(w, from, to)| {
+            if from == to {
+                format!("{w} at {}", from.show())
+            } else {
+                format!("{w} from {} to {}", from.show(), to.show())
+            }
+        })
+        .collect();
     let brief = if machines_differ(runs, points) {
         format!("{group}: rows from different machines; no speed claim along {axis}.")
+    } else if stretches.len() == 1 {
+        format!(
+            "{group}: at >= {target:.0} dB, {} at every measured {axis} ({} to {}; each backend's fastest configuration reaching {target:.0} dB, PSNR in the table).",
+            stretches[0].0,
+            stretches[0].1.show(),
+            stretches[0].2.show()
+        )
     } else if crossings.is_empty() {
         format!(
-            "{group}: {first} at every measured {axis} ({} to {}; each backend's fastest configuration at the suite's quality levels, PSNR in the table).",
-            winners.first().map_or(String::new(), |w| w.0.show()),
-            winners.last().map_or(String::new(), |w| w.0.show())
+            "{group}: at >= {target:.0} dB, {} {axis} (each backend's fastest configuration reaching {target:.0} dB, PSNR in the table).",
+            said.join("; ")
         )
     } else {
         format!(
-            "{group}: the winner changes {} (each backend's fastest configuration at the suite's quality levels, PSNR in the table).",
+            "{group}: at >= {target:.0} dB, {} {axis}; the winner changes {} (each backend's fastest configuration reaching {target:.0} dB, PSNR in the table).",
+            said.join("; "),
             crossings.join("; ")
         )
     };
@@ -846,7 +914,9 @@ pub fn write_findings(
     if let Ok(entries) = std::fs::read_dir(plots_dir) {
         for e in entries.flatten() {
             let name = e.file_name().to_string_lossy().into_owned();
-            let stale = name.ends_with(".svg") && !plots.iter().any(|p| p.file == name);
+            let stale = name.ends_with(".svg")
+                && name != DECISION_SVG
+                && !plots.iter().any(|p| p.file == name);
             if stale && e.file_type().is_ok_and(|t| t.is_file()) {
                 std::fs::remove_file(e.path())
                     .map_err(|err| format!("{}: {err}", e.path().display()))?;
@@ -879,11 +949,52 @@ pub fn write_findings(
             p.log_x,
         )?;
     }
+    // The answer first: per scene setting and accuracy target, the winner among the
+    // configurations reaching it (each run's rows on its own clock).
+    let used_runs = distinct(&points, |p| p.run);
+    let per_run: Vec<(usize, Vec<&Row>)> = used_runs
+        .iter()
+        .map(|&i| {
+            (
+                i,
+                points
+                    .iter()
+                    .filter(|p| p.run == i)
+                    .map(|p| p.row)
+                    .collect(),
+            )
+        })
+        .collect();
+    let chart =
+        crate::decision::DecisionChart::of_settings(per_run.iter().flat_map(|(i, rows)| {
+            let timing = Timing::of(&runs[*i].results);
+            let machines: std::collections::BTreeSet<&str> =
+                rows.iter().map(|r| r.machine.as_str()).collect();
+            crate::verdicts::by_setting(rows.iter().copied())
+                .into_iter()
+                .map(move |(k, set)| {
+                    (
+                        crate::verdicts::setting_name(&k, machines.len() > 1),
+                        set,
+                        timing,
+                    )
+                })
+        }));
     let mut s = String::new();
     let _ = writeln!(
         s,
         "# Findings: when is sphere tracing a distance field faster than ray tracing triangles in a BVH?\n"
     );
+    if !chart.is_empty() {
+        marchmesh_safeio::replace_regular(&plots_dir.join(DECISION_SVG), chart.svg().as_bytes())
+            .map_err(|e| e.to_string())?;
+        let _ = writeln!(
+            s,
+            "## Answer\n\n![decision chart]({plots_link}/{DECISION_SVG})\n\nPer scene setting and accuracy target (PSNR against the exact reference), the fastest backend among the configurations reaching the target, with the runner-up's time over the winner's and its 95% confidence interval (*medians*: a ratio of medians, the two not timed together). *No clear winner*: the interval includes 1; *alone*: no other backend reaches the target. The sections below give every axis with its numbers; the method follows this table.\n\n{}",
+            chart.markdown()
+        );
+        let _ = writeln!(s, "## Method and runs\n");
+    }
     let _ = writeln!(
         s,
         "Generated by `marchmesh findings` from the runs below; regenerate with `marchmesh findings {}{} --out FINDINGS.md` in this folder. Each section is one axis a situation varies along; its first sentence is the claim, the table the numbers (render times are medians on each run's verdict clock, wall or CPU, see its summary), the plot the picture. A winner is named only when the ratio's range from the two medians' 95% confidence intervals stays above 1; otherwise the section says *no clear winner*. Where the same configuration was measured by several runs, the newest run counts. Links go to each run's summary, where every configuration id below has its full row.\n",

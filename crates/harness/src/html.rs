@@ -256,7 +256,7 @@ const SVG_ATTRIBUTES: &[&str] = &[
 /// (an XML declaration before it is allowed) of drawing elements and presentation attributes
 /// only, so no script, event handler, link, style or external reference can come in with a
 /// file someone put into `plots/`.
-fn svg_is_plain(svg: &str) -> bool {
+pub(crate) fn svg_is_plain(svg: &str) -> bool {
     let mut s = svg.trim();
     if let Some(rest) = s.strip_prefix("<?xml") {
         match rest.find("?>") {
@@ -472,7 +472,18 @@ pub fn report_html(res: &Results, dir: &Path) -> String {
         h.push_str("<li><a href=\"#plots\">Plots</a></li>\n");
     }
     h.push_str("<li><a href=\"#images\">Images</a></li>\n</ul></nav>\n</header>\n<main>\n");
-    h.push_str(&summary);
+    // The decision chart opens the page, under the summary's first section heading (the
+    // answer), before its table.
+    let chart = crate::decision::DecisionChart::of_run(res);
+    if chart.is_empty() {
+        h.push_str(&summary);
+    } else {
+        let figure = format!(
+            "</h2>\n<figure class=\"decision\" id=\"decision-chart\">{}<figcaption>Decision chart: per scene and accuracy target, the fastest backend among the configurations reaching the target, and by how much.</figcaption></figure>\n",
+            chart.svg().trim_end()
+        );
+        h.push_str(&summary.replacen("</h2>\n", &figure, 1));
+    }
 
     if !plots.is_empty() {
         h.push_str("<h2 id=\"plots\">Plots</h2>\n<div class=\"plots\">\n");

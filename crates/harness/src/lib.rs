@@ -36,6 +36,7 @@ pub mod alloc;
 pub mod anchors;
 pub mod backend;
 pub mod bench;
+pub mod decision;
 pub mod findings;
 pub mod html;
 pub mod images;

@@ -165,6 +165,20 @@ impl RepeatPolicy {
         }
     }
 
+    /// How far (0 to 1) `count` repeats taking `total_s` seconds are towards meeting the
+    /// policy: the lesser of the count's share of `min_count` and the greater of the time's
+    /// share of `min_time_s` and the count's share of `max_count`; 1 once no repeat is due.
+    pub fn progress(&self, count: u32, total_s: f64) -> f64 {
+        if !self.wants_more(count, total_s) {
+            return 1.0;
+        }
+        let share = |a: f64, b: f64| if b > 0.0 { (a / b).min(1.0) } else { 1.0 };
+        let by_count = share(f64::from(count), f64::from(self.min_count.max(1)));
+        let by_time = share(total_s, self.min_time_s)
+            .max(share(f64::from(count), f64::from(self.max_count.max(1))));
+        by_count.min(by_time).clamp(0.0, 1.0)
+    }
+
     /// Whether another repeat is due after `count` repeats taking `total_s` seconds.
     pub fn wants_more(&self, count: u32, total_s: f64) -> bool {
         count < self.min_count.max(1) || (total_s < self.min_time_s && count < self.max_count)
@@ -174,6 +188,19 @@ impl RepeatPolicy {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn repeat_progress_follows_the_policy() {
+        let p = RepeatPolicy::default(); // 3 repeats, 1 s, at most 50
+        assert_eq!(p.progress(0, 0.0), 0.0);
+        // Slow renders: the count decides.
+        assert!((p.progress(1, 2.0) - 1.0 / 3.0).abs() < 1e-12);
+        assert_eq!(p.progress(3, 6.0), 1.0);
+        // Fast renders: the time decides.
+        assert!((p.progress(10, 0.25) - 0.25).abs() < 1e-12);
+        assert_eq!(p.progress(50, 0.5), 1.0);
+        assert_eq!(p.quick().progress(1, 0.0), 1.0);
+    }
 
     #[test]
     fn odd_and_even_medians_min_max_mad() {

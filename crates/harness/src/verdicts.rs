@@ -472,6 +472,100 @@ pub fn matched_accuracy(rows: &[&Row], timing: Timing<'_>) -> Vec<(f64, Result<C
         .collect()
 }
 
+/// The accuracy targets (PSNR against the reference, dB) the answer is given at: the decision
+/// chart of the summary, report.html and the findings, and the verdicts `bench` prints when it
+/// ends. 30 dB: a preview whose errors show; [`HEADLINE_MIN_PSNR_DB`] (40 dB): differences hard
+/// to see; 50 dB: close to exact.
+pub const ACCURACY_TARGETS_DB: [f64; 3] = [30.0, HEADLINE_MIN_PSNR_DB, 50.0];
+
+/// Who is fastest at one accuracy target: only rows whose PSNR reaches the target (at
+/// [`PSNR_TARGET_STEP_DB`] resolution) take part, so a winner is only ever named between
+/// configurations of matched accuracy.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetVerdict {
+    /// Two or more backends reach the target: the fastest against the runner-up (decisive or
+    /// not: see [`Contest::decisive`]).
+    Contest(Contest),
+    /// Only this backend reaches the target (`backend:quality` of its fastest row reaching it).
+    Alone {
+        /// The backend.
+        backend: String,
+        /// Its fastest configuration reaching the target.
+        label: String,
+    },
+    /// No row reaches the target.
+    Nobody,
+}
+
+impl TargetVerdict {
+    /// The backend named as the answer: the decisive winner or the one backend reaching the
+    /// target; `None` for no clear winner or no row reaching it.
+    pub fn winner(&self) -> Option<&str> {
+        match self {
+            Self::Contest(c) if c.decisive => Some(&c.faster),
+            Self::Alone { backend, .. } => Some(backend),
+            _ => None,
+        }
+    }
+
+    /// A short cell text: `mesh 2.71x (CI 2.33-2.90)`, `no clear winner (sdf 1.02x)`, `sdf
+    /// alone`, `none reaches it`.
+    pub fn short(&self) -> String {
+        match self {
+            Self::Contest(c) => {
+                let ci = match c.ci {
+                    Some((lo, hi, _)) => format!("CI {lo:.2}-{hi:.2}"),
+                    None => "medians".to_string(),
+                };
+                if c.decisive {
+                    format!("{} {:.2}x ({ci})", c.faster, c.ratio)
+                } else {
+                    format!("no clear winner ({} {:.2}x, {ci})", c.faster, c.ratio)
+                }
+            }
+            Self::Alone { backend, .. } => format!("{backend} alone"),
+            Self::Nobody => "none reaches it".to_string(),
+        }
+    }
+}
+
+impl fmt::Display for TargetVerdict {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Contest(c) => write!(f, "{c} (`{}`)", c.faster_label),
+            Self::Alone { backend, label } => {
+                write!(f, "only {backend} reaches it (`{label}`)")
+            }
+            Self::Nobody => write!(f, "no configuration reaches it"),
+        }
+    }
+}
+
+/// The verdict of `rows` (one setting) at accuracy target `target_db`: each backend's fastest
+/// row whose PSNR reaches the target, the fastest backend against the runner-up on `timing`'s
+/// clock.
+pub fn at_target(rows: &[&Row], target_db: f64, timing: Timing<'_>) -> TargetVerdict {
+    let reaching: Vec<&Row> = rows
+        .iter()
+        .copied()
+        .filter(|r| {
+            r.psnr_db
+                .is_some_and(|p| psnr_target_level(p) >= target_db - PSNR_TARGET_STEP_DB / 2.0)
+        })
+        .collect();
+    let best = fastest_per_backend(&reaching, f64::NEG_INFINITY, timing);
+    if let Some(c) = winner_and_runner_up(&best, timing) {
+        return TargetVerdict::Contest(c);
+    }
+    match best.iter().find_map(|(b, r)| r.map(|r| (b, r))) {
+        Some((b, r)) => TargetVerdict::Alone {
+            backend: b.clone(),
+            label: format!("{}:{}", r.backend, r.quality),
+        },
+        None => TargetVerdict::Nobody,
+    }
+}
+
 /// How one verdict of run A fares in run B.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VerdictAgreement {
@@ -700,6 +794,32 @@ mod tests {
             "node-b's own sdf row: {}",
             c.ratio
         );
+    }
+
+    #[test]
+    fn a_target_is_won_only_among_rows_reaching_it() {
+        let rows = [
+            row("sdf", "a", 10.0, Some(52.0), 100),
+            row("mesh", "b", 2.0, Some(24.0), 100),
+            row("mesh", "c", 5.0, Some(39.96), 100),
+        ];
+        let rows: Vec<&Row> = rows.iter().collect();
+        let t = Timing::medians_only();
+        // 30 dB: mesh:c (39.96 prints as 40.0) against sdf; the faster mesh:b is too coarse.
+        match at_target(&rows, 30.0, t) {
+            TargetVerdict::Contest(c) => {
+                assert_eq!((c.faster_label.as_str(), c.ratio), ("mesh:c", 2.0));
+            }
+            v => panic!("{v:?}"),
+        }
+        // 40 dB: 39.96 dB rounds to the 40.0 dB it is printed with.
+        assert_eq!(at_target(&rows, 40.0, t).winner(), Some("mesh"));
+        let alone = at_target(&rows, 50.0, t);
+        assert_eq!(alone.winner(), Some("sdf"));
+        assert_eq!(alone.short(), "sdf alone");
+        assert_eq!(alone.to_string(), "only sdf reaches it (`sdf:a`)");
+        assert_eq!(at_target(&rows, 60.0, t), TargetVerdict::Nobody);
+        assert_eq!(at_target(&rows, 60.0, t).winner(), None);
     }
 
     #[test]

@@ -3,19 +3,24 @@
 
 use super::{bytes, opt};
 use crate::results::Row;
-use crate::verdicts::{Timing, backends, matched_accuracy};
+use crate::verdicts::{Clock, Timing, backends, matched_accuracy};
 
 /// The rows of one setting on the Pareto front of median render time (lower better) against
 /// PSNR (higher better): no other row is at least as fast and at least as accurate while
 /// strictly better in one. Sorted by time. Rows without PSNR are left out.
 pub fn pareto_front(rows: &[&Row]) -> Vec<usize> {
+    pareto_front_on(rows, Clock::Wall)
+}
+
+/// [`pareto_front`] with times on `clock` (the run's verdict clock).
+pub fn pareto_front_on(rows: &[&Row], clock: Clock) -> Vec<usize> {
     let mut idx: Vec<usize> = (0..rows.len())
         .filter(|&i| rows[i].psnr_db.is_some())
         .collect();
     idx.sort_by(|&a, &b| {
-        rows[a]
-            .render_ms_median
-            .total_cmp(&rows[b].render_ms_median)
+        clock
+            .median_ms(rows[a])
+            .total_cmp(&clock.median_ms(rows[b]))
             .then(
                 rows[b]
                     .psnr_db

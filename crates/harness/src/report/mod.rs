@@ -8,11 +8,11 @@ mod plots;
 mod summary;
 
 pub(crate) use analysis::label;
-pub use analysis::{pareto_front, verdict};
+pub use analysis::{pareto_front, pareto_front_on, verdict};
 pub use format::{bytes, md_escape};
 pub(crate) use format::{opt, opt_bytes, short_num, tail_px};
-pub(crate) use plots::line_plot;
 pub use plots::write_plots;
+pub(crate) use plots::{color_of, line_plot};
 pub(crate) use summary::group_scenes;
 pub use summary::{SUMMARY_COLUMNS, SummaryColumn, summary_markdown};
 
@@ -84,6 +84,28 @@ mod tests {
         assert_eq!(short_num(250.0), "250");
         assert_eq!(short_num(0.125), "0.125");
         assert_eq!(short_num(45_000.0), "45k");
+    }
+
+    #[test]
+    fn log_ticks_are_labelled_sparsely_enough_not_to_overlap() {
+        use super::plots::{log_range, log_tick_label};
+        // Two decades: 1, 2, 3, 5 of each; 6, 7, 8, 9 stay unlabelled grid lines.
+        let (lo, hi) = log_range([150.0, 900.0].into_iter());
+        assert_eq!((lo, hi), (100.0, 1000.0));
+        let labels: Vec<String> = [
+            100.0, 200.0, 300.0, 500.0, 600.0, 700.0, 800.0, 900.0, 1000.0,
+        ]
+        .iter()
+        .map(|&v| log_tick_label(v, lo, hi))
+        .collect();
+        assert_eq!(labels, ["100", "200", "300", "500", "", "", "", "", "1000"]);
+        // Four decades: 1, 2, 5; more: powers of ten only.
+        assert_eq!(log_tick_label(3.0, 1.0, 1e4), "");
+        assert_eq!(log_tick_label(5000.0, 1.0, 1e4), "5000");
+        assert_eq!(log_tick_label(5e5, 1.0, 1e7), "");
+        assert_eq!(log_tick_label(1e6, 1.0, 1e7), "1M");
+        // Floating-point key points near a mantissa still count.
+        assert_eq!(log_tick_label(199.99999999, lo, hi), "200");
     }
 
     #[test]

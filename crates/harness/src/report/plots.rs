@@ -6,9 +6,10 @@ use std::path::Path;
 
 use plotters::prelude::*;
 
-use super::{group_scenes, short_num};
+use super::{group_scenes, pareto_front_on, short_num};
 use crate::backend::BackendId;
 use crate::results::Results;
+use crate::verdicts::Clock;
 use marchmesh_core::Backend;
 
 pub(crate) fn plot_err(e: impl std::fmt::Display) -> String {
@@ -36,6 +37,9 @@ pub(crate) fn color_of(backend: &str) -> RGBColor {
     COLORS[i]
 }
 
+/// A log axis range covering `values`: widened to whole powers of ten, so the axis has a tick
+/// at each power and its 1-2-5 steps (plotters puts log ticks only from the first power of ten
+/// inside the range on).
 pub(crate) fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for v in values.filter(|v| *v > 0.0 && v.is_finite()) {
@@ -45,7 +49,40 @@ pub(crate) fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     if !lo.is_finite() {
         return (0.1, 10.0);
     }
-    (lo / 1.5, hi * 1.5)
+    let lo = 10f64.powf(lo.log10().floor());
+    let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
+    (lo, hi)
+}
+
+/// The label of log-axis tick `v` on an axis from `lo` to `hi`: only the ticks at mantissas
+/// 1, 2, 3 and 5 (up to two decades), 1, 2 and 5 (up to four) or powers of ten (more) carry a
+/// label, so labels never run into each other ("600 700800 9001000"); the other ticks stay
+/// as unlabelled grid lines.
+pub(crate) fn log_tick_label(v: f64, lo: f64, hi: f64) -> String {
+    if v <= 0.0 || !v.is_finite() {
+        return String::new();
+    }
+    let decades = (hi / lo).log10();
+    let mantissa = v / 10f64.powf(v.log10().floor());
+    let m = mantissa.round();
+    let near = (mantissa - m).abs() < 1e-6 * m.max(1.0) || (mantissa - 10.0).abs() < 1e-6;
+    let m = if (mantissa - 10.0).abs() < 1e-6 {
+        1.0
+    } else {
+        m
+    };
+    let allowed: &[f64] = if decades <= 2.01 {
+        &[1.0, 2.0, 3.0, 5.0]
+    } else if decades <= 4.01 {
+        &[1.0, 2.0, 5.0]
+    } else {
+        &[1.0]
+    };
+    if near && allowed.contains(&m) {
+        short_num(v)
+    } else {
+        String::new()
+    }
 }
 
 pub(crate) fn lin_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -88,6 +125,7 @@ pub(crate) fn scatter_by_backend(
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70);
+    let (ly0, ly1) = log_range(points.iter().map(|p| p.2));
     macro_rules! draw {
         ($chart:expr) => {{
             let mut chart = $chart;
@@ -95,8 +133,16 @@ pub(crate) fn scatter_by_backend(
                 .configure_mesh()
                 .x_desc(x_desc)
                 .y_desc(y_desc)
-                .x_label_formatter(&|v| short_num(*v))
-                .y_label_formatter(&|v| short_num(*v))
+                .x_labels(100)
+                .y_labels(if y_log { 100 } else { 10 })
+                .x_label_formatter(&|v| log_tick_label(*v, x0, x1))
+                .y_label_formatter(&|v| {
+                    if y_log {
+                        log_tick_label(*v, ly0, ly1)
+                    } else {
+                        short_num(*v)
+                    }
+                })
                 .draw()
                 .map_err(plot_err)?;
             for b in &backends {
@@ -121,10 +167,9 @@ pub(crate) fn scatter_by_backend(
         }};
     }
     if y_log {
-        let (y0, y1) = log_range(points.iter().map(|p| p.2));
         draw!(
             builder
-                .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+                .build_cartesian_2d((x0..x1).log_scale(), (ly0..ly1).log_scale())
                 .map_err(plot_err)?
         );
     } else {
@@ -172,6 +217,8 @@ pub(crate) fn line_plot(
         .fold(0.0f64, f64::max)
         .max(1e-9)
         * 1.1;
+    let xs = || series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
+    let (lx0, lx1) = log_range(xs());
     let mut builder = ChartBuilder::on(&root);
     builder
         .caption(title, ("sans-serif", 18))
@@ -185,7 +232,14 @@ pub(crate) fn line_plot(
                 .configure_mesh()
                 .x_desc(x_desc)
                 .y_desc(y_desc)
-                .x_label_formatter(&|v| short_num(*v))
+                .x_labels(if log_x { 100 } else { 10 })
+                .x_label_formatter(&|v| {
+                    if log_x {
+                        log_tick_label(*v, lx0, lx1)
+                    } else {
+                        short_num(*v)
+                    }
+                })
                 .draw()
                 .map_err(plot_err)?;
             for (i, (name, pts)) in series.iter().enumerate() {
@@ -213,12 +267,10 @@ pub(crate) fn line_plot(
                 .map_err(plot_err)?;
         }};
     }
-    let xs = || series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
     if log_x {
-        let (x0, x1) = log_range(xs());
         draw!(
             builder
-                .build_cartesian_2d((x0..x1).log_scale(), 0.0..y1)
+                .build_cartesian_2d((lx0..lx1).log_scale(), 0.0..y1)
                 .map_err(plot_err)?,
             |x: f64| x > 0.0
         );
@@ -236,6 +288,116 @@ pub(crate) fn line_plot(
     publish_svg(path, &svg)
 }
 
+/// Render time (on the run's verdict `clock`, log axis, with each median's 95% CI as a bar)
+/// against PSNR for the rows of one scene: each backend's Pareto front (no faster row of the
+/// backend is at least as accurate) as a line through its points, dominated configurations as
+/// faint hollow points, every point labelled with its quality level. Rows without PSNR are
+/// left out.
+///
+/// Errors: the SVG cannot be written.
+pub(crate) fn time_vs_accuracy(
+    path: &Path,
+    title: &str,
+    clock: Clock,
+    rows: &[&crate::results::Row],
+) -> Result<(), String> {
+    let rows: Vec<&crate::results::Row> = rows
+        .iter()
+        .copied()
+        .filter(|r| r.psnr_db.is_some())
+        .collect();
+    let mut svg = String::new();
+    let root = SVGBackend::with_string(&mut svg, (720, 480)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let (x0, x1) = log_range(rows.iter().flat_map(|r| {
+        let (lo, hi) = clock.ci_ms(r);
+        [clock.median_ms(r), lo, hi]
+    }));
+    let (y0, y1) = lin_range(rows.iter().filter_map(|r| r.psnr_db));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 18))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d((x0..x1).log_scale(), y0..y1)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(format!(
+            "median render time, ms, {} clock (log); bars: 95% CI",
+            clock.name()
+        ))
+        .y_desc("PSNR vs reference, dB")
+        .x_labels(100)
+        .x_label_formatter(&|v| log_tick_label(*v, x0, x1))
+        .y_label_formatter(&|v| short_num(*v))
+        .draw()
+        .map_err(plot_err)?;
+    let backends = crate::verdicts::backends(rows.iter().copied());
+    for b in &backends {
+        let c = color_of(b);
+        let own: Vec<&crate::results::Row> =
+            rows.iter().copied().filter(|r| &r.backend == b).collect();
+        let front = pareto_front_on(&own, clock);
+        let at = |r: &crate::results::Row| (clock.median_ms(r), r.psnr_db.unwrap_or(0.0));
+        // The CI of each median as a horizontal bar (faint for dominated rows).
+        chart
+            .draw_series(own.iter().enumerate().map(|(i, r)| {
+                let (lo, hi) = clock.ci_ms(r);
+                let (x, y) = at(r);
+                let alpha = if front.contains(&i) { 0.8 } else { 0.25 };
+                PathElement::new(
+                    vec![(lo.min(x), y), (hi.max(x), y)],
+                    c.mix(alpha).stroke_width(1),
+                )
+            }))
+            .map_err(plot_err)?;
+        chart
+            .draw_series(LineSeries::new(
+                front.iter().map(|&i| at(own[i])),
+                ShapeStyle::from(&c).stroke_width(2),
+            ))
+            .map_err(plot_err)?
+            .label(format!("{b}: Pareto front (hollow: dominated)"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c.stroke_width(2)));
+        for (i, r) in own.iter().enumerate() {
+            let on_front = front.contains(&i);
+            let style = if on_front {
+                c.filled()
+            } else {
+                c.mix(0.35).stroke_width(1)
+            };
+            let text_color = if on_front {
+                BLACK.mix(0.9)
+            } else {
+                BLACK.mix(0.45)
+            };
+            chart
+                .draw_series(std::iter::once(
+                    EmptyElement::at(at(r))
+                        + Circle::new((0, 0), 4, style)
+                        + Text::new(
+                            r.quality.clone(),
+                            (6, -12),
+                            ("sans-serif", 11).into_font().color(&text_color),
+                        ),
+                ))
+                .map_err(plot_err)?;
+        }
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    drop(chart);
+    drop(root);
+    publish_svg(path, &svg)
+}
+
 /// Writes the plots into `dir` (created), returning the file names. A plot without data is
 /// not written.
 pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
@@ -244,23 +406,15 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
     let slug = crate::bench::slug;
     // Time vs error per (group, scene).
     let scenes = group_scenes(res);
+    let clock = Clock::for_run(res);
     for ((g, sc), rows) in &scenes {
-        let pts: Vec<(String, f64, f64)> = rows
-            .iter()
-            .filter_map(|r| {
-                r.psnr_db
-                    .map(|p| (r.backend.clone(), r.render_ms_median, p))
-            })
-            .collect();
-        if !pts.is_empty() {
+        if rows.iter().any(|r| r.psnr_db.is_some()) {
             let name = format!("time_vs_error_{}_{}.svg", slug(g), slug(sc));
-            scatter_by_backend(
+            time_vs_accuracy(
                 &dir.join(&name),
                 &format!("{g}/{sc}: render time vs accuracy"),
-                "median render time, ms (log)",
-                "PSNR vs reference, dB",
-                &pts,
-                false,
+                clock,
+                rows,
             )?;
             written.push(name);
         }

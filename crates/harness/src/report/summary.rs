@@ -1,7 +1,7 @@
 //! `summary.md`: provenance, the verdict clock, headlines, the per-configuration table
 //! ([`SUMMARY_COLUMNS`]) and each setting's Pareto front and verdict.
 
-use super::{bytes, label, opt, opt_bytes, pareto_front, tail_px, verdict};
+use super::{bytes, label, opt, opt_bytes, pareto_front_on, tail_px, verdict};
 use crate::results::{Results, Row};
 use crate::verdicts::{Clock, HEADLINE_MIN_PSNR_DB, Timing, by_setting, headlines};
 use std::collections::BTreeMap;
@@ -63,6 +63,15 @@ pub fn summary_markdown(res: &Results) -> String {
     if !res.description.is_empty() {
         let _ = writeln!(s, "{}\n", res.description);
     }
+    let chart = crate::decision::DecisionChart::of_run(res);
+    if !chart.is_empty() {
+        let _ = writeln!(
+            s,
+            "## Answer\n\nPer scene and accuracy target, the fastest backend among the configurations reaching the target (PSNR against the exact reference), with the runner-up's time over the winner's and its 95% confidence interval (*medians*: the two were not timed together, the ratio is of medians). *No clear winner*: the interval includes 1. *Alone*: no other backend reaches the target. Each backend's fastest configuration reaching a target is named under *Headlines* and per scene below.\n\n{}",
+            chart.markdown()
+        );
+    }
+    let _ = writeln!(s, "## Method\n");
     let _ = writeln!(
         s,
         "| date (UTC) | CPU | logical cores | rustc | target | profile | commit | version |\n|---|---|---|---|---|---|---|---|\n| {} | {} | {} | {} | {} | {} | {}{} | {} |\n",
@@ -210,7 +219,7 @@ pub fn summary_markdown(res: &Results) -> String {
                     "Ground truth: the exact reference backend, build {b:.2} ms, one render {t:.2} ms (all cores).\n"
                 );
             }
-            let front = pareto_front(&set);
+            let front = pareto_front_on(&set, timing.clock);
             if front.is_empty() {
                 let _ = writeln!(s, "No accuracy measured: no Pareto front.\n");
             } else {
@@ -220,14 +229,15 @@ pub fn summary_markdown(res: &Results) -> String {
                         format!(
                             "{} ({:.2} ms, {:.1} dB)",
                             label(set[i]),
-                            set[i].render_ms_median,
+                            timing.clock.median_ms(set[i]),
                             set[i].psnr_db.unwrap_or(f64::NAN)
                         )
                     })
                     .collect();
                 let _ = writeln!(
                     s,
-                    "Pareto front (render time vs PSNR, fastest first): {}.\n",
+                    "Pareto front ({} time vs PSNR, fastest first): {}.\n",
+                    timing.clock.name(),
                     parts.join(" -> ")
                 );
             }
