@@ -391,7 +391,11 @@ impl Cells {
         max_error: f64,
     ) -> Option<Cells> {
         let depth = depth.min(8);
-        let max_error = if max_error.is_finite() { max_error.max(0.0) } else { 0.0 };
+        let max_error = if max_error.is_finite() {
+            max_error.max(0.0)
+        } else {
+            0.0
+        };
         if !(bounds.0.is_finite() && bounds.1.is_finite() && pad > 0.0)
             || prog
                 .instrs

@@ -194,10 +194,13 @@ impl DecisionChart {
                     TargetVerdict::Contest(k) if k.decisive => {
                         (format!("{} {:.2}x", k.faster, k.ratio), "#ffffff")
                     }
-                    TargetVerdict::Contest(k) => {
-                        (format!("no clear winner ({:.2}x)", k.ratio), "rgb(34,34,34)")
+                    TargetVerdict::Contest(k) => (
+                        format!("no clear winner ({:.2}x)", k.ratio),
+                        "rgb(34,34,34)",
+                    ),
+                    TargetVerdict::Alone { backend, .. } => {
+                        (format!("{backend} alone"), "rgb(34,34,34)")
                     }
-                    TargetVerdict::Alone { backend, .. } => (format!("{backend} alone"), "rgb(34,34,34)"),
                     TargetVerdict::Nobody => ("none reaches it".to_string(), "rgb(136,136,136)"),
                 };
                 let _ = write!(

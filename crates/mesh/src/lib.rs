@@ -48,11 +48,11 @@ use obvhs::ray::Ray as ObRay;
 use blas::{Blas, BlasHit, BlasInput, Tree};
 use build::{Placement, ShapeKey};
 
+pub use extract::MAX_SURFACE_RESOLUTION;
 pub use options::{
     BUILD_BYTES_PER_TRIANGLE, BuildQuality, BvhKind, Extraction, MAX_SEGMENTS_PER_TURN,
     MAX_TESS_LEVEL, MeshOptions, MeshPreset, Tessellation,
 };
-pub use extract::MAX_SURFACE_RESOLUTION;
 pub use settings::MeshBackend;
 use tessellate::{Detail, LocalMesh, ScreenBudget};
 
@@ -615,12 +615,7 @@ impl ShapeInputs<'_> {
             cells.saturating_mul(EXTRACTION_BYTES_PER_CELL),
             false,
             &node.json_path,
-            || {
-                format!(
-                    "a surface-extraction grid of {}^3 cells",
-                    resolution
-                )
-            },
+            || format!("a surface-extraction grid of {}^3 cells", resolution),
             EXTRACTION_KNOB,
         )?;
         let mesh = extract::extract(node, local, resolution, &field_options)?;

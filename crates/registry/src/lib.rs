@@ -558,7 +558,11 @@ mod tests {
                 o.build_quality(),
                 o.tessellation().expect("consistent"),
             ),
-            (o.extraction().expect("consistent"), o.packets(), o.instancing()),
+            (
+                o.extraction().expect("consistent"),
+                o.packets(),
+                o.instancing(),
+            ),
             (
                 o.max_instances(),
                 o.max_segments_per_turn(),
