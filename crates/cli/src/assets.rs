@@ -93,7 +93,9 @@ pub fn scene_file(arg: &Path) -> Result<PathBuf> {
 /// suites); the built-in copy cannot be extracted.
 pub fn suite_file(arg: &str) -> Result<PathBuf> {
     let path = marchmesh_harness::suite::locate(arg, root)?;
-    if path.is_file() {
+    // Anything that exists (a regular file, or a FIFO or device the suite loader refuses
+    // with its own message without opening it for reading) is the user's file.
+    if path.symlink_metadata().is_ok() {
         return Ok(path);
     }
     if is_bare_name(Path::new(arg)) {
@@ -102,8 +104,12 @@ pub fn suite_file(arg: &str) -> Result<PathBuf> {
             suite_names().join(", ")
         );
     }
+    let reason = match path.metadata() {
+        Err(e) => e.to_string(),
+        Ok(_) => "not found".into(),
+    };
     anyhow::bail!(
-        "suite file {arg} does not exist; built-in suites by name: {}",
+        "suite file {arg}: {reason}; built-in suites by name: {}",
         suite_names().join(", ")
     )
 }

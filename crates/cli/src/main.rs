@@ -335,18 +335,6 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
         };
         match marchmesh_scene::load(&p) {
             Ok(s) => {
-                let mut nodes = 0;
-                s.visit_nodes(|_| nodes += 1);
-                say(format_args!(
-                    "{}: ok: {}x{} camera, {} lights, {} objects ({} nodes), {} meshes",
-                    p.display(),
-                    s.camera.width,
-                    s.camera.height,
-                    s.lights.len(),
-                    s.objects.len(),
-                    nodes,
-                    s.mesh_paths().len()
-                ));
                 let mut problems: Vec<String> = s
                     .mesh_paths()
                     .iter()
@@ -363,7 +351,21 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
                 ) {
                     problems.push(e.to_string());
                 }
-                if !problems.is_empty() {
+                if problems.is_empty() {
+                    let mut nodes = 0;
+                    s.visit_nodes(|_| nodes += 1);
+                    say(format_args!(
+                        "{}: ok: {}x{} camera, {} lights, {} objects ({} nodes), {} meshes",
+                        p.display(),
+                        s.camera.width,
+                        s.camera.height,
+                        s.lights.len(),
+                        s.objects.len(),
+                        nodes,
+                        s.mesh_paths().len()
+                    ));
+                } else {
+                    // Never "ok" beside a problem: a scene that cannot render is invalid.
                     failed += 1;
                     for m in problems {
                         eprintln!("{}: {m}", p.display());
@@ -373,8 +375,8 @@ fn validate(paths: &[PathBuf]) -> Result<()> {
             Err(e) => {
                 failed += 1;
                 eprintln!("{e}");
-                if matches!(e, marchmesh_scene::SceneError::Parse { .. }) {
-                    for more in further_problems(&p) {
+                if let marchmesh_scene::SceneError::Parse { json_path, .. } = &e {
+                    for more in further_problems(&p, json_path) {
                         eprintln!("{more}");
                     }
                 }
@@ -394,8 +396,10 @@ const MAX_PROBLEMS: usize = 64;
 /// value, so each is taken out of the JSON (by its JSON path) and the rest parsed again, until
 /// the file parses (then its validation problems follow) or a problem cannot be taken out (a
 /// missing field, malformed JSON). Line numbers are those of the first error only: the later
-/// ones are found in the edited document, so they are given by JSON path.
-fn further_problems(path: &Path) -> Vec<String> {
+/// ones are found in the edited document, so they are given by JSON path. `first_path` is the
+/// first error's JSON path, not repeated (the edited document's keys are in sorted order, so
+/// it need not come first there).
+fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
     let Ok(bytes) =
         marchmesh_safeio::read_regular_within(path, marchmesh_scene::MAX_SCENE_FILE_BYTES)
     else {
@@ -407,7 +411,7 @@ fn further_problems(path: &Path) -> Vec<String> {
     let name = path.display().to_string();
     let base = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
-    let mut first = true;
+    let mut first_seen = false;
     while out.len() < MAX_PROBLEMS {
         let text = doc.to_string();
         match marchmesh_scene::parse_scene(&text, &name, base) {
@@ -415,10 +419,11 @@ fn further_problems(path: &Path) -> Vec<String> {
             Err(marchmesh_scene::SceneError::Parse {
                 json_path, message, ..
             }) => {
-                if !first {
+                if first_seen || json_path != first_path {
                     out.push(format!("{name}: at `{json_path}`: {message}"));
+                } else {
+                    first_seen = true;
                 }
-                first = false;
                 if message.starts_with("missing field") || !remove_at(&mut doc, &json_path) {
                     break;
                 }

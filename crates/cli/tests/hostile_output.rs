@@ -204,6 +204,11 @@ fn item16_validate_fails_on_missing_environment_maps_and_meshes() {
         stderr(&o)
     );
     assert!(stderr(&o).contains("nope.obj"), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        !out.contains(": ok"),
+        "ok printed beside the problems: {out}"
+    );
 }
 
 #[test]

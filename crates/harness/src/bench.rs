@@ -151,13 +151,18 @@ pub fn portable_scene_path(path: &Path) -> String {
 /// warmed up (the rest is its timed rounds).
 pub const PREPARED_FRACTION: f64 = 0.5;
 
-/// The remaining time of a run from how far its configurations are ([`Progress::advanced`]):
-/// the time so far per unit of work done, times the work left. It moves with every timed
-/// round, so it is meaningful from the first prepared configuration on, and the reference
-/// renders and builds of the first block are spread over every configuration.
+/// The remaining time of a run from how far its configurations are ([`Progress::advanced`]).
+/// Preparing a configuration (builds, reference renders, the warm-up: the first
+/// [`PREPARED_FRACTION`] of its work) and timing it (the rest) cost differently, so the
+/// elapsed times seen at each query are fitted as `a * prepared + b * timed` work (least
+/// squares, `a, b >= 0`) and the work left is priced at those rates; with too few queries to
+/// tell them apart, at the mean rate so far. Meaningful from the first prepared
+/// configuration on.
 #[derive(Debug, Clone)]
 pub struct Eta {
     fractions: Vec<f64>,
+    /// `(elapsed s, prepared work, timed work)` at each query.
+    samples: std::cell::RefCell<Vec<(f64, f64, f64)>>,
 }
 
 impl Eta {
@@ -165,6 +170,7 @@ impl Eta {
     pub fn new(total: usize) -> Self {
         Self {
             fractions: vec![0.0; total],
+            samples: std::cell::RefCell::new(Vec::new()),
         }
     }
 
@@ -186,12 +192,61 @@ impl Eta {
         self.fractions.len()
     }
 
+    /// Prepared and timed work done, in configurations.
+    fn split(&self) -> (f64, f64) {
+        self.fractions.iter().fold((0.0, 0.0), |(p, t), f| {
+            (
+                p + f.min(PREPARED_FRACTION),
+                t + (f - PREPARED_FRACTION).max(0.0),
+            )
+        })
+    }
+
     /// Seconds left after `elapsed_s` seconds; `None` before any work is done.
     pub fn remaining_s(&self, elapsed_s: f64) -> Option<f64> {
         let done = self.done();
-        (done > 1e-9).then(|| elapsed_s * (self.total() as f64 - done).max(0.0) / done)
+        if done <= 1e-9 {
+            return None;
+        }
+        let (prepared, timed) = self.split();
+        let total = self.total() as f64;
+        let (left_p, left_t) = (
+            (total * PREPARED_FRACTION - prepared).max(0.0),
+            (total * (1.0 - PREPARED_FRACTION) - timed).max(0.0),
+        );
+        let mean = elapsed_s * (total - done).max(0.0) / done;
+        let mut samples = self.samples.borrow_mut();
+        // One sample per state of the work: the first query after it moved.
+        let moved = samples
+            .last()
+            .is_none_or(|&(_, p, q)| (p, q) != (prepared, timed));
+        if moved && elapsed_s.is_finite() && samples.len() < MAX_ETA_SAMPLES {
+            samples.push((elapsed_s, prepared, timed));
+        }
+        // Normal equations of t = a p + b q.
+        let (mut spp, mut spq, mut sqq, mut stp, mut stq) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for &(t, p, q) in samples.iter() {
+            spp += p * p;
+            spq += p * q;
+            sqq += q * q;
+            stp += t * p;
+            stq += t * q;
+        }
+        let det = spp * sqq - spq * spq;
+        if samples.len() < 4 || det <= 1e-9 * spp * sqq {
+            return Some(mean);
+        }
+        let a = (stp * sqq - stq * spq) / det;
+        let b = (stq * spp - stp * spq) / det;
+        if !(a.is_finite() && b.is_finite()) || a < 0.0 || b < 0.0 {
+            return Some(mean);
+        }
+        Some(a * left_p + b * left_t)
     }
 }
+
+/// Queries [`Eta`] keeps for its fit (a run's progress bar asks a few times a second).
+const MAX_ETA_SAMPLES: usize = 100_000;
 
 /// A progress sink that ignores everything.
 #[derive(Debug, Default)]

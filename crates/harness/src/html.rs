@@ -744,7 +744,10 @@ mod tests {
         assert_eq!(html.matches("<option ").count(), rows.len());
         assert!(html.contains("<optgroup label=\"g / s\">"));
         assert!(html.contains("<optgroup label=\"g / t\">"));
-        assert!(html.contains("<a href=\"#section-2\">g / s</a>"), "{html}");
+        assert!(
+            html.contains("<a href=\"#section-") && html.contains("\">g / s</a>"),
+            "{html}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 
@@ -780,7 +783,8 @@ mod tests {
         assert!(html.contains("<img src=\"plots/zz%20evil.svg\" alt=\"zz evil.svg\">"));
         assert!(html.contains("<img src=\"plots/zz%20handler.svg\""));
         assert!(!html.contains("alert(1)"));
-        assert_eq!(html.matches("<svg").count(), names.len());
+        // The plots, and the decision chart at the top.
+        assert_eq!(html.matches("<svg").count(), names.len() + 1);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -582,11 +582,16 @@ impl ShapeInputs<'_> {
                 size / (cell_per_distance * distance)
             })
             .fold(0.0f64, f64::max);
+        // Never coarser than 128 / pixels cells a side (the fixed grids the presets used
+        // before: 64, 128 and 256): a cell small on screen can still be large against the
+        // surface's curvature, which the normals show.
+        let floor =
+            (SCREEN_CELL_FLOOR / pixels).clamp(8.0, f64::from(extract::MAX_SURFACE_RESOLUTION));
         let max = f64::from(extract::MAX_SURFACE_RESOLUTION);
         Ok(if finest.is_nan() {
             extract::MAX_SURFACE_RESOLUTION
         } else {
-            finest.ceil().clamp(8.0, max) as u32
+            finest.max(floor).ceil().clamp(8.0, max) as u32
         })
     }
 
@@ -727,6 +732,10 @@ impl ShapeInputs<'_> {
 /// (surface nets emit two triangles per grid face the surface crosses: `2 pi res^2`). A
 /// surface with more area in the same box (many small parts) gives more; the exact count is
 /// charged after each extraction.
+/// [`Extraction::ScreenCell`] grids have at least this many cells a side divided by the
+/// cell's pixels.
+const SCREEN_CELL_FLOOR: f64 = 128.0;
+
 /// What to change when extraction is over the memory limit.
 const EXTRACTION_KNOB: &str = "the extraction grid (--opt surface_px or surface_res)";
 

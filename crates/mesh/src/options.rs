@@ -76,8 +76,8 @@ impl BuildQuality {
 pub enum Extraction {
     /// An extraction cell, projected on screen from the object's nearest distance to the
     /// camera, spans at most `pixels` pixels: cell `pixels * camera.pixel_angle() * distance`
-    /// (the grid clamped to `8..=`[`crate::MAX_SURFACE_RESOLUTION`] cells on the longest
-    /// side). Features thinner than a cell can vanish, so this is what keeps blended content
+    /// (the grid at least `128 / pixels` and at most [`crate::MAX_SURFACE_RESOLUTION`]
+    /// cells on the longest side). Features thinner than a cell can vanish, so this is what keeps blended content
     /// right on screen. `pixels` must be > 0.
     ScreenCell {
         /// Cell size on screen in pixels (e.g. 1).
