@@ -267,28 +267,47 @@ fn deviation(whole: &Field, cells: &Field, points: &[DVec3]) -> f64 {
 }
 
 #[test]
-fn a_cut_fold_stays_within_its_error_and_keeps_few_children() {
-    // The molecule's approach chains: an exact pruner keeps every sphere whose blend still
-    // reaches a cell; cutting the fold where its start changes the value by less than the
-    // error keeps far fewer, and the values stay within the error.
-    let m = molecule(600, 11, 0.026);
-    let whole = compile(&m);
-    let mut exact = compile(&m);
-    let exact_stats = exact.build_cells(5, 0.0).expect("cells");
-    let mut cut = compile(&m);
-    let rel = 1e-7;
-    let cut_stats = cut.build_cells(5, rel).expect("cells");
-    let (lo, hi) = whole.bounds().expect("bounded");
-    let max_error = rel * (hi - lo).max_element();
-    let worst = deviation(&whole, &cut, &probes(24));
-    assert!(worst <= max_error, "deviation {worst} over {max_error}");
-    let mean = |s: marchmesh_field::prune::CellStats| {
-        s.program_nodes as f64 / (s.program_cells - s.shared_cells).max(1) as f64
-    };
-    assert!(
-        mean(cut_stats) * 2.0 < mean(exact_stats),
-        "cut {cut_stats:?} against exact {exact_stats:?}"
+fn a_cut_fold_drops_the_start_of_an_approach_within_its_error() {
+    // Spheres approaching the origin in steps of 0.06, below a blend radius of 0.1: each
+    // child changes the running blend, so the exact pruner keeps all of them; but each lies
+    // below the prefix, which then reaches the result only through a derivative of about
+    // 0.23, so cutting the first half changes the value by far less than 1e-6.
+    let k = 0.1;
+    let children = (0..17)
+        .map(|i| sphere(0.05, DVec3::new(1.0 - 0.06 * f64::from(i), 0.0, 0.0)))
+        .collect();
+    let n = node(
+        NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children,
+            blend_radius: k,
+        },
+        DVec3::ZERO,
     );
+    let prog = whole_program(&n);
+    let (centre, r) = (DVec3::ZERO, 1e-4);
+    let exact = prune(&prog, &[], centre, r, 0.0);
+    let cut = prune(&prog, &[], centre, r, 1e-6);
+    assert_eq!(
+        exact.program.instrs.len(),
+        prog.instrs.len(),
+        "exact keeps the chain"
+    );
+    assert!(
+        cut.program.instrs.len() * 3 < exact.program.instrs.len() * 2,
+        "cut keeps {} of {} nodes",
+        cut.program.instrs.len(),
+        exact.program.instrs.len()
+    );
+    for q in [
+        centre,
+        DVec3::new(5e-5, 0.0, 0.0),
+        DVec3::new(0.0, -7e-5, 3e-5),
+    ] {
+        let (w, c) = (eval64(&prog, q), eval64(&cut.program, q));
+        assert!((w - c).abs() <= 1e-6, "{q}: cut {c}, whole {w}");
+        assert!(cut.lo <= w && w <= cut.hi);
+    }
 }
 
 proptest! {

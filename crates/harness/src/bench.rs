@@ -1124,8 +1124,10 @@ mod tests {
         let first_block = per_block + 3 * per_block;
         for (at, est, truth) in &events[first_block - 1..events.len() - 1] {
             let err = (est - truth).abs() / truth.max(1.0);
+            // Within 30%, or 10 s near the end of the run (where the last block's reference
+            // render, priced at the mean preparation rate, is a large share of what is left).
             assert!(
-                err <= 0.3 || (est - truth).abs() < 5.0,
+                err <= 0.3 || (est - truth).abs() < 10.0,
                 "at {at} s: estimated {est:.0} s left, truly {truth:.0} s"
             );
         }
