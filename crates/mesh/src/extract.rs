@@ -80,7 +80,7 @@ pub(crate) fn extract(
 /// the mesher. Triangles come out counter-clockwise seen from outside (positive distance).
 /// A closed zero set inside the bounds gives a closed mesh.
 ///
-/// Only the samples near the surface read `distance` (see [`sample_narrow_band`]), so the
+/// Only the samples near the surface read `distance` (see `sample_narrow_band`), so the
 /// cost grows with the surface's area in cells, not the grid's volume.
 pub fn extract_surface(
     distance: impl Fn(DVec3) -> f32 + Sync,

@@ -197,7 +197,7 @@ fn convex_union(pieces: impl IntoIterator<Item = Option<Span>>) -> Option<Span> 
 }
 
 /// The capsule of radius `r` around the y-axis segment `|y| <= hh`: the union of the
-/// capped cylinder over the segment and the spheres at its ends (convex: [`convex_union`]).
+/// capped cylinder over the segment and the spheres at its ends (convex: `convex_union`).
 pub fn capsule(o: DVec3, d: DVec3, r: f64, hh: f64) -> Option<Span> {
     let end = |y: f64| {
         let c = DVec3::new(0.0, y, 0.0);
@@ -210,7 +210,7 @@ pub fn capsule(o: DVec3, d: DVec3, r: f64, hh: f64) -> Option<Span> {
 /// The box of half extents `half` with edges and corners rounded by radius `r`
 /// (`0 <= r <= min(half)`): the inner box `half - r` grown by `r`, i.e. the union of the
 /// inner box grown along each axis alone, a cylinder along each of its 12 edges and a sphere
-/// at each of its 8 corners (convex: [`convex_union`]). `r = 0` is the plain box.
+/// at each of its 8 corners (convex: `convex_union`). `r = 0` is the plain box.
 pub fn rounded_box(o: DVec3, d: DVec3, half: DVec3, r: f64) -> Option<Span> {
     if r <= 0.0 {
         return aabox(o, d, half);
