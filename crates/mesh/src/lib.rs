@@ -582,9 +582,8 @@ impl ShapeInputs<'_> {
                 size / (cell_per_distance * distance)
             })
             .fold(0.0f64, f64::max);
-        // Never coarser than 128 / pixels cells a side (the fixed grids the presets used
-        // before: 64, 128 and 256): a cell small on screen can still be large against the
-        // surface's curvature, which the normals show.
+        // Never coarser than 128 / pixels cells a side: a cell small on screen can still be
+        // large against the surface's curvature, which the normals show (decision 0015).
         let floor =
             (SCREEN_CELL_FLOOR / pixels).clamp(8.0, f64::from(extract::MAX_SURFACE_RESOLUTION));
         let max = f64::from(extract::MAX_SURFACE_RESOLUTION);

@@ -56,7 +56,7 @@ pub(crate) fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 
 /// The label of log-axis tick `v` on an axis from `lo` to `hi`: only the ticks at mantissas
 /// 1, 2, 3 and 5 (up to two decades), 1, 2 and 5 (up to four) or powers of ten (more) carry a
-/// label, so labels never run into each other ("600 700800 9001000"); the other ticks stay
+/// label, so labels never run into each other; the other ticks stay
 /// as unlabelled grid lines.
 pub(crate) fn log_tick_label(v: f64, lo: f64, hi: f64) -> String {
     if v <= 0.0 || !v.is_finite() {
