@@ -298,16 +298,15 @@ impl MeshResolver for Meshes<'_> {
             if needed <= limit {
                 return Ok(());
             }
-            Err(format!(
-                "loading and baking it would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles, {} MiB for its grid, {} MiB of grids already baked), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
-                needed.div_ceil(1 << 20),
-                b.file_bytes.div_ceil(1 << 20),
-                b.records,
-                b.vertices,
-                b.triangles,
-                grid.div_ceil(1 << 20),
-                held.div_ceil(1 << 20),
-                limit >> 20
+            Err(b.over_limit(
+                "loading and baking it",
+                needed,
+                &format!(
+                    ", {} MiB for its grid, {} MiB of grids already baked",
+                    grid.div_ceil(1 << 20),
+                    held.div_ceil(1 << 20)
+                ),
+                limit,
             ))
         };
         let mesh = marchmesh_meshio::load_mesh_checked(path, &mut check).map_err(|e| match e {

@@ -187,6 +187,27 @@ impl LoadBound {
     /// the kept triangles and the duplicate set.
     pub const BYTES_PER_TRIANGLE: u64 = 128;
 
+    /// The message refusing a load over `limit_bytes`: `doing` (e.g. "loading it") would
+    /// take `needed_bytes`, the load's own counts, then `extra` (what the caller builds from
+    /// the mesh and holds already, starting with its separator).
+    pub fn over_limit(
+        &self,
+        doing: &str,
+        needed_bytes: u64,
+        extra: &str,
+        limit_bytes: u64,
+    ) -> String {
+        format!(
+            "{doing} would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles{extra}), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
+            needed_bytes.div_ceil(1 << 20),
+            self.file_bytes.div_ceil(1 << 20),
+            self.records,
+            self.vertices,
+            self.triangles,
+            limit_bytes >> 20
+        )
+    }
+
     /// The bound in bytes (saturating).
     pub fn load_bytes(&self) -> u64 {
         self.file_bytes

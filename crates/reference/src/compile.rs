@@ -80,15 +80,14 @@ impl Compiler<'_> {
             if needed <= limit {
                 return Ok(());
             }
-            Err(format!(
-                "loading it would take about {} MiB ({} MiB of file, {} records, up to {} vertices and {} triangles and their f64 copy with its BVH, {} MiB of meshes already loaded), over the memory limit of {} MiB; raise --memory-limit-mib or use a smaller mesh",
-                needed.div_ceil(1 << 20),
-                b.file_bytes.div_ceil(1 << 20),
-                b.records,
-                b.vertices,
-                b.triangles,
-                held.div_ceil(1 << 20),
-                limit >> 20
+            Err(b.over_limit(
+                "loading it",
+                needed,
+                &format!(
+                    " and their f64 copy with its BVH, {} MiB of meshes already loaded",
+                    held.div_ceil(1 << 20)
+                ),
+                limit,
             ))
         })
     }
