@@ -405,16 +405,26 @@ impl ShapeInputs<'_> {
                 placements.len() as u64
             }
         };
-        let mut extractions: Vec<(&str, u64, u32)> = Vec::new();
-        for (key, placements) in groups {
-            if matches!(key, ShapeKey::Composite(_)) {
-                extractions.push((
+        // Each composite group's extraction grid, computed once (`None` for other groups).
+        let resolutions: Vec<Option<u32>> = groups
+            .iter()
+            .map(|(key, placements)| {
+                matches!(key, ShapeKey::Composite(_))
+                    .then(|| self.extraction_resolution(placements))
+                    .transpose()
+            })
+            .collect::<Result<_, _>>()?;
+        let extractions: Vec<(&str, u64, u32)> = groups
+            .iter()
+            .zip(&resolutions)
+            .filter_map(|((_, placements), res)| {
+                Some((
                     placements[0].node.json_path.as_str(),
                     copies_of(placements),
-                    self.extraction_resolution(placements)?,
-                ));
-            }
-        }
+                    (*res)?,
+                ))
+            })
+            .collect();
         if let Some((first, ..)) = extractions.first() {
             let bytes = extractions
                 .iter()
@@ -434,7 +444,7 @@ impl ShapeInputs<'_> {
                 ));
             }
         }
-        for (key, placements) in groups {
+        for ((key, placements), resolution) in groups.iter().zip(resolutions) {
             let node = placements[0].node;
             let copies = copies_of(placements);
             let mesh = match key {
@@ -442,7 +452,7 @@ impl ShapeInputs<'_> {
                     Some(self.tessellate(node, placements, copies, &mut budget, report)?)
                 }
                 ShapeKey::Composite(_) => {
-                    let resolution = self.extraction_resolution(placements)?;
+                    let resolution = resolution.unwrap_or(MAX_SURFACE_RESOLUTION);
                     Some(self.extract(
                         node,
                         resolution,
