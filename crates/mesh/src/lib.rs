@@ -1417,6 +1417,70 @@ mod tests {
     use super::*;
 
     #[test]
+    fn bad_extraction_options_are_refused_naming_the_key() {
+        for (options, key) in [
+            (
+                MeshOptions {
+                    surface_px: Some(0.0),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_px",
+            ),
+            (
+                MeshOptions {
+                    surface_px: Some(-1.0),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_px",
+            ),
+            (
+                MeshOptions {
+                    surface_px: Some(f64::NAN),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_px",
+            ),
+            (
+                MeshOptions {
+                    surface_px: Some(f64::INFINITY),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_px",
+            ),
+            (
+                MeshOptions {
+                    surface_res: Some(4),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_res",
+            ),
+            (
+                MeshOptions {
+                    surface_res: Some(MAX_SURFACE_RESOLUTION + 1),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_res",
+            ),
+            (
+                MeshOptions {
+                    surface_px: Some(1.0),
+                    surface_res: Some(64),
+                    ..MeshOptions::DEFAULT
+                },
+                "surface_px, surface_res",
+            ),
+        ] {
+            let e = check_options(&options).expect_err(key).to_string();
+            assert!(e.contains(key), "{options:?}: {e}");
+        }
+        check_options(&MeshOptions {
+            surface_px: Some(0.5),
+            ..MeshOptions::DEFAULT
+        })
+        .expect("valid");
+    }
+
+    #[test]
     fn ob_ray_new_is_bit_identical_to_obvhs_ray_new() {
         let eps = f32::EPSILON;
         let mut values = vec![
