@@ -203,8 +203,11 @@ fn print_ignoring_broken_pipe(text: &str) -> Result<()> {
 }
 
 pub fn bench(args: BenchArgs) -> Result<()> {
+    // Installed before the run folder exists, so an interrupt at any moment after the folder
+    // appears stops the run cleanly and writes what was measured.
+    let stop = stop_flag();
     if let Some(run) = &args.resume {
-        return resume(&args, run);
+        return resume(&args, run, stop);
     }
     // The built-in scenes are needed only for a suite given by name.
     let suite_path = crate::assets::suite_file(&args.suite)?;
@@ -305,7 +308,14 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         images_dir: suite.images.then(|| dir.join("images")),
         ..options
     };
-    measure(&configs, &options, &template, &dir, &Default::default())
+    measure(
+        &configs,
+        &options,
+        &template,
+        &dir,
+        &Default::default(),
+        stop,
+    )
 }
 
 /// Refuses to resume a run whose `results.json` no interrupted run writes (a configuration
@@ -356,7 +366,7 @@ fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
 
 /// `bench --resume RUN`: the configurations RUN's results.json lists as missing, measured
 /// into RUN on top of what it holds.
-fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
+fn resume(args: &BenchArgs, run: &Path, stop: Arc<AtomicBool>) -> Result<()> {
     let json = run.join("results.json");
     let previous = Results::read_json(&json)?;
     if !previous.is_incomplete() {
@@ -442,21 +452,22 @@ fn resume(args: &BenchArgs, run: &Path) -> Result<()> {
         interrupted: false,
         ..template
     };
-    measure(&configs, &options, &template, run, &existing_images)
+    measure(&configs, &options, &template, run, &existing_images, stop)
 }
 
 /// Runs `configs` into the run folder `dir` (checkpointing `results.json` after every
 /// rotation block on top of `template`), writes the report and fails when anything is
 /// missing, failed or not written. Images in `kept` (written by the run being resumed) are
-/// not written again, and that is not an error.
+/// not written again, and that is not an error. `stop` (set by Ctrl-C) ends the run after the
+/// current round.
 fn measure(
     configs: &[bench::Config],
     options: &BenchOptions,
     template: &Results,
     dir: &Path,
     kept: &std::collections::HashSet<PathBuf>,
+    stop: Arc<AtomicBool>,
 ) -> Result<()> {
-    let stop = stop_flag();
     let mut progress = Checkpointing {
         bars: Bars::new(),
         template,
