@@ -237,14 +237,14 @@ impl Field {
 
     /// Distances at eight points under a restriction made by [`Field::restrict_to`] on this
     /// field (same interpreter as [`Field::distance_x8`]; an empty restriction is 1e30).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance_x8(&self, r: &Restricted, p: [Vec3; 8]) -> [f32; 8] {
         self.restricted_distance_lanes(r, V3::from_points(p)).0
     }
 
     /// Distances of eight points given as SoA lanes under a restriction (per lane the same
     /// as [`Field::restricted_distance`]).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
         if r.taped {
             r.tape.eval::<F32x8, false>(p, &self.grids).0
@@ -256,7 +256,7 @@ impl Field {
     /// Distances and materials at eight points under a restriction (per lane the same as
     /// [`Field::restricted_distance_x8`]; materials as [`Field::distance_material_x8`]
     /// reports them).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance_material_x8(
         &self,
         r: &Restricted,
@@ -276,7 +276,7 @@ impl Field {
     /// which at a hit of the bundle is the gradient of the surface hit (its object is kept).
     /// Lanes nearest a mesh grid get NaN. `None` when the restriction has no tape (it has
     /// CSG, repetition or too many leaves) or no lane has a gradient.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_nearest_gradients_x8(
         &self,
         r: &Restricted,
@@ -291,7 +291,7 @@ impl Field {
 
     /// [`Field::segment_step`] under a restriction made by [`Field::restrict_to`] on this
     /// field (only for rays of the restricted bundle).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_segment_step(
         &self,
         r: &Restricted,
@@ -304,7 +304,7 @@ impl Field {
 
     /// [`Field::restricted_segment_step`] on eight lanes (as [`Field::segment_lanes`]);
     /// `None` when the restriction has no tape.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_segment_lanes(
         &self,
         r: &Restricted,
@@ -323,7 +323,7 @@ impl Field {
 
     /// The scalar distance under a restriction (same values per point as
     /// [`Field::restricted_distance_x8`]).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance(&self, r: &Restricted, p: Vec3) -> f32 {
         self.eval::<f32, false>(&r.prog, V3::new(p.x, p.y, p.z)).0
     }

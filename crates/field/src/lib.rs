@@ -31,6 +31,13 @@
 //!
 //! Material: the closest leaf's material for unions; for intersection and subtraction the
 //! material of the child whose value defines the result (the surface there).
+//!
+//! Build cost: the public evaluation entry points ([`Field::distance_lanes`],
+//! [`tape::Tape::eval`], [`program::Program::eval`], ...) are `#[inline]` only in builds
+//! without debug assertions. Inlined, each calling crate (and each of its codegen units)
+//! compiles its own copy of the evaluators, which are `#[inline(always)]` inside; in the
+//! test profile that took minutes of LLVM time per crate. Optimized builds keep the
+//! cross-crate inlining (`docs/decisions/0016-evaluators-compiled-once-in-test-builds.md`).
 
 // Index loops over fixed lanes/axes are the clearest form here and auto-vectorise.
 #![allow(clippy::needless_range_loop)]
@@ -565,7 +572,7 @@ impl Field {
     }
 
     /// Signed distance bound at `p` (f32). 1e30 for an empty field.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance(&self, p: Vec3) -> f32 {
         match &self.cells {
             Some(c) => c.eval::<false>(p, &self.p32, &self.grids).0,
@@ -584,7 +591,7 @@ impl Field {
 
     /// Signed distance bound at `p` in f64 (same formulas as [`Field::distance`]; the whole
     /// program's value in far cells).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_f64(&self, p: DVec3) -> f64 {
         self.eval::<f64, false>(self.p64_at(p), V3::new(p.x, p.y, p.z))
             .0
@@ -594,7 +601,7 @@ impl Field {
     /// a pruned field ([`Field::build_cells`]) and outside its box their bound, elsewhere
     /// [`Field::distance_f64`]. Its sign is the field's everywhere, so sign changes along a
     /// ray are the field's.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_bound_f64(&self, p: DVec3) -> f64 {
         match self.cells.as_ref().and_then(|c| c.far_bound_f64(p)) {
             Some(b) => b,
@@ -604,7 +611,7 @@ impl Field {
 
     /// Distance and the material of the surface defining it (f32; the whole program's
     /// value in far cells, which carry no material).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_material(&self, p: Vec3) -> (f32, MaterialId) {
         match &self.cells {
             Some(c) => c.eval::<true>(p, &self.p32, &self.grids),
@@ -613,7 +620,7 @@ impl Field {
     }
 
     /// Distance and material in f64.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_material_f64(&self, p: DVec3) -> (f64, MaterialId) {
         self.eval::<f64, true>(self.p64_at(p), V3::new(p.x, p.y, p.z))
     }
@@ -623,7 +630,7 @@ impl Field {
     /// see [`program::segment`]): for a distance `d != 0` the field keeps the sign of `d` at
     /// `p + s dir` for every `s` in `[0, step)`. Never below `|d| / |dir|`; 0 when `d` is 0 or
     /// NaN. `len` must be positive (a longer segment gives looser bounds).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn segment_step(&self, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
         // A segment inside one program cell reads the cell's program (the same values
         // along it); any other the whole program.
@@ -649,14 +656,14 @@ impl Field {
 
     /// Distances at eight points evaluated in lockstep (same values as [`Field::distance`]
     /// per lane).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_x8(&self, p: [Vec3; 8]) -> [f32; 8] {
         self.distance_lanes(V3::from_points(p)).0
     }
 
     /// Distances and materials at eight points evaluated in lockstep (per lane the same as
     /// [`Field::distance_material`]).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_material_x8(&self, p: [Vec3; 8]) -> ([f32; 8], [MaterialId; 8]) {
         let p = V3::from_points(p);
         if let Some(c) = &self.cells {
@@ -672,7 +679,7 @@ impl Field {
 
     /// Distances of eight points given as SoA lanes (per lane the same as
     /// [`Field::distance`]).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_lanes(&self, p: V3<F32x8>) -> F32x8 {
         if let Some(c) = &self.cells {
             return c.eval_x8::<false>(p, &self.p32, &self.grids).0;
@@ -693,7 +700,7 @@ impl Field {
     /// [`Field::segment_step`] on eight lanes (points `p`, directions `d`, segment lengths
     /// `len`), per lane the same value and step bit for bit; `None` when the field has no
     /// [`tape`] (the scalar query serves it).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn segment_lanes(&self, p: V3<F32x8>, d: V3<F32x8>, len: F32x8) -> Option<(F32x8, F32x8)> {
         self.tape
             .as_ref()
@@ -707,7 +714,7 @@ impl Field {
     /// derivative, and when the field has no [`tape`] (the interpreter is not instantiated
     /// for dual numbers: its recursion made that instance too costly to compile). Distances
     /// are the same as [`Field::distance_x8`]'s.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_gradient_x8(&self, p: [Vec3; 8]) -> Option<([f32; 8], [Vec3; 8])> {
         if !self.grids.is_empty() {
             return None;
@@ -725,7 +732,7 @@ impl Field {
     /// hit), far cheaper than [`Field::distance_gradient_x8`] on a tape of several leaves
     /// and the same away from ties and bounds. A lane nearest a mesh grid gets NaN (a grid
     /// has no derivative). `None` when the field has no [`tape`] or no lane has a gradient.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn nearest_gradients_x8(&self, p: [Vec3; 8]) -> Option<[Vec3; 8]> {
         let t = self.tape.as_ref()?;
         let g = t.nearest_gradients(V3::from_points(p), &self.grids);
@@ -733,7 +740,7 @@ impl Field {
     }
 
     /// [`Field::nearest_gradients_x8`] at one point (bit for bit a lane's result).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn nearest_gradient(&self, p: Vec3) -> Option<Vec3> {
         Some(self.tape.as_ref()?.nearest_gradient(p, &self.grids))
     }

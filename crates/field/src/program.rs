@@ -290,7 +290,7 @@ impl<S: Scalar> Program<S> {
 
     /// Evaluates the whole program at `p` (root's parent frame): (distance, material); the
     /// material is only tracked when `M` is true (otherwise it is the root's).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn eval<T: Lane<S = S>, const M: bool>(
         &self,
         p: V3<T>,

@@ -652,7 +652,7 @@ impl Cells {
 
     /// Value and material at one point in f32 (`M`: track the material, taken from `whole`
     /// outside program cells).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn eval<const M: bool>(
         &self,
         p: Vec3,

@@ -174,7 +174,7 @@ impl Tape {
     /// The value of the program at `p` (and the material when `M`), bit for bit
     /// [`Program::eval`]'s with the same `grids` (the field's mesh grids, indexed by the
     /// program's [`Leaf::Mesh`] leaves; panics on an index past them, as the interpreter).
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn eval<T: Lane<S = f32>, const M: bool>(
         &self,
         p: V3<T>,
@@ -222,7 +222,7 @@ impl Tape {
     /// the same order; the union's members in the program's order, where [`Tape::eval`]
     /// visits a pair nearer first: a member's skip decides its step). What lockstep bundles
     /// use for their segment-tracing lanes instead of one interpreter call per lane.
-    #[inline]
+    #[cfg_attr(not(debug_assertions), inline)]
     pub fn segment<T: Lane<S = f32>>(
         &self,
         p: V3<T>,
