@@ -105,7 +105,13 @@ impl<S: Scalar> Leaf<S> {
     /// [`Leaf::Triangle`], the grid's value for [`Leaf::Mesh`]) at `q` in its local frame,
     /// before the node's distance scale. Mesh grids are sampled from `grids` (NaN from
     /// [`NoGrids`]; an index past a [`GridList`] panics, a compiler bug).
-    #[inline(always)]
+    ///
+    /// Inlined at every call in optimized builds; one out-of-line copy per instantiation in
+    /// builds with debug assertions, where the evaluators' dozens of inlined copies of this
+    /// match made one function of ~700k lines of LLVM IR and minutes of compile time
+    /// (`docs/decisions/0016-evaluators-compiled-once-in-test-builds.md`).
+    #[cfg_attr(debug_assertions, inline(never))]
+    #[cfg_attr(not(debug_assertions), inline(always))]
     pub(crate) fn distance<T: Lane<S = S>, G: GridSource>(&self, q: V3<T>, grids: G) -> T {
         match self {
             Leaf::Sphere { r } => shapes::sphere(q, T::splat(*r)),
