@@ -62,8 +62,10 @@ pub(crate) fn extract(
             .min(6);
         field.build_cells(depth, PRUNE_MAX_ERROR_REL);
     }
-    Ok(extract_surface(
-        |p| field.distance_bound_f64(p) as f32,
+    // Eight samples of a block row at a time through the field's 8-lane f32 evaluation (the
+    // values the tracer reads; a pruned field answers a row from its cell in one pass).
+    Ok(extract_surface_x8(
+        |p| field.distance_x8(p.map(DVec3::as_vec3)),
         |p| field.distance_material_f64(p).1,
         bounds,
         resolution,
@@ -84,7 +86,19 @@ pub(crate) fn extract(
 /// cost grows with the surface's area in cells, not the grid's volume.
 pub fn extract_surface(
     distance: impl Fn(DVec3) -> f32 + Sync,
-    material_at: impl Fn(DVec3) -> MaterialId,
+    material_at: impl Fn(DVec3) -> MaterialId + Sync,
+    bounds: (DVec3, DVec3),
+    resolution: u32,
+) -> LocalMesh {
+    extract_surface_x8(|p| p.map(&distance), material_at, bounds, resolution)
+}
+
+/// [`extract_surface`] with the field read eight points at a time: `distance_x8` returns
+/// the distances at its eight points (the sampler passes runs of up to eight samples of a
+/// grid row, repeating the last point to fill the lanes).
+pub fn extract_surface_x8(
+    distance_x8: impl Fn([DVec3; 8]) -> [f32; 8] + Sync,
+    material_at: impl Fn(DVec3) -> MaterialId + Sync,
     bounds: (DVec3, DVec3),
     resolution: u32,
 ) -> LocalMesh {
@@ -95,7 +109,7 @@ pub fn extract_surface(
     let origin = lo - DVec3::splat(2.0 * cell);
     let dims = ((extent / cell).ceil().as_uvec3() + glam::UVec3::splat(5)).to_array();
     let shape = RuntimeShape::<u32, 3>::new(dims);
-    let sdf = sample_narrow_band(&distance, origin, cell, dims);
+    let sdf = sample_narrow_band(&distance_x8, origin, cell, dims);
     let mut buffer = SurfaceNetsBuffer::default();
     surface_nets(&sdf, &shape, [0; 3], dims.map(|d| d - 1), &mut buffer);
 
@@ -132,8 +146,9 @@ pub fn extract_surface(
             t.swap(1, 2);
         }
     }
+    // In parallel: one field evaluation per triangle, in the triangles' order.
     let materials = triangles
-        .iter()
+        .par_iter()
         .map(|t| {
             let [a, b, c] = t.map(|i| positions[i as usize]);
             material_at((a + b + c) / 3.0)
@@ -151,6 +166,7 @@ pub fn extract_surface(
 
 /// Samples per axis of a block of [`sample_narrow_band`].
 const BAND_BLOCK: usize = 8;
+const _: () = assert!(BAND_BLOCK == 8, "a block row is one 8-point query");
 
 /// The grid of `dims` samples at `origin + i * cell`, read from `distance` only near the
 /// surface: each block of [`BAND_BLOCK`]^3 samples first reads the field at its centre, and
@@ -162,7 +178,7 @@ const BAND_BLOCK: usize = 8;
 /// whose values lie within a cell diagonal of zero, so no such corner is in a skipped
 /// block: the mesh is the one the fully sampled grid gives.
 fn sample_narrow_band(
-    distance: &(impl Fn(DVec3) -> f32 + Sync),
+    distance_x8: &(impl Fn([DVec3; 8]) -> [f32; 8] + Sync),
     origin: DVec3,
     cell: f64,
     dims: [u32; 3],
@@ -170,12 +186,10 @@ fn sample_narrow_band(
     let [nx, ny, nz] = dims.map(|d| d as usize);
     let slice = nx * ny;
     let blocks = [nx, ny, nz].map(|n| n.div_ceil(BAND_BLOCK));
-    let sample = |x: usize, y: usize, z: usize| -> f32 {
-        let p = origin + DVec3::new(x as f64, y as f64, z as f64) * cell;
-        let d = distance(p);
-        // Non-finite samples would poison the mesher: treat them as outside.
-        if d.is_finite() { d } else { f32::MAX }
-    };
+    let point =
+        |x: usize, y: usize, z: usize| origin + DVec3::new(x as f64, y as f64, z as f64) * cell;
+    // Non-finite samples would poison the mesher: treat them as outside.
+    let finite = |d: f32| if d.is_finite() { d } else { f32::MAX };
     // One slab of blocks (BAND_BLOCK planes of z) per task.
     let slabs: Vec<Vec<f32>> = (0..blocks[2])
         .into_par_iter()
@@ -201,21 +215,27 @@ fn sample_narrow_band(
                     .length()
                         * 0.5
                         * cell;
-                    let d = f64::from(distance(centre));
+                    let d = f64::from(distance_x8([centre; 8])[0]);
                     let far = d.is_finite() && d.abs() > half_diagonal + 2.0 * 3f64.sqrt() * cell;
                     for z in z0..z1 {
                         for y in y0..y1 {
                             let row = (z - z0) * slice + y * nx;
-                            for x in x0..x1 {
-                                out[row + x] = if far {
+                            if far {
+                                for x in x0..x1 {
                                     let offset = (DVec3::new(x as f64, y as f64, z as f64)
                                         - centre_index)
                                         .length()
                                         * cell;
-                                    ((d.abs() - offset) as f32).copysign(d as f32)
-                                } else {
-                                    sample(x, y, z)
-                                };
+                                    out[row + x] = ((d.abs() - offset) as f32).copysign(d as f32);
+                                }
+                            } else {
+                                // BAND_BLOCK is 8: one row of a block is one call.
+                                let values = distance_x8(std::array::from_fn(|i| {
+                                    point((x0 + i).min(x1 - 1), y, z)
+                                }));
+                                for x in x0..x1 {
+                                    out[row + x] = finite(values[x - x0]);
+                                }
                             }
                         }
                     }
@@ -283,7 +303,7 @@ mod tests {
         let dims = [40u32, 40, 40];
         let cell = 0.05;
         let origin = DVec3::splat(-1.0);
-        let grid = sample_narrow_band(&distance, origin, cell, dims);
+        let grid = sample_narrow_band(&|p: [DVec3; 8]| p.map(distance), origin, cell, dims);
         for z in 0..40usize {
             for y in 0..40usize {
                 for x in 0..40usize {
