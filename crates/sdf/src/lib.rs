@@ -1,7 +1,7 @@
 //! The SDF backend of marchmesh: the scene compiled into a distance field
 //! ([`marchmesh_field::Field`], render space, f32) and sphere traced.
 //!
-//! * Hit test in two stages (see `march.rs`): a sample closer than the cone epsilon
+//! * Hit test in two stages (see `march/`): a sample closer than the cone epsilon
 //!   ([`HitEpsilon::PixelCone`], a twentieth of the pixel footprint by default) does not end
 //!   the ray; the tracer then decides hit or near miss with secant predictions of the
 //!   crossing and regula falsi on a sign change, to 1e-3 of the epsilon. Silhouettes are

@@ -1,0 +1,150 @@
+//! Phong shading of a surface point: the lights it sees (point lights, and area lights as
+//! stratified point samples with their own shadow rays) and the colour they give.
+
+use glam::Vec3;
+use marchmesh_scene::{Light, Material, Scene};
+
+use crate::emitter::Emitter;
+use crate::geometry::{Ray, RenderSpace};
+use crate::sampling::{mix64, unit_from_key};
+
+/// Scene data the shading loops read, converted once to f32 render space.
+pub(crate) struct Shading {
+    pub(crate) ambient: f32,
+    pub(crate) lights: Vec<ShadingLight>,
+    pub(crate) materials: Vec<Material>,
+    pub(crate) max_depth: u32,
+    pub(crate) cutoff: f32,
+    pub(crate) ray_offset: f32,
+    pub(crate) max_distance: f32,
+    pub(crate) spp: u32,
+    /// Shadow rays per area light per shading point.
+    pub(crate) area_samples: u32,
+    /// Ambient occlusion: (rays, distance).
+    pub(crate) ambient_occlusion: Option<(u32, f32)>,
+    /// Every area light, also listed in `lights`, for intersecting camera and mirror rays.
+    pub(crate) emitters: Vec<Emitter>,
+    pub(crate) seed: u64,
+    /// Path tracer: most bounces after the camera ray.
+    pub(crate) max_bounces: u32,
+}
+
+pub(crate) enum ShadingLight {
+    Point {
+        position: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+    Directional {
+        to_light: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+    Area(Emitter),
+}
+
+impl Shading {
+    pub(super) fn new(scene: &Scene) -> Self {
+        let origin = scene.camera.position;
+        let space = RenderSpace::of(scene);
+        let mut ambient = 0.0;
+        let mut lights = Vec::new();
+        let mut emitters = Vec::new();
+        for l in &scene.lights {
+            if let Some(e) = Emitter::of(l, &space) {
+                emitters.push(e);
+                lights.push(ShadingLight::Area(e));
+                continue;
+            }
+            match *l {
+                Light::Ambient { intensity } => ambient += intensity as f32,
+                Light::Point {
+                    position,
+                    intensity,
+                    casts_shadows,
+                } => lights.push(ShadingLight::Point {
+                    position: (position - origin).as_vec3(),
+                    intensity: intensity as f32,
+                    shadows: casts_shadows,
+                }),
+                Light::Directional {
+                    direction,
+                    intensity,
+                    casts_shadows,
+                } => lights.push(ShadingLight::Directional {
+                    to_light: direction.as_vec3().normalize(),
+                    intensity: intensity as f32,
+                    shadows: casts_shadows,
+                }),
+                Light::Sphere { .. } | Light::Rectangle { .. } => {}
+            }
+        }
+        let r = &scene.render;
+        Self {
+            ambient,
+            lights,
+            materials: scene.materials.clone(),
+            max_depth: r.max_reflection_depth,
+            cutoff: r.reflection_cutoff as f32,
+            ray_offset: r.ray_offset as f32,
+            max_distance: r.max_distance as f32,
+            spp: r.samples_per_pixel,
+            area_samples: r.area_light_samples.max(1),
+            ambient_occlusion: r
+                .ambient_occlusion
+                .map(|ao| (ao.samples.max(1), ao.distance as f32)),
+            emitters,
+            seed: r.seed,
+            max_bounces: r.max_bounces,
+        }
+    }
+
+    /// The emission of the nearest area light the ray meets before `t_geometry`, if any.
+    pub(crate) fn emitter_before(&self, ray: &Ray, t_geometry: f32) -> Option<Vec3> {
+        let mut best: Option<(f32, Vec3)> = None;
+        for e in &self.emitters {
+            let limit = best.map_or(t_geometry, |b| b.0);
+            if let Some(t) = e.intersect(ray.origin, ray.dir, limit) {
+                best = Some((t, e.emission()));
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    pub(crate) fn material(&self, id: u32) -> Material {
+        self.materials
+            .get(id as usize)
+            .copied()
+            .unwrap_or(self.materials[0])
+    }
+}
+
+/// Phong's diffuse plus specular factor of a light of `intensity` in direction `to_light`
+/// (unit) at a point with facing normal `n` seen along `d`; 0 when the light is behind.
+pub(super) fn phong(
+    n: Vec3,
+    d: Vec3,
+    to_light: Vec3,
+    intensity: f32,
+    specular: Option<f64>,
+) -> f32 {
+    let ndl = n.dot(to_light);
+    if ndl.is_nan() || ndl <= 0.0 {
+        return 0.0;
+    }
+    let mut amount = intensity * ndl;
+    if let Some(s) = specular {
+        let r = 2.0 * n * ndl - to_light;
+        let rv = r.dot(-d);
+        if rv > 0.0 {
+            amount += intensity * rv.powf(s as f32);
+        }
+    }
+    amount
+}
+
+/// The Cranley-Patterson rotation of one pixel sample's stratified set number `set`.
+pub(super) fn rotation_of(pixel_key: u64, set: u64) -> (f32, f32) {
+    let k = pixel_key ^ mix64(set);
+    (unit_from_key(k), unit_from_key(k ^ 0x9e37_79b9))
+}
