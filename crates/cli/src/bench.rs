@@ -598,6 +598,14 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         }
         refuse_non_empty(&plots_dir, "plots folder")?;
     }
+    // The plots folder belongs to the document (its stale plots are removed): a symbolic link
+    // there would send the writes and removals into a folder of the user's.
+    marchmesh_safeio::check_own_folder(&plots_dir).with_context(|| {
+        format!(
+            "--out {}: its plots folder is not replaced, even with --force",
+            out.display()
+        )
+    })?;
     let doc_dir = out
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -626,7 +634,7 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    let text =
+    let (text, plot_count) =
         marchmesh_harness::findings::write_findings(&inputs, &anchors, &plots_dir, &plots_link)
             .map_err(anyhow::Error::msg)
             .context("writing the findings plots")?;
@@ -640,7 +648,7 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         "{}: findings from {} runs ({} plots in {})",
         out.display(),
         inputs.len(),
-        std::fs::read_dir(&plots_dir).map_or(0, Iterator::count),
+        plot_count,
         plots_dir.display()
     );
     let unfinished: Vec<String> = inputs

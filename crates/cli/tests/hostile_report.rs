@@ -352,3 +352,47 @@ fn a_closed_stdout_ends_report_compare_merge_and_findings_quietly() {
         assert_ne!(o.status.code(), Some(101), "{args:?}: {e}");
     }
 }
+
+#[test]
+fn findings_refuse_a_symlinked_plots_folder_and_count_only_the_plots_written() {
+    let dir = tmp("report-findings-plots-link");
+    let good = run_dir(&dir, "good", &small_run());
+    let precious = dir.join("precious");
+    std::fs::create_dir_all(&precious).unwrap();
+    std::fs::write(precious.join("logo.svg"), b"art").unwrap();
+    std::os::unix::fs::symlink(&precious, dir.join("findings-plots")).unwrap();
+    let out = dir.join("findings.md");
+    let args = [
+        "findings",
+        "-o",
+        out.to_str().unwrap(),
+        good.to_str().unwrap(),
+        "--force",
+    ];
+    let o = marchmesh(&args, &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("findings-plots") && e.contains("symbolic link"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(precious.join("logo.svg")).unwrap(), b"art");
+    assert_eq!(std::fs::read_dir(&precious).unwrap().count(), 1);
+    assert!(!out.exists(), "the document was written");
+    // A real plots folder holding other files of the user's: they stay and are not counted.
+    std::fs::remove_file(dir.join("findings-plots")).unwrap();
+    let plots = dir.join("findings-plots");
+    std::fs::create_dir_all(&plots).unwrap();
+    std::fs::write(plots.join("notes.txt"), b"mine").unwrap();
+    std::fs::write(plots.join("README.md"), b"mine").unwrap();
+    let o = marchmesh(&args, &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let svgs = std::fs::read_dir(&plots)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".svg"))
+        .count();
+    let said = support::text(&o.stdout);
+    assert!(said.contains(&format!("({svgs} plots in")), "{said}");
+    assert_eq!(std::fs::read(plots.join("notes.txt")).unwrap(), b"mine");
+}
