@@ -320,8 +320,8 @@ pub fn bench(args: BenchArgs) -> Result<()> {
 
 /// Refuses to resume a run whose `results.json` no interrupted run writes (a configuration
 /// with two rows, listed twice as missing, or both measured and missing: resuming it would
-/// leave duplicate rows), or whose `images/` is not a folder of its own (a symbolic link would
-/// send the resumed images elsewhere).
+/// leave duplicate rows), or whose `images/` or `plots/` is not a folder of its own (a
+/// symbolic link would send the resumed images or plots elsewhere).
 fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
     let mut rows = std::collections::HashSet::new();
     if let Some(id) = previous
@@ -347,19 +347,12 @@ fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
             json.display()
         );
     }
-    let images = run.join("images");
-    if let Ok(meta) = std::fs::symlink_metadata(&images)
-        && !meta.is_dir()
-    {
-        bail!(
-            "{}: not a folder ({}): a resumed run writes its images only into its own folder, nothing was measured",
-            images.display(),
-            if meta.file_type().is_symlink() {
-                "a symbolic link"
-            } else {
-                "a file or special file"
-            }
-        );
+    for folder in ["images", "plots"] {
+        marchmesh_safeio::check_own_folder(&run.join(folder)).map_err(|e| {
+            anyhow::anyhow!(
+                "{e}: a resumed run writes its {folder} only into its own folder, nothing was measured"
+            )
+        })?;
     }
     Ok(())
 }

@@ -509,6 +509,19 @@ fn resuming_a_run_that_would_duplicate_rows_or_write_through_a_link_is_refused()
     let kept: Vec<_> = std::fs::read_dir(&victim).unwrap().flatten().collect();
     assert_eq!(kept.len(), 1);
     assert_eq!(std::fs::read(victim.join("keep.txt")).unwrap(), b"precious");
+    // plots/ linked to a folder of the user's: refused the same way.
+    let run = run_dir(&dir, "plots-linked", &interrupted(vec![], &[&id]));
+    std::os::unix::fs::symlink(&victim, run.join("plots")).unwrap();
+    let before = std::fs::read(run.join("results.json")).unwrap();
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("plots") && e.contains("symbolic link") && e.contains("nothing was measured"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(run.join("results.json")).unwrap(), before);
+    assert_eq!(std::fs::read_dir(&victim).unwrap().count(), 1);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -396,3 +396,31 @@ fn findings_refuse_a_symlinked_plots_folder_and_count_only_the_plots_written() {
     assert!(said.contains(&format!("({svgs} plots in")), "{said}");
     assert_eq!(std::fs::read(plots.join("notes.txt")).unwrap(), b"mine");
 }
+
+#[test]
+fn report_refuses_a_symlinked_or_file_plots_folder_and_writes_nothing() {
+    let dir = tmp("report-plots-folder-link");
+    let run = run_dir(&dir, "run", &small_run());
+    let victim = dir.join("victim");
+    std::fs::create_dir_all(&victim).unwrap();
+    // A file of the user's with the name of a plot report writes for the run.
+    std::fs::write(victim.join("time_vs_error_g_s.svg"), b"precious").unwrap();
+    std::os::unix::fs::symlink(&victim, run.join("plots")).unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("plots") && e.contains("symbolic link"), "{e}");
+    assert_eq!(
+        std::fs::read(victim.join("time_vs_error_g_s.svg")).unwrap(),
+        b"precious"
+    );
+    assert_eq!(std::fs::read_dir(&victim).unwrap().count(), 1);
+    assert!(!run.join("summary.md").exists() && !run.join("report.html").exists());
+    // plots/ as a file: refused the same way, the file kept.
+    std::fs::remove_file(run.join("plots")).unwrap();
+    std::fs::write(run.join("plots"), b"a file").unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("is a file"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(run.join("plots")).unwrap(), b"a file");
+}
