@@ -224,3 +224,44 @@ fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
     assert!(start.elapsed() < std::time::Duration::from_secs(60));
     assert!(!dir.join("a.png").exists());
 }
+
+#[test]
+fn built_in_scenes_in_subfolders_are_found_by_their_listed_names() {
+    let dir = tmp("render-builtin-subfolder");
+    // Names as `marchmesh scenes` lists them, with a folder and with a dot.
+    let o = marchmesh(
+        &[
+            "validate",
+            "lighting/cornell-box",
+            "extreme/grazing_plane_angle_deg_0.1",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.join("c.png");
+    let o = marchmesh(
+        &[
+            "render",
+            "crosscheck/shapes",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.exists());
+    // A path that exists stays the user's file, even under a built-in name.
+    std::fs::create_dir_all(dir.join("lighting")).unwrap();
+    std::fs::write(dir.join("lighting/cornell-box"), b"{ not json").unwrap();
+    let o = marchmesh(&["validate", "lighting/cornell-box"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("lighting/cornell-box"),
+        "{}",
+        stderr(&o)
+    );
+}
