@@ -231,11 +231,22 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         machine: marchmesh_harness::results::hostname(),
     };
     let mut configs = bench::configurations(&suite, &options);
-    if let Some(shard) = args.shard {
-        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
-    }
     for s in &suite.skipped {
         eprintln!("skipped: {s}");
+    }
+    // Checked for --list as for a run: a listing that is empty is the same mistake.
+    if configs.is_empty() {
+        bail!(
+            "no configuration of suite {} matches{}",
+            suite_path.display(),
+            args.filter
+                .as_deref()
+                .map(|f| format!(" the filter {f:?}"))
+                .unwrap_or_default(),
+        );
+    }
+    if let Some(shard) = args.shard {
+        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
     }
     if args.list {
         let mut text = String::new();
@@ -243,19 +254,6 @@ pub fn bench(args: BenchArgs) -> Result<()> {
             outln!(text, "{}", c.id);
         }
         return print_ignoring_broken_pipe(&text);
-    }
-    if configs.is_empty() {
-        bail!(
-            "no configuration of suite {} matches{}{}",
-            suite_path.display(),
-            args.filter
-                .as_deref()
-                .map(|f| format!(" the filter {f:?}"))
-                .unwrap_or_default(),
-            args.shard
-                .map(|s| format!(" in shard {s}"))
-                .unwrap_or_default()
-        );
     }
     // Read before the run, so a bad anchor file fails in a second, not after the suite.
     let anchors = args

@@ -111,6 +111,34 @@ fn shard_counts_beyond_the_configurations_are_refused_not_allocated() {
 }
 
 #[test]
+fn shard_counts_beyond_the_scenes_and_empty_listings_are_refused() {
+    let dir = tmp("bench-shard-scenes");
+    // The csg scene's two configurations are one unit: a second shard would be empty.
+    for extra in [&["--list"][..], &["--out", dir.to_str().unwrap()][..]] {
+        let mut args = vec![
+            "bench", "--suite", "smoke", "--filter", "/csg/", "--shard", "2/2",
+        ];
+        args.extend_from_slice(extra);
+        let o = marchmesh(&args, &repo());
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}: {e}");
+        assert!(e.contains("at most 1"), "{extra:?}: {e}");
+        assert!(o.stdout.is_empty(), "{extra:?}");
+    }
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a run folder");
+    // A filter that matches nothing fails the listing as it fails the run.
+    let o = marchmesh(
+        &[
+            "bench", "--suite", "smoke", "--filter", "nothing*", "--list",
+        ],
+        &repo(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("nothing*"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn suites_expanding_beyond_the_maximum_are_refused_at_load() {
     let dir = tmp("bench-expand");
     let resolutions: Vec<String> = (1..=400)
