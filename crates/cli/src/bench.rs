@@ -479,17 +479,18 @@ fn measure(
     results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
     // A report file that cannot be written (a full disk) is one more write error: the
     // summary below still names every failure and the run still exits nonzero.
-    let plots = match report::write_run(&results, dir) {
-        Ok(plots) => plots,
+    let report_written = report::write_run(&results, dir);
+    let written = match report_written.as_ref() {
+        Ok(plots) => format!("{} plots and report.html", plots.len()),
         Err(e) => {
             results
                 .write_errors
                 .push(format!("writing results into {}: {e}", dir.display()));
-            Vec::new()
+            "the report was not written (see below)".to_string()
         }
     };
     out!(
-        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
+        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {written}",
         dir.display(),
         results.rows.len(),
         results.failures.len(),
@@ -500,9 +501,8 @@ fn measure(
             ""
         },
         elapsed.as_secs_f64(),
-        plots.len()
     );
-    print_answer(&results, dir);
+    print_answer(&results, dir, report_written.is_ok());
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
@@ -539,8 +539,8 @@ fn measure(
 }
 
 /// Prints the answer of a run: per scene setting, the verdict at each accuracy target (the
-/// decision chart of its summary), then where the report is.
-fn print_answer(results: &Results, dir: &Path) {
+/// decision chart of its summary), then where the report is if it was written.
+fn print_answer(results: &Results, dir: &Path, report_written: bool) {
     let chart = marchmesh_harness::decision::DecisionChart::of_run(results);
     if chart.is_empty() {
         out!("answer: no configuration measured accuracy, so no verdict at matched accuracy");
@@ -551,7 +551,9 @@ fn print_answer(results: &Results, dir: &Path) {
         let text = chart.terminal();
         out!("{}", text.trim_end_matches('\n'));
     }
-    out!("report: {}", dir.join("report.html").display());
+    if report_written {
+        out!("report: {}", dir.join("report.html").display());
+    }
 }
 
 /// `marchmesh findings RUN... --out FILE [--force]`.
