@@ -359,7 +359,8 @@ fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
 /// into RUN on top of what it holds.
 fn resume(args: &BenchArgs, run: &Path, stop: Arc<AtomicBool>) -> Result<()> {
     let json = run.join("results.json");
-    let previous = Results::read_json(&json)?;
+    let previous = Results::read_json(&json)
+        .with_context(|| format!("{} not resumed, nothing was measured", run.display()))?;
     if !previous.is_incomplete() {
         bail!(
             "{}: the run finished (nothing missing, not interrupted): nothing to resume",

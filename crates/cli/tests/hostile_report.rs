@@ -424,3 +424,44 @@ fn report_refuses_a_symlinked_or_file_plots_folder_and_writes_nothing() {
     assert!(stderr(&o).contains("is a file"), "{}", stderr(&o));
     assert_eq!(std::fs::read(run.join("plots")).unwrap(), b"a file");
 }
+
+#[test]
+fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
+    let dir = tmp("report-duplicate-rows");
+    let good = run_dir(&dir, "good", &small_run());
+    let mut res = small_run();
+    let twin = res.rows[1].clone();
+    res.rows.extend(std::iter::repeat_n(twin, 1000));
+    let run = run_dir(&dir, "dup", &res);
+    let findings = dir.join("F.md");
+    let merged = dir.join("m");
+    for args in [
+        vec!["report", run.to_str().unwrap()],
+        vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+        vec![
+            "findings",
+            run.to_str().unwrap(),
+            "-o",
+            findings.to_str().unwrap(),
+        ],
+        vec![
+            "merge",
+            "-o",
+            merged.to_str().unwrap(),
+            run.to_str().unwrap(),
+        ],
+    ] {
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            e.contains("dup/results.json")
+                && e.contains("g/s/mesh:b/x1/t1")
+                && e.contains("more than one row")
+                && !e.contains("shards must not overlap"),
+            "{args:?}: {e}"
+        );
+    }
+    assert!(!findings.exists() && !merged.exists());
+    assert!(!run.join("summary.md").exists());
+}
