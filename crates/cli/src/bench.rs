@@ -262,6 +262,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         .map(|p| marchmesh_harness::anchors::read_anchor(p))
         .collect::<Result<Vec<_>, _>>()
         .context("--anchor")?;
+    crate::refuse_file_as_folder(&args.results_dir, "--out")?;
     let (run_id, dir) = report::create_run_dir(&args.results_dir, &suite.name)
         .with_context(|| format!("creating a run folder in {}", args.results_dir.display()))?;
     eprintln!(
@@ -1133,6 +1134,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
 
 /// Refuses `dir` (named by `flag` in the message) if it exists and is not an empty folder.
 fn refuse_non_empty(dir: &std::path::Path, flag: &str) -> Result<()> {
+    crate::refuse_file_as_folder(dir, flag)?;
     match std::fs::read_dir(dir) {
         Ok(mut entries) => {
             if entries.next().is_some() {

@@ -503,6 +503,7 @@ fn scenes(out: Option<&Path>) -> Result<()> {
         ));
         return Ok(());
     };
+    refuse_file_as_folder(dir, "-o")?;
     if let Ok(mut entries) = std::fs::read_dir(dir)
         && entries.next().is_some()
     {
@@ -528,6 +529,22 @@ fn scenes(out: Option<&Path>) -> Result<()> {
         assets::scene_names().len(),
         assets::suite_names().len()
     );
+    Ok(())
+}
+
+/// Refuses an output folder `dir` (given as `flag`) that exists but is not a folder (symbolic
+/// links are followed: a link to a folder is the user's choice), naming it plainly instead of
+/// the OS error ("File exists") creating inside it would give.
+pub(crate) fn refuse_file_as_folder(dir: &Path, flag: &str) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(dir)
+        && !meta.is_dir()
+    {
+        bail!(
+            "{flag} {}: {} is a file, not a folder (nothing was written)",
+            dir.display(),
+            dir.display()
+        );
+    }
     Ok(())
 }
 
@@ -585,6 +602,7 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     let jpeg = output_is_jpeg(&args.out)?;
     if let Some(dir) = &args.aov {
+        refuse_file_as_folder(dir, "--aov")?;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating AOV folder {}", dir.display()))?;
     }
