@@ -265,3 +265,60 @@ fn built_in_scenes_in_subfolders_are_found_by_their_listed_names() {
         stderr(&o)
     );
 }
+
+#[test]
+fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
+    let dir = tmp("render-option-keys");
+    let scene = dir.join("s.json");
+    std::fs::write(
+        &scene,
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    for (backend, options, expected, internal) in [
+        (
+            "mesh",
+            &["tess_level=13"][..],
+            "tess_level must be in 0..=12",
+            "FixedLevel",
+        ),
+        (
+            "mesh",
+            &["tess_chord=0"][..],
+            "tess_chord must be",
+            "ChordError",
+        ),
+        ("mesh", &["tess_px=0"][..], "tess_px must be", "ScreenError"),
+        (
+            "sdf",
+            &["eps_px=0"][..],
+            "sdf option eps_px: must be",
+            "hit_epsilon",
+        ),
+        (
+            "sdf",
+            &["eps_abs=0"][..],
+            "sdf option eps_abs: must be",
+            "hit_epsilon",
+        ),
+        (
+            "sdf",
+            &["grid=sparse", "grid_res=513"][..],
+            "sdf option grid_res: must be in",
+            "mesh_grid_resolution",
+        ),
+    ] {
+        let mut args = vec!["render", "s.json", "--backend", backend, "-o", "o.png"];
+        for o in options {
+            args.extend(["-O", o]);
+        }
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{options:?}");
+        assert!(
+            e.contains(expected) && !e.contains(internal),
+            "{options:?}: {e}"
+        );
+        assert!(!dir.join("o.png").exists());
+    }
+}
