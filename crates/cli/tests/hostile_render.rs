@@ -322,3 +322,44 @@ fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
         assert!(!dir.join("o.png").exists());
     }
 }
+
+#[test]
+fn validate_reports_each_problem_once_at_its_own_path() {
+    let dir = tmp("render-validate-paths");
+    let good = r#"{"point": {"position": [2, 1, 0], "intensity": 0.5}}"#;
+    let bad = r#"{"pointy": {}}"#;
+    let lights = |bad_at: &[usize]| {
+        (0..10)
+            .map(|i| if bad_at.contains(&i) { bad } else { good })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let objects =
+        r#"[{"shape": {"sphre": {}}}, {"shape": {"sphere": {}}}, {"shape": {"cube": 3}}]"#;
+    for (bad_at, object_list) in [
+        (&[0, 1, 2][..], "[{\"shape\": {\"sphere\": {}}}]"),
+        (&[5, 8][..], objects),
+    ] {
+        let scene = dir.join("s.json");
+        std::fs::write(
+            &scene,
+            format!(r#"{{"camera": {{"width": 8, "height": 8}}, "lights": [{}], "objects": {object_list}}}"#, lights(bad_at)),
+        )
+        .unwrap();
+        let o = marchmesh(&["validate", "s.json"], &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success());
+        for i in 0..10 {
+            let shown = e.matches(&format!("`lights[{i}]")).count();
+            assert_eq!(shown, usize::from(bad_at.contains(&i)), "lights[{i}]: {e}");
+        }
+        assert!(!e.contains("missing field"), "{e}");
+        if object_list == objects {
+            assert!(
+                e.contains("`objects[0].shape") && e.contains("`objects[2].shape"),
+                "{e}"
+            );
+            assert!(!e.contains("`objects[1]"), "{e}");
+        }
+    }
+}
