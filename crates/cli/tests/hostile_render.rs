@@ -363,3 +363,20 @@ fn validate_reports_each_problem_once_at_its_own_path() {
         }
     }
 }
+
+#[test]
+fn a_value_over_the_magnitude_limit_is_one_problem() {
+    // Not also "must be > 0, got 0" for the value the limit check replaced.
+    let dir = tmp("render-validate-magnitude");
+    std::fs::write(
+        dir.join("b.json"),
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"smooth_union": {
+            "blend_radius": -1e308, "children": [{"shape": {"sphere": {}}}]}}}]}"#,
+    )
+    .unwrap();
+    let o = marchmesh(&["validate", "b.json"], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert_eq!(e.matches("blend_radius").count(), 1, "{e}");
+    assert!(e.contains("magnitude limit") && !e.contains("got 0"), "{e}");
+}
