@@ -67,31 +67,40 @@ fn is_bare_name(arg: &Path) -> bool {
     arg.extension().is_none() && arg.components().count() == 1
 }
 
-/// A scene argument as a file: an existing path as given; otherwise a bare name
-/// (`seed-spheres`, no extension or folder) is a built-in scene, found under [`root`].
+/// A scene argument as a file: a path that exists (even as a link or special file) is the
+/// user's file as given; otherwise a name `marchmesh scenes` lists (`seed-spheres`,
+/// `lighting/cornell-box`) is that built-in scene, found under [`root`]; any other argument
+/// with a folder or extension is a path as given (its loader names the missing file).
 ///
 /// Errors: an unknown bare name (the error lists the built-in scenes); the built-in copy
 /// cannot be extracted.
 pub fn scene_file(arg: &Path) -> Result<PathBuf> {
-    if arg.exists() || !is_bare_name(arg) {
+    if arg.symlink_metadata().is_ok() {
         return Ok(arg.to_path_buf());
     }
     let name = arg.to_string_lossy();
-    if !scene_names().iter().any(|n| *n == name) {
-        anyhow::bail!(
-            "{name}: no such scene file, nor a built-in scene; built-in scenes: {} (`marchmesh scenes` lists them)",
-            scene_names().join(", ")
-        );
+    if scene_names().iter().any(|n| *n == name) {
+        return Ok(root()?.join("scenes").join(format!("{name}.json")));
     }
-    Ok(root()?.join("scenes").join(format!("{name}.json")))
+    if !is_bare_name(arg) {
+        return Ok(arg.to_path_buf());
+    }
+    anyhow::bail!(
+        "{name}: no such scene file, nor a built-in scene; built-in scenes: {} (`marchmesh scenes` lists them)",
+        scene_names().join(", ")
+    )
 }
 
-/// A suite argument as a file: a path (with an extension or a folder) as given, else the
-/// built-in suite of that name under [`root`].
+/// A suite argument as a file: a path that exists is the user's file; otherwise a name
+/// `marchmesh scenes` lists as a suite is that built-in suite under [`root`]; any other
+/// argument with an extension or a folder is a path as given.
 ///
 /// Errors: an unknown suite name or a missing suite file (the error lists the built-in
 /// suites); the built-in copy cannot be extracted.
 pub fn suite_file(arg: &str) -> Result<PathBuf> {
+    if Path::new(arg).symlink_metadata().is_err() && suite_names().iter().any(|n| n == arg) {
+        return Ok(root()?.join("scenes/suites").join(format!("{arg}.json")));
+    }
     let path = marchmesh_harness::suite::locate(arg, root)?;
     // Anything that exists (a regular file, or a FIFO or device the suite loader refuses
     // with its own message without opening it for reading) is the user's file.

@@ -231,11 +231,22 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         machine: marchmesh_harness::results::hostname(),
     };
     let mut configs = bench::configurations(&suite, &options);
-    if let Some(shard) = args.shard {
-        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
-    }
     for s in &suite.skipped {
         eprintln!("skipped: {s}");
+    }
+    // Checked for --list as for a run: a listing that is empty is the same mistake.
+    if configs.is_empty() {
+        bail!(
+            "no configuration of suite {} matches{}",
+            suite_path.display(),
+            args.filter
+                .as_deref()
+                .map(|f| format!(" the filter {f:?}"))
+                .unwrap_or_default(),
+        );
+    }
+    if let Some(shard) = args.shard {
+        configs = bench::shard(&configs, shard).map_err(anyhow::Error::msg)?;
     }
     if args.list {
         let mut text = String::new();
@@ -244,19 +255,6 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         }
         return print_ignoring_broken_pipe(&text);
     }
-    if configs.is_empty() {
-        bail!(
-            "no configuration of suite {} matches{}{}",
-            suite_path.display(),
-            args.filter
-                .as_deref()
-                .map(|f| format!(" the filter {f:?}"))
-                .unwrap_or_default(),
-            args.shard
-                .map(|s| format!(" in shard {s}"))
-                .unwrap_or_default()
-        );
-    }
     // Read before the run, so a bad anchor file fails in a second, not after the suite.
     let anchors = args
         .anchor
@@ -264,6 +262,7 @@ pub fn bench(args: BenchArgs) -> Result<()> {
         .map(|p| marchmesh_harness::anchors::read_anchor(p))
         .collect::<Result<Vec<_>, _>>()
         .context("--anchor")?;
+    crate::refuse_file_as_folder(&args.results_dir, "--out")?;
     let (run_id, dir) = report::create_run_dir(&args.results_dir, &suite.name)
         .with_context(|| format!("creating a run folder in {}", args.results_dir.display()))?;
     eprintln!(
@@ -320,8 +319,8 @@ pub fn bench(args: BenchArgs) -> Result<()> {
 
 /// Refuses to resume a run whose `results.json` no interrupted run writes (a configuration
 /// with two rows, listed twice as missing, or both measured and missing: resuming it would
-/// leave duplicate rows), or whose `images/` is not a folder of its own (a symbolic link would
-/// send the resumed images elsewhere).
+/// leave duplicate rows), or whose `images/` or `plots/` is not a folder of its own (a
+/// symbolic link would send the resumed images or plots elsewhere).
 fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
     let mut rows = std::collections::HashSet::new();
     if let Some(id) = previous
@@ -347,19 +346,12 @@ fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
             json.display()
         );
     }
-    let images = run.join("images");
-    if let Ok(meta) = std::fs::symlink_metadata(&images)
-        && !meta.is_dir()
-    {
-        bail!(
-            "{}: not a folder ({}): a resumed run writes its images only into its own folder, nothing was measured",
-            images.display(),
-            if meta.file_type().is_symlink() {
-                "a symbolic link"
-            } else {
-                "a file or special file"
-            }
-        );
+    for folder in ["images", "plots"] {
+        marchmesh_safeio::check_own_folder(&run.join(folder)).map_err(|e| {
+            anyhow::anyhow!(
+                "{e}: a resumed run writes its {folder} only into its own folder, nothing was measured"
+            )
+        })?;
     }
     Ok(())
 }
@@ -368,7 +360,8 @@ fn check_resumable(previous: &Results, json: &Path, run: &Path) -> Result<()> {
 /// into RUN on top of what it holds.
 fn resume(args: &BenchArgs, run: &Path, stop: Arc<AtomicBool>) -> Result<()> {
     let json = run.join("results.json");
-    let previous = Results::read_json(&json)?;
+    let previous = Results::read_json(&json)
+        .with_context(|| format!("{} not resumed, nothing was measured", run.display()))?;
     if !previous.is_incomplete() {
         bail!(
             "{}: the run finished (nothing missing, not interrupted): nothing to resume",
@@ -488,17 +481,18 @@ fn measure(
     results.provenance.load_average_1m_end = marchmesh_harness::results::load_average_1m();
     // A report file that cannot be written (a full disk) is one more write error: the
     // summary below still names every failure and the run still exits nonzero.
-    let plots = match report::write_run(&results, dir) {
-        Ok(plots) => plots,
+    let report_written = report::write_run(&results, dir);
+    let written = match report_written.as_ref() {
+        Ok(plots) => format!("{} plots and report.html", plots.len()),
         Err(e) => {
             results
                 .write_errors
                 .push(format!("writing results into {}: {e}", dir.display()));
-            Vec::new()
+            "the report was not written (see below)".to_string()
         }
     };
     out!(
-        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {} plots and report.html",
+        "{}: {} configurations measured, {} failed, {} missing{} in {:.1} s; {written}",
         dir.display(),
         results.rows.len(),
         results.failures.len(),
@@ -509,9 +503,8 @@ fn measure(
             ""
         },
         elapsed.as_secs_f64(),
-        plots.len()
     );
-    print_answer(&results, dir);
+    print_answer(&results, dir, report_written.is_ok());
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
@@ -548,8 +541,8 @@ fn measure(
 }
 
 /// Prints the answer of a run: per scene setting, the verdict at each accuracy target (the
-/// decision chart of its summary), then where the report is.
-fn print_answer(results: &Results, dir: &Path) {
+/// decision chart of its summary), then where the report is if it was written.
+fn print_answer(results: &Results, dir: &Path, report_written: bool) {
     let chart = marchmesh_harness::decision::DecisionChart::of_run(results);
     if chart.is_empty() {
         out!("answer: no configuration measured accuracy, so no verdict at matched accuracy");
@@ -560,7 +553,9 @@ fn print_answer(results: &Results, dir: &Path) {
         let text = chart.terminal();
         out!("{}", text.trim_end_matches('\n'));
     }
-    out!("report: {}", dir.join("report.html").display());
+    if report_written {
+        out!("report: {}", dir.join("report.html").display());
+    }
 }
 
 /// `marchmesh findings RUN... --out FILE [--force]`.
@@ -598,6 +593,14 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         }
         refuse_non_empty(&plots_dir, "plots folder")?;
     }
+    // The plots folder belongs to the document (its stale plots are removed): a symbolic link
+    // there would send the writes and removals into a folder of the user's.
+    marchmesh_safeio::check_own_folder(&plots_dir).with_context(|| {
+        format!(
+            "--out {}: its plots folder is not replaced, even with --force",
+            out.display()
+        )
+    })?;
     let doc_dir = out
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -626,7 +629,7 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    let text =
+    let (text, plot_count) =
         marchmesh_harness::findings::write_findings(&inputs, &anchors, &plots_dir, &plots_link)
             .map_err(anyhow::Error::msg)
             .context("writing the findings plots")?;
@@ -640,7 +643,7 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
         "{}: findings from {} runs ({} plots in {})",
         out.display(),
         inputs.len(),
-        std::fs::read_dir(&plots_dir).map_or(0, Iterator::count),
+        plot_count,
         plots_dir.display()
     );
     let unfinished: Vec<String> = inputs
@@ -1131,6 +1134,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
 
 /// Refuses `dir` (named by `flag` in the message) if it exists and is not an empty folder.
 fn refuse_non_empty(dir: &std::path::Path, flag: &str) -> Result<()> {
+    crate::refuse_file_as_folder(dir, flag)?;
     match std::fs::read_dir(dir) {
         Ok(mut entries) => {
             if entries.next().is_some() {

@@ -395,10 +395,13 @@ const MAX_PROBLEMS: usize = 64;
 /// The problems of a scene file beyond its first parse error: serde stops at the first wrong
 /// value, so each is taken out of the JSON (by its JSON path) and the rest parsed again, until
 /// the file parses (then its validation problems follow) or a problem cannot be taken out (a
-/// missing field, malformed JSON). Line numbers are those of the first error only: the later
-/// ones are found in the edited document, so they are given by JSON path. `first_path` is the
-/// first error's JSON path, not repeated (the edited document's keys are in sorted order, so
-/// it need not come first there).
+/// missing field of the user's, malformed JSON). Line numbers are those of the first error
+/// only: the later ones are found in the edited document, so they are given by JSON path,
+/// mapped back to the indices of the user's file (an array element taken out shifts the
+/// later ones). A field missing because a value was taken out is not the user's problem: it
+/// is not reported, and the array element holding it is taken out instead. `first_path` is
+/// the first error's JSON path, not repeated (the edited document's keys are in sorted order,
+/// so it need not come first there).
 fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
     let Ok(bytes) =
         marchmesh_safeio::read_regular_within(path, marchmesh_scene::MAX_SCENE_FILE_BYTES)
@@ -412,6 +415,7 @@ fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
     let base = path.parent().unwrap_or(Path::new("."));
     let mut out = Vec::new();
     let mut first_seen = false;
+    let mut taken = TakenOut::default();
     while out.len() < MAX_PROBLEMS {
         let text = doc.to_string();
         match marchmesh_scene::parse_scene(&text, &name, base) {
@@ -419,12 +423,42 @@ fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
             Err(marchmesh_scene::SceneError::Parse {
                 json_path, message, ..
             }) => {
-                if first_seen || json_path != first_path {
+                let Some(segments) = json_segments(&json_path) else {
                     out.push(format!("{name}: at `{json_path}`: {message}"));
+                    break;
+                };
+                let original = taken.original(&segments);
+                if let Some(field) = missing_field(&message) {
+                    if !taken
+                        .keys
+                        .contains(&(render_path(&original), field.to_string()))
+                    {
+                        out.push(format!(
+                            "{name}: at `{}`: {message}",
+                            render_path(&original)
+                        ));
+                        break;
+                    }
+                    // Missing only because a value was taken out: take out the array
+                    // element holding it instead.
+                    let Some(at) = segments
+                        .iter()
+                        .rposition(|s| matches!(s, Segment::Index(_)))
+                    else {
+                        break;
+                    };
+                    if !taken.remove(&mut doc, &segments[..=at]) {
+                        break;
+                    }
+                    continue;
+                }
+                let shown = render_path(&original);
+                if first_seen || shown != first_path {
+                    out.push(format!("{name}: at `{shown}`: {message}"));
                 } else {
                     first_seen = true;
                 }
-                if message.starts_with("missing field") || !remove_at(&mut doc, &json_path) {
+                if !taken.remove(&mut doc, &segments) {
                     break;
                 }
             }
@@ -438,33 +472,134 @@ fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
     out
 }
 
-/// Removes the value at `json_path` (serde_path_to_error's `a.b[2].c`) from `doc`; false when
-/// the path does not lead to a removable value.
-fn remove_at(doc: &mut serde_json::Value, json_path: &str) -> bool {
-    let mut segments: Vec<Result<usize, &str>> = Vec::new();
+/// The field name of serde's "missing field `NAME`" message.
+fn missing_field(message: &str) -> Option<&str> {
+    message.strip_prefix("missing field `")?.split('`').next()
+}
+
+/// One step of a JSON path: an object key or an array index.
+#[derive(Clone, Debug, PartialEq)]
+enum Segment {
+    Key(String),
+    Index(usize),
+}
+
+/// The steps of a serde_path_to_error path (`a.b[2].c`; `.` for the document itself), or
+/// `None` when it is not of that form.
+fn json_segments(json_path: &str) -> Option<Vec<Segment>> {
+    let mut segments = Vec::new();
+    if json_path == "." {
+        return Some(segments);
+    }
     for part in json_path.split('.') {
         let (key, rest) = match part.find('[') {
             Some(i) => (&part[..i], &part[i..]),
             None => (part, ""),
         };
         if !key.is_empty() {
-            segments.push(Err(key));
+            segments.push(Segment::Key(key.to_string()));
         }
         for index in rest.split('[').filter(|x| !x.is_empty()) {
-            match index.trim_end_matches(']').parse::<usize>() {
-                Ok(i) => segments.push(Ok(i)),
-                Err(_) => return false,
-            }
+            segments.push(Segment::Index(
+                index.strip_suffix(']')?.parse::<usize>().ok()?,
+            ));
         }
     }
+    Some(segments)
+}
+
+/// `segments` written as a JSON path (`a.b[2].c`; `.` for none).
+fn render_path(segments: &[Segment]) -> String {
+    let mut s = String::new();
+    for seg in segments {
+        match seg {
+            Segment::Key(k) => {
+                if !s.is_empty() {
+                    s.push('.');
+                }
+                s.push_str(k);
+            }
+            Segment::Index(i) => s.push_str(&format!("[{i}]")),
+        }
+    }
+    if s.is_empty() { ".".into() } else { s }
+}
+
+/// What [`further_problems`] took out of the document, in the user's file's terms: the
+/// original indices taken out of each array (by the array's original path) and the keys
+/// taken out of each object (original path, key).
+#[derive(Default)]
+struct TakenOut {
+    indices: std::collections::HashMap<String, Vec<usize>>,
+    keys: std::collections::HashSet<(String, String)>,
+}
+
+impl TakenOut {
+    /// `current` (a path in the edited document) as the path of the same value in the
+    /// user's file.
+    fn original(&self, current: &[Segment]) -> Vec<Segment> {
+        let mut out: Vec<Segment> = Vec::with_capacity(current.len());
+        for seg in current {
+            match seg {
+                Segment::Key(_) => out.push(seg.clone()),
+                Segment::Index(c) => {
+                    let gone = self
+                        .indices
+                        .get(&render_path(&out))
+                        .map_or(&[][..], Vec::as_slice);
+                    // The c-th original index not taken out.
+                    let mut o = 0;
+                    let mut left = *c;
+                    loop {
+                        if !gone.contains(&o) {
+                            if left == 0 {
+                                break;
+                            }
+                            left -= 1;
+                        }
+                        o += 1;
+                    }
+                    out.push(Segment::Index(o));
+                }
+            }
+        }
+        out
+    }
+
+    /// Takes the value at `current` out of `doc` and records it; false when the path does
+    /// not lead to a removable value.
+    fn remove(&mut self, doc: &mut serde_json::Value, current: &[Segment]) -> bool {
+        let original = self.original(current);
+        if !remove_at(doc, current) {
+            return false;
+        }
+        if let Some((last, parent)) = original.split_last() {
+            match last {
+                Segment::Index(o) => self
+                    .indices
+                    .entry(render_path(parent))
+                    .or_default()
+                    .push(*o),
+                Segment::Key(k) => {
+                    self.keys.insert((render_path(parent), k.clone()));
+                }
+            }
+        }
+        true
+    }
+}
+
+/// Removes the value at `segments` from `doc`; false when the path does not lead to a
+/// removable value.
+fn remove_at(doc: &mut serde_json::Value, segments: &[Segment]) -> bool {
     let Some((last, parents)) = segments.split_last() else {
         return false;
     };
     let mut at = doc;
     for seg in parents {
         let next = match (seg, at) {
-            (Ok(i), serde_json::Value::Array(a)) => a.get_mut(*i),
-            (Err(k), serde_json::Value::Object(o)) => o.get_mut(*k),
+            (Segment::Index(i), serde_json::Value::Array(a)) => a.get_mut(*i),
+            (Segment::Key(k), serde_json::Value::Object(o)) => o.get_mut(k),
             _ => None,
         };
         match next {
@@ -473,11 +608,11 @@ fn remove_at(doc: &mut serde_json::Value, json_path: &str) -> bool {
         }
     }
     match (last, at) {
-        (Ok(i), serde_json::Value::Array(a)) if *i < a.len() => {
+        (Segment::Index(i), serde_json::Value::Array(a)) if *i < a.len() => {
             a.remove(*i);
             true
         }
-        (Err(k), serde_json::Value::Object(o)) => o.remove(*k).is_some(),
+        (Segment::Key(k), serde_json::Value::Object(o)) => o.remove(k).is_some(),
         _ => false,
     }
 }
@@ -503,6 +638,7 @@ fn scenes(out: Option<&Path>) -> Result<()> {
         ));
         return Ok(());
     };
+    refuse_file_as_folder(dir, "-o")?;
     if let Ok(mut entries) = std::fs::read_dir(dir)
         && entries.next().is_some()
     {
@@ -528,6 +664,22 @@ fn scenes(out: Option<&Path>) -> Result<()> {
         assets::scene_names().len(),
         assets::suite_names().len()
     );
+    Ok(())
+}
+
+/// Refuses an output folder `dir` (given as `flag`) that exists but is not a folder (symbolic
+/// links are followed: a link to a folder is the user's choice), naming it plainly instead of
+/// the OS error ("File exists") creating inside it would give.
+pub(crate) fn refuse_file_as_folder(dir: &Path, flag: &str) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(dir)
+        && !meta.is_dir()
+    {
+        bail!(
+            "{flag} {}: {} is a file, not a folder (nothing was written)",
+            dir.display(),
+            dir.display()
+        );
+    }
     Ok(())
 }
 
@@ -585,6 +737,7 @@ fn render(args: RenderArgs) -> Result<()> {
     }
     let jpeg = output_is_jpeg(&args.out)?;
     if let Some(dir) = &args.aov {
+        refuse_file_as_folder(dir, "--aov")?;
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating AOV folder {}", dir.display()))?;
     }

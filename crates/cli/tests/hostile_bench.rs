@@ -111,6 +111,83 @@ fn shard_counts_beyond_the_configurations_are_refused_not_allocated() {
 }
 
 #[test]
+fn shard_counts_beyond_the_scenes_and_empty_listings_are_refused() {
+    let dir = tmp("bench-shard-scenes");
+    // The csg scene's two configurations are one unit: a second shard would be empty.
+    for extra in [&["--list"][..], &["--out", dir.to_str().unwrap()][..]] {
+        let mut args = vec![
+            "bench", "--suite", "smoke", "--filter", "/csg/", "--shard", "2/2",
+        ];
+        args.extend_from_slice(extra);
+        let o = marchmesh(&args, &repo());
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}: {e}");
+        assert!(e.contains("at most 1"), "{extra:?}: {e}");
+        assert!(o.stdout.is_empty(), "{extra:?}");
+    }
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "a run folder");
+    // A filter that matches nothing fails the listing as it fails the run.
+    let o = marchmesh(
+        &[
+            "bench", "--suite", "smoke", "--filter", "nothing*", "--list",
+        ],
+        &repo(),
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("nothing*"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn long_group_and_scene_names_still_give_file_names_that_fit() {
+    let dir = tmp("bench-long-names");
+    let (group, scene) = ("g".repeat(130), "s".repeat(130));
+    let s = dir.join("long.json");
+    std::fs::write(
+        &s,
+        format!(
+            r#"{{"repeats": {{"min_count": 1, "min_time_s": 0, "max_count": 1}},
+                "groups": [{{"name": "{group}", "scenes": [{{"path": "{}", "name": "{scene}"}}],
+                    "resolutions": [{{"max_side": 16}}], "spp": 1, "threads": [1],
+                    "backends": [{{"backend": "sdf", "label": "q", "options": ["max_steps=64"]}}]}}]}}"#,
+            csg()
+        ),
+    )
+    .unwrap();
+    let runs = dir.join("runs");
+    let o = marchmesh(
+        &[
+            "bench",
+            "--suite",
+            s.to_str().unwrap(),
+            "--out",
+            runs.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    let said = support::text(&o.stdout);
+    assert!(o.status.success(), "{said}{}", stderr(&o));
+    let run = std::fs::read_dir(&runs)
+        .unwrap()
+        .flatten()
+        .next()
+        .unwrap()
+        .path();
+    assert!(run.join("report.html").exists(), "{said}");
+    let names: Vec<String> = ["images", "plots"]
+        .iter()
+        .flat_map(|f| std::fs::read_dir(run.join(f)).unwrap().flatten())
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(names.iter().any(|n| n.ends_with(".diff.png")), "{names:?}");
+    assert!(names.iter().any(|n| n.ends_with(".svg")), "{names:?}");
+    assert!(names.iter().all(|n| n.len() <= 255), "{names:?}");
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
 fn suites_expanding_beyond_the_maximum_are_refused_at_load() {
     let dir = tmp("bench-expand");
     let resolutions: Vec<String> = (1..=400)
@@ -294,6 +371,13 @@ fn a_full_disk_leaves_no_partial_image_and_lists_the_failed_writes() {
         stderr(&o).contains("could not be written"),
         "{}",
         stderr(&o)
+    );
+    // The plots do not fit either, so there is no report, and stdout does not claim one.
+    assert!(!run.join("report.html").exists());
+    let said = support::text(&o.stdout);
+    assert!(
+        said.contains("the report was not written") && !said.contains("report.html"),
+        "{said}"
     );
 }
 
@@ -509,6 +593,19 @@ fn resuming_a_run_that_would_duplicate_rows_or_write_through_a_link_is_refused()
     let kept: Vec<_> = std::fs::read_dir(&victim).unwrap().flatten().collect();
     assert_eq!(kept.len(), 1);
     assert_eq!(std::fs::read(victim.join("keep.txt")).unwrap(), b"precious");
+    // plots/ linked to a folder of the user's: refused the same way.
+    let run = run_dir(&dir, "plots-linked", &interrupted(vec![], &[&id]));
+    std::os::unix::fs::symlink(&victim, run.join("plots")).unwrap();
+    let before = std::fs::read(run.join("results.json")).unwrap();
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("plots") && e.contains("symbolic link") && e.contains("nothing was measured"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(run.join("results.json")).unwrap(), before);
+    assert_eq!(std::fs::read_dir(&victim).unwrap().count(), 1);
     let _ = std::fs::remove_dir_all(&dir);
 }
 

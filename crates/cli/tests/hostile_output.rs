@@ -342,3 +342,38 @@ fn item12_an_installed_binary_finds_its_suites_and_writes_under_the_current_fold
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn output_folders_given_as_files_are_named_as_files() {
+    let dir = tmp("folder-is-file");
+    std::fs::write(dir.join("afile"), b"mine").unwrap();
+    std::fs::write(dir.join("f.png"), b"mine").unwrap();
+    let o = support::marchmesh(&["scenes", "-o", "afile"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("afile is a file, not a folder"),
+        "{}",
+        stderr(&o)
+    );
+    let o = render(&dir, &["--out", "a.png", "--aov", "f.png"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("f.png is a file, not a folder"),
+        "{}",
+        stderr(&o)
+    );
+    let o = support::marchmesh(
+        &["stability", "--out", "afile", "--filter", "nothing"],
+        &dir,
+    );
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("afile is a file, not a folder"),
+        "{}",
+        stderr(&o)
+    );
+    for f in ["afile", "f.png"] {
+        assert_eq!(std::fs::read(dir.join(f)).unwrap(), b"mine");
+    }
+    assert!(!dir.join("a.png").exists());
+}

@@ -224,3 +224,159 @@ fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
     assert!(start.elapsed() < std::time::Duration::from_secs(60));
     assert!(!dir.join("a.png").exists());
 }
+
+#[test]
+fn built_in_scenes_in_subfolders_are_found_by_their_listed_names() {
+    let dir = tmp("render-builtin-subfolder");
+    // Names as `marchmesh scenes` lists them, with a folder and with a dot.
+    let o = marchmesh(
+        &[
+            "validate",
+            "lighting/cornell-box",
+            "extreme/grazing_plane_angle_deg_0.1",
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = dir.join("c.png");
+    let o = marchmesh(
+        &[
+            "render",
+            "crosscheck/shapes",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(out.exists());
+    // A path that exists stays the user's file, even under a built-in name.
+    std::fs::create_dir_all(dir.join("lighting")).unwrap();
+    std::fs::write(dir.join("lighting/cornell-box"), b"{ not json").unwrap();
+    let o = marchmesh(&["validate", "lighting/cornell-box"], &dir);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("lighting/cornell-box"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
+    let dir = tmp("render-option-keys");
+    let scene = dir.join("s.json");
+    std::fs::write(
+        &scene,
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    for (backend, options, expected, internal) in [
+        (
+            "mesh",
+            &["tess_level=13"][..],
+            "tess_level must be in 0..=12",
+            "FixedLevel",
+        ),
+        (
+            "mesh",
+            &["tess_chord=0"][..],
+            "tess_chord must be",
+            "ChordError",
+        ),
+        ("mesh", &["tess_px=0"][..], "tess_px must be", "ScreenError"),
+        (
+            "sdf",
+            &["eps_px=0"][..],
+            "sdf option eps_px: must be",
+            "hit_epsilon",
+        ),
+        (
+            "sdf",
+            &["eps_abs=0"][..],
+            "sdf option eps_abs: must be",
+            "hit_epsilon",
+        ),
+        (
+            "sdf",
+            &["grid=sparse", "grid_res=513"][..],
+            "sdf option grid_res: must be in",
+            "mesh_grid_resolution",
+        ),
+    ] {
+        let mut args = vec!["render", "s.json", "--backend", backend, "-o", "o.png"];
+        for o in options {
+            args.extend(["-O", o]);
+        }
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{options:?}");
+        assert!(
+            e.contains(expected) && !e.contains(internal),
+            "{options:?}: {e}"
+        );
+        assert!(!dir.join("o.png").exists());
+    }
+}
+
+#[test]
+fn validate_reports_each_problem_once_at_its_own_path() {
+    let dir = tmp("render-validate-paths");
+    let good = r#"{"point": {"position": [2, 1, 0], "intensity": 0.5}}"#;
+    let bad = r#"{"pointy": {}}"#;
+    let lights = |bad_at: &[usize]| {
+        (0..10)
+            .map(|i| if bad_at.contains(&i) { bad } else { good })
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let objects =
+        r#"[{"shape": {"sphre": {}}}, {"shape": {"sphere": {}}}, {"shape": {"cube": 3}}]"#;
+    for (bad_at, object_list) in [
+        (&[0, 1, 2][..], "[{\"shape\": {\"sphere\": {}}}]"),
+        (&[5, 8][..], objects),
+    ] {
+        let scene = dir.join("s.json");
+        std::fs::write(
+            &scene,
+            format!(r#"{{"camera": {{"width": 8, "height": 8}}, "lights": [{}], "objects": {object_list}}}"#, lights(bad_at)),
+        )
+        .unwrap();
+        let o = marchmesh(&["validate", "s.json"], &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success());
+        for i in 0..10 {
+            let shown = e.matches(&format!("`lights[{i}]")).count();
+            assert_eq!(shown, usize::from(bad_at.contains(&i)), "lights[{i}]: {e}");
+        }
+        assert!(!e.contains("missing field"), "{e}");
+        if object_list == objects {
+            assert!(
+                e.contains("`objects[0].shape") && e.contains("`objects[2].shape"),
+                "{e}"
+            );
+            assert!(!e.contains("`objects[1]"), "{e}");
+        }
+    }
+}
+
+#[test]
+fn a_value_over_the_magnitude_limit_is_one_problem() {
+    // Not also "must be > 0, got 0" for the value the limit check replaced.
+    let dir = tmp("render-validate-magnitude");
+    std::fs::write(
+        dir.join("b.json"),
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"smooth_union": {
+            "blend_radius": -1e308, "children": [{"shape": {"sphere": {}}}]}}}]}"#,
+    )
+    .unwrap();
+    let o = marchmesh(&["validate", "b.json"], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert_eq!(e.matches("blend_radius").count(), 1, "{e}");
+    assert!(e.contains("magnitude limit") && !e.contains("got 0"), "{e}");
+}

@@ -352,3 +352,116 @@ fn a_closed_stdout_ends_report_compare_merge_and_findings_quietly() {
         assert_ne!(o.status.code(), Some(101), "{args:?}: {e}");
     }
 }
+
+#[test]
+fn findings_refuse_a_symlinked_plots_folder_and_count_only_the_plots_written() {
+    let dir = tmp("report-findings-plots-link");
+    let good = run_dir(&dir, "good", &small_run());
+    let precious = dir.join("precious");
+    std::fs::create_dir_all(&precious).unwrap();
+    std::fs::write(precious.join("logo.svg"), b"art").unwrap();
+    std::os::unix::fs::symlink(&precious, dir.join("findings-plots")).unwrap();
+    let out = dir.join("findings.md");
+    let args = [
+        "findings",
+        "-o",
+        out.to_str().unwrap(),
+        good.to_str().unwrap(),
+        "--force",
+    ];
+    let o = marchmesh(&args, &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("findings-plots") && e.contains("symbolic link"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(precious.join("logo.svg")).unwrap(), b"art");
+    assert_eq!(std::fs::read_dir(&precious).unwrap().count(), 1);
+    assert!(!out.exists(), "the document was written");
+    // A real plots folder holding other files of the user's: they stay and are not counted.
+    std::fs::remove_file(dir.join("findings-plots")).unwrap();
+    let plots = dir.join("findings-plots");
+    std::fs::create_dir_all(&plots).unwrap();
+    std::fs::write(plots.join("notes.txt"), b"mine").unwrap();
+    std::fs::write(plots.join("README.md"), b"mine").unwrap();
+    let o = marchmesh(&args, &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let svgs = std::fs::read_dir(&plots)
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".svg"))
+        .count();
+    let said = support::text(&o.stdout);
+    assert!(said.contains(&format!("({svgs} plots in")), "{said}");
+    assert_eq!(std::fs::read(plots.join("notes.txt")).unwrap(), b"mine");
+}
+
+#[test]
+fn report_refuses_a_symlinked_or_file_plots_folder_and_writes_nothing() {
+    let dir = tmp("report-plots-folder-link");
+    let run = run_dir(&dir, "run", &small_run());
+    let victim = dir.join("victim");
+    std::fs::create_dir_all(&victim).unwrap();
+    // A file of the user's with the name of a plot report writes for the run.
+    std::fs::write(victim.join("time_vs_error_g_s.svg"), b"precious").unwrap();
+    std::os::unix::fs::symlink(&victim, run.join("plots")).unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("plots") && e.contains("symbolic link"), "{e}");
+    assert_eq!(
+        std::fs::read(victim.join("time_vs_error_g_s.svg")).unwrap(),
+        b"precious"
+    );
+    assert_eq!(std::fs::read_dir(&victim).unwrap().count(), 1);
+    assert!(!run.join("summary.md").exists() && !run.join("report.html").exists());
+    // plots/ as a file: refused the same way, the file kept.
+    std::fs::remove_file(run.join("plots")).unwrap();
+    std::fs::write(run.join("plots"), b"a file").unwrap();
+    let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("is a file"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(run.join("plots")).unwrap(), b"a file");
+}
+
+#[test]
+fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
+    let dir = tmp("report-duplicate-rows");
+    let good = run_dir(&dir, "good", &small_run());
+    let mut res = small_run();
+    let twin = res.rows[1].clone();
+    res.rows.extend(std::iter::repeat_n(twin, 1000));
+    let run = run_dir(&dir, "dup", &res);
+    let findings = dir.join("F.md");
+    let merged = dir.join("m");
+    for args in [
+        vec!["report", run.to_str().unwrap()],
+        vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+        vec![
+            "findings",
+            run.to_str().unwrap(),
+            "-o",
+            findings.to_str().unwrap(),
+        ],
+        vec![
+            "merge",
+            "-o",
+            merged.to_str().unwrap(),
+            run.to_str().unwrap(),
+        ],
+    ] {
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            e.contains("dup/results.json")
+                && e.contains("g/s/mesh:b/x1/t1")
+                && e.contains("more than one row")
+                && !e.contains("shards must not overlap"),
+            "{args:?}: {e}"
+        );
+    }
+    assert!(!findings.exists() && !merged.exists());
+    assert!(!run.join("summary.md").exists());
+}

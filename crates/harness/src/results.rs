@@ -420,12 +420,32 @@ impl Results {
             })?;
         results
             .check_values()
+            .and_then(|()| results.check_unique_rows())
             .map_err(|(at, reason)| ResultsError::Json {
                 file: path.display().to_string(),
                 path: at,
                 reason,
             })?;
         Ok(results)
+    }
+
+    /// Refuses a configuration id with more than one row (no run writes one; reports would
+    /// count it twice and `merge` would take the file for two overlapping shards). Returns
+    /// the JSON path of the first repeated row and the reason naming the id and its first row.
+    pub fn check_unique_rows(&self) -> Result<(), (String, String)> {
+        let mut first = std::collections::HashMap::with_capacity(self.rows.len());
+        for (i, r) in self.rows.iter().enumerate() {
+            if let Some(j) = first.insert(r.config_id.as_str(), i) {
+                return Err((
+                    format!("rows[{i}].config_id"),
+                    format!(
+                        "configuration {} has more than one row (also rows[{j}]): each configuration has one row",
+                        r.config_id
+                    ),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// A copy whose free text (names, ids, options, notes, errors, provenance, anchors) is

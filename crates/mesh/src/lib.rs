@@ -244,17 +244,17 @@ fn check_options(o: &MeshOptions) -> Result<(), MeshError> {
     match o.tessellation()? {
         Tessellation::ScreenError { pixels } if !(pixels.is_finite() && pixels > 0.0) => {
             return Err(MeshError::InvalidOption(format!(
-                "ScreenError pixels must be > 0, got {pixels}"
+                "tess_px must be a finite number of pixels > 0, got {pixels}"
             )));
         }
         Tessellation::ChordError { world } if !(world > 0.0 && world.is_finite()) => {
             return Err(MeshError::InvalidOption(format!(
-                "ChordError world must be > 0, got {world}"
+                "tess_chord must be a finite length in world units > 0, got {world}"
             )));
         }
         Tessellation::FixedLevel(l) if l > MAX_TESS_LEVEL => {
             return Err(MeshError::InvalidOption(format!(
-                "FixedLevel must be <= {MAX_TESS_LEVEL}, got {l}"
+                "tess_level must be in 0..={MAX_TESS_LEVEL}, got {l}"
             )));
         }
         _ => {}
@@ -651,6 +651,33 @@ mod tests {
         ] {
             let e = check_options(&options).expect_err(key).to_string();
             assert!(e.contains(key), "{options:?}: {e}");
+        }
+        // Tessellation keys too, with the accepted range, never the internal variant names.
+        for (options, expected) in [
+            (
+                MeshOptions {
+                    tess_level: Some(MAX_TESS_LEVEL + 1),
+                    ..MeshOptions::DEFAULT
+                },
+                "tess_level must be in 0..=12",
+            ),
+            (
+                MeshOptions {
+                    tess_chord: Some(0.0),
+                    ..MeshOptions::DEFAULT
+                },
+                "tess_chord must be",
+            ),
+            (
+                MeshOptions {
+                    tess_px: Some(0.0),
+                    ..MeshOptions::DEFAULT
+                },
+                "tess_px must be",
+            ),
+        ] {
+            let e = check_options(&options).expect_err(expected).to_string();
+            assert!(e.contains(expected), "{options:?}: {e}");
         }
         check_options(&MeshOptions {
             surface_px: Some(0.5),

@@ -7,6 +7,9 @@
 //! - [`publish_new`] writes bytes to a unique temporary file beside the target and publishes
 //!   it with a hard link, which fails if the target exists: exactly one of concurrent writers
 //!   wins, the others get [`SafeIoError::Exists`], and a failed write leaves no partial file.
+//! - [`own_folder`] creates or reuses a folder the tools own inside a run folder or beside
+//!   an output (`plots/`, `images/`, `<stem>-plots/`) and refuses one that is a symbolic link
+//!   or not a folder, so nothing is ever written or deleted through a planted link.
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -56,6 +59,15 @@ pub enum SafeIoError {
     BadReadCap {
         /// The value found.
         value: String,
+    },
+    /// A folder the tools own (created or reused inside a run folder or beside an output) is
+    /// a symbolic link, file or special file: nothing is written or deleted through it.
+    #[error("{} is {kind}, not a folder of its own (nothing was written through it)", path.display())]
+    NotOwnFolder {
+        /// The path.
+        path: PathBuf,
+        /// What it is instead (`"a symbolic link"`, `"a file"`, `"a device, FIFO or socket"`).
+        kind: &'static str,
     },
     /// The target already exists (or was created by a concurrent writer) and overwriting
     /// was not allowed.
@@ -183,6 +195,54 @@ pub fn read_regular(path: &Path) -> Result<Vec<u8>, SafeIoError> {
 /// Errors: those of [`read_capped`], or [`SafeIoError::BadReadCap`].
 pub fn read_regular_within(path: &Path, cap_bytes: u64) -> Result<Vec<u8>, SafeIoError> {
     read_capped(path, cap_bytes.min(read_cap_bytes()?))
+}
+
+/// What `meta` (of `symlink_metadata`) is when it is not a real folder, or `None` for a
+/// folder.
+fn not_a_folder(meta: &std::fs::Metadata) -> Option<&'static str> {
+    let t = meta.file_type();
+    if t.is_symlink() {
+        Some("a symbolic link")
+    } else if t.is_dir() {
+        None
+    } else if t.is_file() {
+        Some("a file")
+    } else {
+        Some("a device, FIFO or socket")
+    }
+}
+
+/// Checks that `dir`, a folder the tools own (inside a run folder or beside an output), is
+/// absent or a real folder: never a symbolic link (even to a folder), file or special file.
+/// Only the last component is checked; the folders above it are the user's choice. Returns
+/// whether it exists.
+///
+/// Errors: [`SafeIoError::NotOwnFolder`] naming the path and what it is.
+pub fn check_own_folder(dir: &Path) -> Result<bool, SafeIoError> {
+    match std::fs::symlink_metadata(dir) {
+        Ok(meta) => match not_a_folder(&meta) {
+            None => Ok(true),
+            Some(kind) => Err(SafeIoError::NotOwnFolder {
+                path: dir.to_path_buf(),
+                kind,
+            }),
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
+        Err(e) => Err(io_error(dir, "cannot inspect")(e)),
+    }
+}
+
+/// Creates `dir` (and missing parents) or reuses it if it is a real folder, refusing it when
+/// it is a symbolic link, file or special file ([`check_own_folder`], checked before and
+/// after creating).
+///
+/// Errors: [`SafeIoError::NotOwnFolder`], or the OS error naming the folder.
+pub fn own_folder(dir: &Path) -> Result<(), SafeIoError> {
+    if !check_own_folder(dir)? {
+        std::fs::create_dir_all(dir).map_err(io_error(dir, "cannot create the folder"))?;
+        check_own_folder(dir)?;
+    }
+    Ok(())
 }
 
 /// A temporary file name unique to this process and call, beside `target`.
@@ -341,6 +401,27 @@ mod tests {
         assert!(matches!(e, SafeIoError::Exists { .. }), "{e}");
         // No temporary files are left behind.
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn own_folders_are_created_or_reused_but_never_links_or_files() {
+        let dir = scratch("own");
+        let plots = dir.join("a/plots");
+        own_folder(&plots).unwrap();
+        own_folder(&plots).unwrap();
+        assert!(plots.is_dir());
+        let target = dir.join("target");
+        std::fs::create_dir_all(&target).unwrap();
+        let link = dir.join("linked");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        let file = dir.join("file");
+        std::fs::write(&file, b"x").unwrap();
+        for (p, kind) in [(&link, "symbolic link"), (&file, "a file")] {
+            let e = own_folder(p).unwrap_err();
+            assert!(matches!(e, SafeIoError::NotOwnFolder { .. }), "{e}");
+            assert!(e.to_string().contains(kind), "{e}");
+        }
+        assert!(!check_own_folder(&dir.join("absent")).unwrap());
     }
 
     #[test]

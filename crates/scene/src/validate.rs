@@ -117,22 +117,30 @@ impl Ctx<'_> {
     }
 
     fn finite(&mut self, path: &str, v: f64) -> f64 {
+        self.finite_or_fail(path, v).unwrap_or(0.0)
+    }
+
+    /// `v` when finite and within [`MAX_COORDINATE`] in magnitude; otherwise the one problem
+    /// is recorded and `None` returned, so range checks on the value are not made as well.
+    fn finite_or_fail(&mut self, path: &str, v: f64) -> Option<f64> {
         if !v.is_finite() {
             self.fail(path, format!("{v} is not a finite number"));
-            0.0
+            None
         } else if v.abs() > MAX_COORDINATE {
             self.fail(
                 path,
                 format!("{v:e} exceeds the magnitude limit {MAX_COORDINATE:e}"),
             );
-            0.0
+            None
         } else {
-            v
+            Some(v)
         }
     }
 
     fn positive(&mut self, path: &str, v: f64) -> f64 {
-        let v = self.finite(path, v);
+        let Some(v) = self.finite_or_fail(path, v) else {
+            return 0.0;
+        };
         if v <= 0.0 {
             self.fail(path, format!("must be > 0, got {v}"));
         }
@@ -140,7 +148,9 @@ impl Ctx<'_> {
     }
 
     fn non_negative(&mut self, path: &str, v: f64) -> f64 {
-        let v = self.finite(path, v);
+        let Some(v) = self.finite_or_fail(path, v) else {
+            return 0.0;
+        };
         if v < 0.0 {
             self.fail(path, format!("must be >= 0, got {v}"));
         }
@@ -148,7 +158,9 @@ impl Ctx<'_> {
     }
 
     fn in_range(&mut self, path: &str, v: f64, lo: f64, hi: f64) -> f64 {
-        let v = self.finite(path, v);
+        let Some(v) = self.finite_or_fail(path, v) else {
+            return 0.0;
+        };
         if !(lo..=hi).contains(&v) {
             self.fail(path, format!("must be in [{lo}, {hi}], got {v}"));
         }
@@ -467,14 +479,8 @@ impl Ctx<'_> {
                 let p = format!("{path}.repeat");
                 let mut period = DVec3::ZERO;
                 for axis in 0..3 {
-                    let v = self.finite(&format!("{p}.period[{axis}]"), r.period[axis]);
-                    if v < 0.0 {
-                        self.fail(
-                            &format!("{p}.period[{axis}]"),
-                            format!("must be >= 0, got {v}"),
-                        );
-                    }
-                    period[axis] = v.max(0.0);
+                    period[axis] =
+                        self.non_negative(&format!("{p}.period[{axis}]"), r.period[axis]);
                     if let Some(n) = r.count[axis]
                         && (n == 0 || n > MAX_REPEAT_COUNT_PER_AXIS)
                     {
@@ -710,13 +716,16 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
     let position = cx.vec3("camera.position", c.position);
     let look_at = cx.vec3("camera.look_at", c.look_at);
     let up = cx.vec3("camera.up", c.up);
-    let vfov = cx.finite("camera.vfov_deg", c.vfov_deg);
-    if !(vfov > 0.0 && vfov < 180.0) {
+    let vfov = cx.finite_or_fail("camera.vfov_deg", c.vfov_deg);
+    if let Some(vfov) = vfov
+        && !(vfov > 0.0 && vfov < 180.0)
+    {
         cx.fail(
             "camera.vfov_deg",
             format!("must be in (0, 180) degrees, got {vfov}"),
         );
     }
+    let vfov = vfov.unwrap_or(0.0);
     if let Err(e) = check_image_size(c.width, c.height) {
         cx.fail("camera.width", e);
     }

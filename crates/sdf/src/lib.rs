@@ -207,16 +207,16 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         HitEpsilon::Absolute(e) => {
             check(
                 e > 0.0 && e.is_finite(),
-                "hit_epsilon",
-                "absolute epsilon must be > 0",
+                "eps_abs",
+                &format!("must be a finite length in world units > 0, got {e}"),
             )?;
             (e, 0.0)
         }
         HitEpsilon::PixelCone(k) => {
             check(
                 k > 0.0 && k.is_finite(),
-                "hit_epsilon",
-                "cone fraction must be > 0",
+                "eps_px",
+                &format!("must be a finite fraction of the pixel footprint > 0, got {k}"),
             )?;
             (0.0, k * scene.camera.pixel_angle())
         }
@@ -234,15 +234,22 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     )?;
     let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
     check(max_distance > 0.0, "max_distance", "must be > 0")?;
-    check(opts.grid_res >= 2, "mesh_grid_resolution", "must be >= 2")?;
+    check(
+        opts.grid_res >= 2,
+        "grid_res",
+        &format!("must be >= 2, got {}", opts.grid_res),
+    )?;
     if let MeshGrid::Sparse { band_voxels, .. } = opts.mesh_grid() {
         use marchmesh_field::bake::{
             MAX_BAND_VOXELS, MAX_RESOLUTION, MIN_BAND_VOXELS, MIN_RESOLUTION,
         };
         check(
             (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.grid_res),
-            "mesh_grid_resolution",
-            &format!("sparse grids take {MIN_RESOLUTION}..={MAX_RESOLUTION} cells"),
+            "grid_res",
+            &format!(
+                "must be in {MIN_RESOLUTION}..={MAX_RESOLUTION} cells for sparse grids (grid=sparse), got {}",
+                opts.grid_res
+            ),
         )?;
         check(
             (MIN_BAND_VOXELS..=MAX_BAND_VOXELS).contains(&band_voxels),

@@ -179,8 +179,8 @@ fn sparse_grid_options_out_of_range_are_refused_by_name_before_baking() {
     for (opts, name) in [
         (sparse(0, 128), "band"),
         (sparse(99, 128), "band"),
-        (sparse(2, 100_000), "mesh_grid_resolution"),
-        (sparse(2, 1), "mesh_grid_resolution"),
+        (sparse(2, 100_000), "sdf option grid_res:"),
+        (sparse(2, 1), "sdf option grid_res:"),
     ] {
         let err = build(&scene, &opts).expect_err("refused").to_string();
         assert!(err.contains(name), "{err}");

@@ -146,9 +146,18 @@ impl RepeatPolicy {
     }
 }
 
-/// File-name-safe version of a configuration id.
+/// The longest [`slug`] in bytes: two of them plus the longest prefix and suffix the tools
+/// add (`steps_histogram_`, `_`, `_accuracy.svg`) stay well under the 255-byte file-name
+/// limit of common file systems.
+pub const SLUG_MAX_BYTES: usize = 96;
+
+/// File-name-safe version of a configuration id (or a group, scene or suite name): ASCII
+/// letters, digits and `-_.=` kept, anything else `_`. At most [`SLUG_MAX_BYTES`] bytes: a
+/// longer one keeps a readable prefix and ends in `-` and 16 hex digits of a stable hash
+/// (FNV-1a) of the whole `id`, so distinct long ids keep distinct names.
 pub fn slug(id: &str) -> String {
-    id.chars()
+    let full: String = id
+        .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || "-_.=".contains(c) {
                 c
@@ -156,7 +165,17 @@ pub fn slug(id: &str) -> String {
                 '_'
             }
         })
-        .collect()
+        .collect();
+    if full.len() <= SLUG_MAX_BYTES {
+        return full;
+    }
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in id.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01B3);
+    }
+    // `full` is ASCII, so any byte index is a character boundary.
+    format!("{}-{h:016x}", &full[..SLUG_MAX_BYTES - 17])
 }
 
 /// Consecutive runs of `configs` measured in one rotation: same suite group, scene file,
@@ -183,6 +202,22 @@ pub fn rotation_blocks(configs: &[Config]) -> Vec<std::ops::Range<usize>> {
 mod tests {
     use super::*;
     use crate::bench::test_util::config;
+
+    #[test]
+    fn long_slugs_are_capped_with_a_stable_hash() {
+        assert_eq!(slug("g/s/sdf:a b/x1/t1"), "g_s_sdf_a_b_x1_t1");
+        let long = |c: char| format!("{}/s/sdf:a/x1/t1", c.to_string().repeat(300));
+        let (a, b) = (slug(&long('a')), slug(&long('b')));
+        assert_eq!(a.len(), SLUG_MAX_BYTES);
+        assert!(a.starts_with("aaaa") && a != b, "{a} {b}");
+        assert_eq!(a, slug(&long('a')));
+        // Ids differing only past the prefix still differ.
+        let (x, y) = (
+            format!("{}x", "g".repeat(200)),
+            format!("{}y", "g".repeat(200)),
+        );
+        assert_ne!(slug(&x), slug(&y));
+    }
 
     #[test]
     fn results_record_scene_paths_from_the_scenes_folder() {

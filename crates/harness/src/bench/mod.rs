@@ -26,7 +26,9 @@ mod progress;
 mod shard;
 
 use configs::resolution_tag;
-pub use configs::{configurations, filter_matches, portable_scene_path, rotation_blocks, slug};
+pub use configs::{
+    SLUG_MAX_BYTES, configurations, filter_matches, portable_scene_path, rotation_blocks, slug,
+};
 use prepare::{Loaded, Prepared, SceneKey, Truth, load_scene, prepare, reference_render};
 pub use progress::{Eta, PREPARED_FRACTION, Progress, Silent};
 pub use shard::{Shard, shard};

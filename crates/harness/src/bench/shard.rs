@@ -44,15 +44,10 @@ impl std::fmt::Display for Shard {
 /// to shards greedily, most configurations first, each to the shard with the fewest so far
 /// (ties: lowest shard, then suite order). Suite order is kept within a shard.
 ///
-/// Errors: more shards than configurations (checked before anything is allocated per shard).
+/// Errors: more shards than scene files, the units a suite is split into (checked before
+/// anything is allocated per shard): some shard would be empty, so its run would fail and
+/// the shards could never be merged. The message gives the largest possible N.
 pub fn shard(configs: &[Config], shard: Shard) -> Result<Vec<Config>, String> {
-    if shard.count > configs.len() {
-        return Err(format!(
-            "--shard {shard}: {} shards but only {} configurations; N must be at most the number of configurations",
-            shard.count,
-            configs.len()
-        ));
-    }
     let mut scene_index: HashMap<&Path, usize> = HashMap::new();
     let mut scenes: Vec<(&Path, usize)> = Vec::new();
     for c in configs {
@@ -63,6 +58,15 @@ pub fn shard(configs: &[Config], shard: Shard) -> Result<Vec<Config>, String> {
                 scenes.len() - 1
             });
         scenes[i].1 += 1;
+    }
+    if shard.count > scenes.len() {
+        return Err(format!(
+            "--shard {shard}: {} shards but the {} configurations come from only {} scene files (all configurations of a scene run in one shard): N must be at most {}",
+            shard.count,
+            configs.len(),
+            scenes.len(),
+            scenes.len()
+        ));
     }
     let mut order: Vec<usize> = (0..scenes.len()).collect();
     order.sort_by(|&a, &b| scenes[b].1.cmp(&scenes[a].1).then(a.cmp(&b)));
@@ -101,7 +105,7 @@ mod tests {
                 configs.push(config(scene, &format!("sdf:{i}")));
             }
         }
-        for count in 1..=8 {
+        for count in 1..=6 {
             let shards: Vec<Vec<Config>> = (1..=count)
                 .map(|index| shard(&configs, Shard { index, count }).unwrap())
                 .collect();
@@ -140,14 +144,17 @@ mod tests {
             .collect();
         assert_eq!(two.iter().sum::<usize>(), 21);
         assert!(two.iter().all(|&n| (10..=11).contains(&n)), "{two:?}");
+        // Six scenes: a seventh shard would be empty.
+        let e = shard(&configs, Shard { index: 7, count: 7 }).unwrap_err();
+        assert!(e.contains("at most 6"), "{e}");
     }
 
     #[test]
-    fn more_shards_than_configurations_are_refused_before_allocating() {
+    fn more_shards_than_scenes_are_refused_before_allocating() {
         let configs = vec![config("a", "sdf"), config("b", "sdf")];
         for count in [3, 1_000_000_000_000, usize::MAX] {
             let e = shard(&configs, Shard { index: 1, count }).unwrap_err();
-            assert!(e.contains("only 2 configurations"), "{e}");
+            assert!(e.contains("at most 2"), "{e}");
         }
         assert_eq!(
             shard(&configs, Shard { index: 2, count: 2 }).unwrap().len(),

@@ -41,17 +41,18 @@ pub struct Run {
     pub results: Results,
 }
 
-/// The findings document for `runs`, and its plots written into `plots_dir` (linked as
-/// `plots_link/NAME.svg`). Its anchor section lists the anchors the runs recorded, then
-/// `more_anchors`. Deterministic: the same inputs give the same bytes.
+/// The findings document for `runs` and the number of plots written into `plots_dir` (linked
+/// as `plots_link/NAME.svg`; created, or reused only if it is a real folder, never a symbolic
+/// link). Its anchor section lists the anchors the runs recorded, then `more_anchors`.
+/// Deterministic: the same inputs give the same bytes.
 ///
-/// Errors: a plot cannot be written.
+/// Errors: `plots_dir` is a symbolic link, file or special file, or a plot cannot be written.
 pub fn write_findings(
     runs: &[Run],
     more_anchors: &[crate::anchors::Anchor],
     plots_dir: &Path,
     plots_link: &str,
-) -> Result<String, String> {
+) -> Result<(String, usize), String> {
     let points = newest_points(runs);
     let mut plots = Vec::new();
     let mut sections = Vec::new();
@@ -92,7 +93,7 @@ pub fn write_findings(
             }
         }
     }
-    std::fs::create_dir_all(plots_dir).map_err(|e| format!("{}: {e}", plots_dir.display()))?;
+    marchmesh_safeio::own_folder(plots_dir).map_err(|e| e.to_string())?;
     // The folder belongs to this document: plots of an earlier version that this one no
     // longer draws are removed (only `.svg` files; anything else is left alone).
     if let Ok(entries) = std::fs::read_dir(plots_dir) {
@@ -297,7 +298,7 @@ pub fn write_findings(
         let _ = writeln!(s, "## {}\n", sec.title);
         s.push_str(&sec.body.replace("PLOTS/", &format!("{plots_link}/")));
     }
-    Ok(s)
+    Ok((s, plots.len() + usize::from(!chart.is_empty())))
 }
 
 #[cfg(test)]
@@ -332,7 +333,7 @@ mod tests {
             results: results(rows),
         }];
         let dir = std::env::temp_dir().join(format!("marchmesh-findings-{}", std::process::id()));
-        let doc = write_findings(&runs, &[], &dir, "plots").unwrap();
+        let doc = write_findings(&runs, &[], &dir, "plots").unwrap().0;
         assert!(
             doc.contains("from mesh to sdf between 100 and 10000 copies (the number in the scene name) (interpolated 346,"),
             "{doc}"
@@ -344,7 +345,7 @@ mod tests {
         std::fs::write(dir.join("old_axis.svg"), "<svg/>").unwrap();
         std::fs::write(dir.join("notes.txt"), "mine").unwrap();
         // Same input, same bytes.
-        assert_eq!(write_findings(&runs, &[], &dir, "plots").unwrap(), doc);
+        assert_eq!(write_findings(&runs, &[], &dir, "plots").unwrap().0, doc);
         assert!(!dir.join("old_axis.svg").exists());
         assert!(dir.join("notes.txt").is_file());
         std::fs::remove_dir_all(&dir).ok();
@@ -366,7 +367,7 @@ mod tests {
         }];
         let dir =
             std::env::temp_dir().join(format!("marchmesh-findings-{name}-{}", std::process::id()));
-        let doc = write_findings(&runs, &[], &dir, "plots").unwrap();
+        let doc = write_findings(&runs, &[], &dir, "plots").unwrap().0;
         std::fs::remove_dir_all(&dir).ok();
         doc
     }

@@ -22,8 +22,10 @@ use crate::results::Results;
 
 /// Writes `summary.md`, `plots/` and `report.html` (which inlines the plots and shows the
 /// images of `images/`, see [`crate::html`]) into `dir` from `res`. Returns the plot file
-/// names.
+/// names. A `plots/` that is a symbolic link, file or special file is refused before
+/// anything is written.
 pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    marchmesh_safeio::check_own_folder(&dir.join("plots")).map_err(|e| e.to_string())?;
     let summary = dir.join("summary.md");
     marchmesh_safeio::replace_regular(&summary, summary_markdown(&res.markdown_safe()).as_bytes())
         .map_err(|e| e.to_string())?;

@@ -398,10 +398,10 @@ pub(crate) fn time_vs_accuracy(
     publish_svg(path, &svg)
 }
 
-/// Writes the plots into `dir` (created), returning the file names. A plot without data is
-/// not written.
+/// Writes the plots into `dir` (created, or reused only if it is a real folder, never a
+/// symbolic link), returning the file names. A plot without data is not written.
 pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    marchmesh_safeio::own_folder(dir).map_err(|e| e.to_string())?;
     let mut written = Vec::new();
     let slug = crate::bench::slug;
     // Time vs error per (group, scene).
