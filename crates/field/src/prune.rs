@@ -347,6 +347,9 @@ pub struct Cells {
     /// While building: the cell holding each distinct program, by its nodes' indices in the
     /// whole program (neighbouring cells often keep the same children; they share one).
     by_source: std::collections::HashMap<Vec<u32>, u32>,
+    /// While building: how many more program nodes the pruner may read
+    /// ([`Cells::max_work`]).
+    work_left: usize,
 }
 
 /// Counts of a [`Cells`] build, for reports.
@@ -363,6 +366,9 @@ pub struct CellStats {
     /// Program cells that share the program of an earlier cell (counted in
     /// `program_cells`, not in `program_nodes`).
     pub shared_cells: usize,
+    /// Program nodes the pruner read over the build (its work: each octree node prunes its
+    /// parent's program).
+    pub pruned_nodes: usize,
 }
 
 /// Cells with at most this many nodes are not subdivided further.
@@ -377,9 +383,11 @@ impl Cells {
     /// Builds the octree over `bounds` (a box holding every surface of the field; the octree
     /// covers it grown by `pad`, which must be positive) down to `2^depth` finest cells per
     /// axis (`depth` at most 8). `None` when the box is not finite, the program holds a
-    /// mesh grid (grids are not Lipschitz bounds, see the module docs), or the cells'
-    /// programs would hold more than [`Cells::max_nodes`] nodes in all (the build stops there:
-    /// memory and time stay bounded). Every cell's program is within `max_error` of the
+    /// mesh grid (grids are not Lipschitz bounds, see the module docs), the cells'
+    /// programs would hold more than [`Cells::max_nodes`] nodes in all, or the pruner would
+    /// read more than [`Cells::max_work`] program nodes (the build stops there: memory and
+    /// time stay bounded; a deep chain whose cells keep most of it reads the whole program
+    /// once per octree node). Every cell's program is within `max_error` of the
     /// whole program in the cell (each level of the octree prunes within its share), and far
     /// bounds are lowered by it: `0` keeps values bit for bit.
     pub fn build(
@@ -418,6 +426,7 @@ impl Cells {
             pad: pad as f32,
             stats: CellStats::default(),
             by_source: std::collections::HashMap::new(),
+            work_left: Self::max_work(prog.instrs.len()),
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let whole: Vec<u32> = (0..prog.instrs.len() as u32).collect();
@@ -442,6 +451,13 @@ impl Cells {
         nodes.saturating_mul(8).max(1 << 18)
     }
 
+    /// The most program nodes the pruner may read building the octree of a program of
+    /// `nodes` nodes: 2^22 (about a second of pruning), or 16 times the program when that is
+    /// more. A build over it stops ([`Cells::build`] returns `None`).
+    pub fn max_work(nodes: usize) -> usize {
+        nodes.saturating_mul(16).max(1 << 22)
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn build_cell(
         &mut self,
@@ -454,6 +470,12 @@ impl Cells {
         budget: usize,
         (level_error, max_error): (f64, f64),
     ) -> bool {
+        let work = prog.instrs.len();
+        if work > self.work_left {
+            return false;
+        }
+        self.work_left -= work;
+        self.stats.pruned_nodes += work;
         let radius = 0.5 * (hi - lo).length();
         let mut pruned = prune(prog, grids, 0.5 * (lo + hi), radius, level_error);
         for s in &mut pruned.source {
