@@ -220,8 +220,8 @@ struct RenderArgs {
     /// instances; then the image buffers) would exceed this many MiB.
     #[arg(long, default_value_t = 4096)]
     memory_limit_mib: u64,
-    /// Stop (writing nothing) as soon as the render's projected time, from the rows done so
-    /// far, exceeds this many seconds.
+    /// Stop (writing nothing) as soon as the build and the render together take, or the
+    /// render is projected from the rows done so far to take, more than this many seconds.
     #[arg(long, value_name = "SECONDS")]
     max_seconds: Option<f64>,
 }
@@ -765,17 +765,37 @@ fn render(args: RenderArgs) -> Result<()> {
     let background = BackgroundSampler::load_within(&scene.background, memory_limit_bytes)
         .with_context(|| format!("scene {}", scene_path.display()))?;
 
-    let t0 = Instant::now();
-    let spec = BackendSpec { kind, options };
-    let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
-        .with_context(|| format!("building scene {}", scene_path.display()))?;
-    let build_time = t0.elapsed();
-
     if let Some(limit) = args.max_seconds
         && !(limit.is_finite() && limit > 0.0)
     {
         bail!("--max-seconds {limit}: must be a positive number");
     }
+    let t0 = Instant::now();
+    // The deadline holds from the build on (a deep field can take minutes to build) and
+    // while no row has finished yet (a band of a render at the caps can take minutes).
+    let finished = std::sync::Arc::new(AtomicBool::new(false));
+    if let Some(limit) = args.max_seconds {
+        let finished = finished.clone();
+        std::thread::spawn(move || {
+            let deadline = t0 + Duration::from_secs_f64(limit);
+            while Instant::now() < deadline {
+                if finished.load(Ordering::Relaxed) {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            if !finished.load(Ordering::Relaxed) {
+                eprintln!(
+                    "\nerror: the build and render did not finish within --max-seconds {limit}; nothing was written"
+                );
+                std::process::exit(1);
+            }
+        });
+    }
+    let spec = BackendSpec { kind, options };
+    let geometry = backend::build_within(&scene, &spec, memory_limit_bytes)
+        .with_context(|| format!("building scene {}", scene_path.display()))?;
+    let build_time = t0.elapsed();
     let bound = ray_bound(&scene);
     if bound > QUIET_RAY_BOUND {
         eprintln!(
@@ -799,11 +819,12 @@ fn render(args: RenderArgs) -> Result<()> {
         if let Some(limit) = args.max_seconds {
             let elapsed = start.elapsed().as_secs_f64();
             let projected = elapsed * f64::from(h) / bar.position().max(1) as f64;
-            if projected > limit {
+            if build_time.as_secs_f64() + projected > limit {
                 bar.finish_and_clear();
                 eprintln!(
-                    "error: the render is projected to take {projected:.0} s ({} of {h} rows in {elapsed:.1} s), over --max-seconds {limit}; nothing was written",
-                    bar.position()
+                    "error: the render is projected to take {projected:.0} s ({} of {h} rows in {elapsed:.1} s) after a build of {:.1} s, over --max-seconds {limit}; nothing was written",
+                    bar.position(),
+                    build_time.as_secs_f64()
                 );
                 std::process::exit(1);
             }
@@ -814,27 +835,6 @@ fn render(args: RenderArgs) -> Result<()> {
         memory_limit_bytes,
         ..Default::default()
     };
-    // The deadline also holds while no row has finished yet (a band of a render at the
-    // caps can take minutes).
-    let finished = std::sync::Arc::new(AtomicBool::new(false));
-    if let Some(limit) = args.max_seconds {
-        let finished = finished.clone();
-        std::thread::spawn(move || {
-            let deadline = start + Duration::from_secs_f64(limit);
-            while Instant::now() < deadline {
-                if finished.load(Ordering::Relaxed) {
-                    return;
-                }
-                std::thread::sleep(Duration::from_millis(50));
-            }
-            if !finished.load(Ordering::Relaxed) {
-                eprintln!(
-                    "\nerror: the render did not finish within --max-seconds {limit}; nothing was written"
-                );
-                std::process::exit(1);
-            }
-        });
-    }
     let out = marchmesh_core::render(&scene, geometry.as_ref(), &background, &opts, &on_row)?;
     finished.store(true, Ordering::Relaxed);
     bar.finish_and_clear();

@@ -1,7 +1,7 @@
 //! Hostile input to `render`, `validate` and `view`: environment maps are budgeted from their
 //! header before decoding (and `validate` says so), errors print each OS error once, and
-//! nonsense view steps are refused up front; a closed stdout never panics `render`, `bench`
-//! or `stability`.
+//! nonsense view steps are refused up front; `--max-seconds` covers the build as well as the
+//! render; a closed stdout never panics `render`, `bench` or `stability`.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -379,4 +379,72 @@ fn a_value_over_the_magnitude_limit_is_one_problem() {
     assert!(!o.status.success());
     assert_eq!(e.matches("blend_radius").count(), 1, "{e}");
     assert!(e.contains("magnitude limit") && !e.contains("got 0"), "{e}");
+}
+
+#[test]
+fn max_seconds_covers_a_slow_build() {
+    let dir = tmp("render-slow-build");
+    // A left-deep chain of 16,000 smooth subtractions: the mesh backend samples the whole
+    // chain at every grid point, a build of tens of seconds even in a release build.
+    let levels = 16_000;
+    let mut json = String::from(r#"{"camera": {"width": 16, "height": 16}, "objects": ["#);
+    for _ in 0..levels {
+        json.push_str(r#"{"shape": {"smooth_subtraction": {"blend_radius": 0.05, "children": ["#);
+    }
+    json.push_str(r#"{"shape": {"sphere": {"radius": 0.5}}}"#);
+    for _ in 0..levels {
+        json.push_str(
+            r#", {"shape": {"capsule": {"radius": 0.1, "height": 0.5}}, "transform": {"translate": [0.3, 0, 0]}}]}}}"#,
+        );
+    }
+    json.push_str("]}");
+    std::fs::write(dir.join("chain.json"), json).unwrap();
+    let start = std::time::Instant::now();
+    let o = marchmesh(
+        &[
+            "render",
+            "chain.json",
+            "--backend",
+            "mesh",
+            "--out",
+            "a.png",
+            "--max-seconds",
+            "1",
+        ],
+        &dir,
+    );
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(
+        e.contains("--max-seconds 1") && e.contains("nothing was written"),
+        "{e}"
+    );
+    // Parsing and the deadline, not the build's tens of seconds.
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(20),
+        "{:?}",
+        start.elapsed()
+    );
+    assert!(!dir.join("a.png").exists());
+}
+
+#[test]
+fn an_error_thousands_of_levels_deep_names_a_shortened_path() {
+    let dir = tmp("render-deep-error");
+    let levels = 5_000;
+    let mut json = String::from(r#"{"objects": ["#);
+    for _ in 0..levels {
+        json.push_str(r#"{"shape": {"union": {"children": ["#);
+    }
+    json.push_str(r#"{"shape": {"sphre": {}}}"#);
+    for _ in 0..levels {
+        json.push_str("]}}}");
+    }
+    json.push_str("]}");
+    std::fs::write(dir.join("deep.json"), json).unwrap();
+    let o = marchmesh(&["validate", "deep.json"], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success(), "{e}");
+    assert!(e.contains("sphre") && e.contains("characters)..."), "{e}");
+    assert!(e.len() < 4_000, "{} bytes of message", e.len());
 }

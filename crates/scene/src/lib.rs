@@ -48,7 +48,10 @@ pub enum SceneError {
         reason: String,
     },
     /// The JSON is malformed or a value has the wrong type or an unknown field.
-    #[error("{source_name}:{line}:{column}: at `{json_path}`: {message}")]
+    #[error(
+        "{source_name}:{line}:{column}: at `{}`: {message}",
+        validate::shown_path(json_path)
+    )]
     Parse {
         /// The scene file (or `<string>`).
         source_name: String,

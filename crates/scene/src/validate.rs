@@ -79,8 +79,24 @@ pub struct Problem {
 
 impl std::fmt::Display for Problem {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "at `{}`: {}", self.json_path, self.reason)
+        write!(f, "at `{}`: {}", shown_path(&self.json_path), self.reason)
     }
+}
+
+/// Longest JSON path a message shows whole; a longer one (a value thousands of levels deep)
+/// is shown as its start, the number of characters left out and its end.
+pub const SHOWN_PATH_MAX_CHARS: usize = 240;
+
+/// `json_path` as messages show it: whole up to [`SHOWN_PATH_MAX_CHARS`] characters,
+/// otherwise its first 80 and last 120 characters around a count of those left out.
+pub fn shown_path(json_path: &str) -> std::borrow::Cow<'_, str> {
+    let chars = json_path.chars().count();
+    if chars <= SHOWN_PATH_MAX_CHARS {
+        return json_path.into();
+    }
+    let head: String = json_path.chars().take(80).collect();
+    let tail: String = json_path.chars().skip(chars - 120).collect();
+    format!("{head}...({} characters)...{tail}", chars - 200).into()
 }
 
 /// Checks an image size against the limits.
@@ -913,5 +929,21 @@ pub fn resolve(file: &SceneFile, base_dir: &Path, source: &str) -> Result<Scene,
             }
             Err(cx.problems)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn long_paths_are_shown_shortened_with_both_ends() {
+        assert_eq!(shown_path("objects[0].shape"), "objects[0].shape");
+        let long = format!("objects[0]{}.radius", ".children[0]".repeat(1000));
+        let shown = shown_path(&long);
+        assert!(shown.len() < 300, "{shown}");
+        assert!(shown.starts_with("objects[0].children[0]"), "{shown}");
+        assert!(shown.ends_with(".children[0].radius"), "{shown}");
+        assert!(shown.contains(&format!("({} characters)", long.len() - 200)));
     }
 }
