@@ -398,8 +398,8 @@ const MAX_PROBLEMS: usize = 64;
 /// missing field of the user's, malformed JSON). Line numbers are those of the first error
 /// only: the later ones are found in the edited document, so they are given by JSON path,
 /// mapped back to the indices of the user's file (an array element taken out shifts the
-/// later ones). A field missing because a value was taken out is not the user's problem: it
-/// is not reported, and the array element holding it is taken out instead. `first_path` is
+/// later ones). A missing field is reported unless a value taken out caused it, and the array
+/// element holding it is taken out so the search goes on. `first_path` is
 /// the first error's JSON path, not repeated (the edited document's keys are in sorted order,
 /// so it need not come first there).
 fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
@@ -429,18 +429,18 @@ fn further_problems(path: &Path, first_path: &str) -> Vec<String> {
                 };
                 let original = taken.original(&segments);
                 if let Some(field) = missing_field(&message) {
-                    if !taken
-                        .keys
-                        .contains(&(render_path(&original), field.to_string()))
-                    {
-                        out.push(format!(
-                            "{name}: at `{}`: {message}",
-                            render_path(&original)
-                        ));
-                        break;
+                    let shown = render_path(&original);
+                    // The user's own missing field is reported (once: the first error is
+                    // printed by the caller); one missing only because a value was taken out
+                    // is not. Either way the value cannot be completed: the array element
+                    // holding it is taken out and the search goes on.
+                    if !taken.keys.contains(&(shown.clone(), field.to_string())) {
+                        if first_seen || shown != first_path {
+                            out.push(format!("{name}: at `{shown}`: {message}"));
+                        } else {
+                            first_seen = true;
+                        }
                     }
-                    // Missing only because a value was taken out: take out the array
-                    // element holding it instead.
                     let Some(at) = segments
                         .iter()
                         .rposition(|s| matches!(s, Segment::Index(_)))

@@ -365,6 +365,25 @@ fn validate_reports_each_problem_once_at_its_own_path() {
 }
 
 #[test]
+fn validate_reports_missing_fields_once_and_goes_on() {
+    let dir = tmp("render-validate-missing");
+    // The first problem is a missing field of the user's: printed once, then the search goes
+    // on to the next ones.
+    std::fs::write(
+        dir.join("m.json"),
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"mesh": {}}},
+            {"shape": {"mesh": {}}}, {"shape": {"cube": {}}}]}"#,
+    )
+    .unwrap();
+    let o = marchmesh(&["validate", "m.json"], &dir);
+    let e = stderr(&o);
+    assert!(!o.status.success());
+    assert_eq!(e.matches("`objects[0].shape.mesh").count(), 1, "{e}");
+    assert_eq!(e.matches("`objects[1].shape.mesh").count(), 1, "{e}");
+    assert_eq!(e.matches("`objects[2].shape").count(), 1, "{e}");
+}
+
+#[test]
 fn a_value_over_the_magnitude_limit_is_one_problem() {
     // Not also "must be > 0, got 0" for the value the limit check replaced.
     let dir = tmp("render-validate-magnitude");
