@@ -465,3 +465,43 @@ fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
     assert!(!findings.exists() && !merged.exists());
     assert!(!run.join("summary.md").exists());
 }
+
+#[test]
+fn results_listing_a_configuration_as_missing_twice_or_beside_its_row_are_refused() {
+    let dir = tmp("report-duplicate-missing");
+    let mut twice = small_run();
+    twice.interrupted = true;
+    twice.missing = vec!["zz".into(), "zz".into()];
+    let twice = run_dir(&dir, "twice", &twice);
+    let mut beside = small_run();
+    beside.interrupted = true;
+    beside.missing = vec![beside.rows[0].config_id.clone()];
+    let beside = run_dir(&dir, "beside", &beside);
+    for (run, reason) in [
+        (&twice, "listed as missing twice"),
+        (&beside, "listed as missing but has a row"),
+    ] {
+        let merged = dir.join("m");
+        let o = marchmesh(
+            &[
+                "merge",
+                "-o",
+                merged.to_str().unwrap(),
+                run.to_str().unwrap(),
+            ],
+            &dir,
+        );
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{e}");
+        assert!(
+            e.contains("results.json")
+                && e.contains(reason)
+                && e.contains("missing[")
+                && !e.contains("configurations missing"),
+            "{e}"
+        );
+        assert!(!merged.exists());
+        let o = marchmesh(&["report", run.to_str().unwrap()], &dir);
+        assert!(!o.status.success() && stderr(&o).contains(reason));
+    }
+}

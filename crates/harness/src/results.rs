@@ -429,9 +429,10 @@ impl Results {
         Ok(results)
     }
 
-    /// Refuses a configuration id with more than one row (no run writes one; reports would
-    /// count it twice and `merge` would take the file for two overlapping shards). Returns
-    /// the JSON path of the first repeated row and the reason naming the id and its first row.
+    /// Refuses a configuration id with more than one row, or listed as missing twice or
+    /// beside its row (no run writes either; reports would count it twice and `merge` would
+    /// take the file for two overlapping shards). Returns the JSON path of the first such
+    /// entry and the reason naming the id and where it first appeared.
     pub fn check_unique_rows(&self) -> Result<(), (String, String)> {
         let mut first = std::collections::HashMap::with_capacity(self.rows.len());
         for (i, r) in self.rows.iter().enumerate() {
@@ -442,6 +443,21 @@ impl Results {
                         "configuration {} has more than one row (also rows[{j}]): each configuration has one row",
                         r.config_id
                     ),
+                ));
+            }
+        }
+        let mut listed = std::collections::HashMap::with_capacity(self.missing.len());
+        for (i, id) in self.missing.iter().enumerate() {
+            if let Some(&j) = first.get(id.as_str()) {
+                return Err((
+                    format!("missing[{i}]"),
+                    format!("configuration {id} is listed as missing but has a row (rows[{j}])"),
+                ));
+            }
+            if let Some(j) = listed.insert(id.as_str(), i) {
+                return Err((
+                    format!("missing[{i}]"),
+                    format!("configuration {id} is listed as missing twice (also missing[{j}])"),
                 ));
             }
         }

@@ -61,10 +61,11 @@ pub fn shard(configs: &[Config], shard: Shard) -> Result<Vec<Config>, String> {
     }
     if shard.count > scenes.len() {
         return Err(format!(
-            "--shard {shard}: {} shards but the {} configurations come from only {} scene files (all configurations of a scene run in one shard): N must be at most {}",
+            "--shard {shard}: {} shards but the {} configurations come from only {} scene file{} (all configurations of a scene run in one shard): N must be at most {}",
             shard.count,
             configs.len(),
             scenes.len(),
+            if scenes.len() == 1 { "" } else { "s" },
             scenes.len()
         ));
     }
@@ -147,6 +148,16 @@ mod tests {
         // Six scenes: a seventh shard would be empty.
         let e = shard(&configs, Shard { index: 7, count: 7 }).unwrap_err();
         assert!(e.contains("at most 6"), "{e}");
+    }
+
+    #[test]
+    fn one_scene_file_is_named_in_the_singular() {
+        let configs = vec![config("a", "sdf"), config("a", "mesh")];
+        let e = shard(&configs, Shard { index: 1, count: 2 }).unwrap_err();
+        assert!(
+            e.contains("only 1 scene file (") && e.contains("at most 1"),
+            "{e}"
+        );
     }
 
     #[test]
