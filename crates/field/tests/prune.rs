@@ -327,3 +327,43 @@ proptest! {
         prop_assert!(worst <= max_error * (1.0 + 1e-9) + 1e-15, "{} over {}", worst, max_error);
     }
 }
+
+/// A left-deep chain of `levels` smooth intersections: every cell the surface crosses keeps
+/// nearly the whole chain, so an unbudgeted octree reads the whole program at every node.
+fn intersection_chain(levels: usize) -> Node {
+    let mut n = sphere(0.5, DVec3::ZERO);
+    for _ in 0..levels {
+        n = node(
+            NodeKind::Smooth {
+                op: SmoothOp::Intersection,
+                children: vec![n, sphere(0.6, DVec3::new(0.3, 0.0, 0.0))],
+                blend_radius: 0.05,
+            },
+            DVec3::ZERO,
+        );
+    }
+    n
+}
+
+#[test]
+fn the_octree_build_reads_at_most_its_work_budget() {
+    use marchmesh_field::prune::Cells;
+    // A molecule prunes well: its octree is built, within the budget.
+    let mut m = compile(&molecule(300, 7, 0.026));
+    let nodes = m.node_count();
+    let stats = m
+        .build_cells(6, 0.0)
+        .expect("a molecule's octree fits the budgets");
+    assert!(stats.pruned_nodes > 0 && stats.pruned_nodes <= Cells::max_work(nodes));
+    // A deep chain reads its whole program at every octree node: the deep octree gives up at
+    // the budget, and whatever depth is built stayed within it.
+    let chain = intersection_chain(600);
+    let mut f = compile(&chain);
+    let nodes = f.node_count();
+    let whole = whole_program(&chain);
+    let (lo, hi) = f.bounds().expect("bounded");
+    assert!(Cells::build(&whole, &[], (lo, hi), 0.01, 6, 0.0).is_none());
+    if let Some(stats) = f.build_cells(6, 0.0) {
+        assert!(stats.pruned_nodes <= Cells::max_work(nodes), "{stats:?}");
+    }
+}
