@@ -199,14 +199,25 @@ fn sample_narrow_band(
             let mut out = vec![0f32; slice * (z1 - z0)];
             for by in 0..blocks[1] {
                 let (y0, y1) = (by * BAND_BLOCK, ((by + 1) * BAND_BLOCK).min(ny));
-                for bx in 0..blocks[0] {
-                    let (x0, x1) = (bx * BAND_BLOCK, ((bx + 1) * BAND_BLOCK).min(nx));
-                    let centre_index = DVec3::new(
+                let x_range = |bx: usize| (bx * BAND_BLOCK, ((bx + 1) * BAND_BLOCK).min(nx));
+                let centre_index = |bx: usize| {
+                    let (x0, x1) = x_range(bx);
+                    DVec3::new(
                         0.5 * (x0 + x1 - 1) as f64,
                         0.5 * (y0 + y1 - 1) as f64,
                         0.5 * (z0 + z1 - 1) as f64,
-                    );
-                    let centre = origin + centre_index * cell;
+                    )
+                };
+                // The centres of eight blocks of the row per query.
+                let mut centre_values = Vec::with_capacity(blocks[0].next_multiple_of(8));
+                for first in (0..blocks[0]).step_by(8) {
+                    centre_values.extend(distance_x8(std::array::from_fn(|i| {
+                        origin + centre_index((first + i).min(blocks[0] - 1)) * cell
+                    })));
+                }
+                for (bx, &centre_value) in centre_values.iter().enumerate().take(blocks[0]) {
+                    let (x0, x1) = x_range(bx);
+                    let centre_index = centre_index(bx);
                     let half_diagonal = DVec3::new(
                         (x1 - x0 - 1) as f64,
                         (y1 - y0 - 1) as f64,
@@ -215,7 +226,7 @@ fn sample_narrow_band(
                     .length()
                         * 0.5
                         * cell;
-                    let d = f64::from(distance_x8([centre; 8])[0]);
+                    let d = f64::from(centre_value);
                     let far = d.is_finite() && d.abs() > half_diagonal + 2.0 * 3f64.sqrt() * cell;
                     for z in z0..z1 {
                         for y in y0..y1 {
