@@ -33,6 +33,9 @@ fn stop_flag() -> Arc<AtomicBool> {
 }
 
 struct Bars {
+    /// Stderr is not a terminal (a log file, a pipe, a Slurm job): the bars are hidden there,
+    /// so each configuration's start and every note are written as plain lines instead.
+    plain: bool,
     multi: MultiProgress,
     overall: ProgressBar,
     current: Option<ProgressBar>,
@@ -54,6 +57,7 @@ impl Bars {
         );
         overall.set_prefix("bench");
         Self {
+            plain: !std::io::IsTerminal::is_terminal(&std::io::stderr()),
             multi,
             overall,
             current: None,
@@ -152,8 +156,14 @@ impl Progress for Bars {
         self.eta = bench::Eta::new(total);
         self.overall.set_length(total as u64 * BAR_STEPS as u64);
         self.show();
+        if self.plain {
+            eprintln!("bench: {total} configurations");
+        }
     }
     fn config(&mut self, index: usize, id: &str) {
+        if self.plain {
+            eprintln!("bench: [{}/{}] {id}", index + 1, self.eta.total());
+        }
         if let Some(b) = self.current.take() {
             b.finish_and_clear();
             self.multi.remove(&b);
@@ -177,7 +187,11 @@ impl Progress for Bars {
         self.show();
     }
     fn note(&mut self, message: &str) {
-        let _ = self.multi.println(format!("note: {message}"));
+        if self.plain {
+            eprintln!("note: {message}");
+        } else {
+            let _ = self.multi.println(format!("note: {message}"));
+        }
     }
     fn advanced(&mut self, index: usize, fraction: f64) {
         self.eta.advance(index, fraction);

@@ -362,7 +362,7 @@ fn ctrl_c_keeps_the_finished_configurations() {
     )
     .unwrap();
     let out = dir.join("out");
-    let child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+    let mut child = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
         .args([
             "bench",
             "--suite",
@@ -374,25 +374,50 @@ fn ctrl_c_keeps_the_finished_configurations() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    // Wait until the run folder exists and the first configuration is repeating.
-    let start = std::time::Instant::now();
-    while !(out.is_dir() && out.read_dir().unwrap().count() > 0) {
-        assert!(start.elapsed().as_secs() < 60, "run folder never appeared");
-        std::thread::sleep(std::time::Duration::from_millis(50));
+    // Stderr is a pipe, so progress comes as plain lines: wait for the first configuration to
+    // start (the stop is checked before each configuration, so that one is measured).
+    let stderr_pipe = child.stderr.take().unwrap();
+    let (lines_tx, lines_rx) = std::sync::mpsc::channel::<String>();
+    let reader = std::thread::spawn(move || {
+        use std::io::BufRead as _;
+        for line in std::io::BufReader::new(stderr_pipe).lines() {
+            let Ok(line) = line else { break };
+            if lines_tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let mut seen = Vec::new();
+    loop {
+        let line = lines_rx
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .unwrap_or_else(|_| panic!("the first configuration never started: {seen:?}"));
+        let first = line.starts_with("bench: [1/6] ");
+        seen.push(line);
+        if first {
+            break;
+        }
     }
-    std::thread::sleep(std::time::Duration::from_millis(500));
+    assert!(
+        out.is_dir(),
+        "the run folder appears before measuring starts"
+    );
+    std::thread::sleep(std::time::Duration::from_millis(200));
+    let interrupted_at = std::time::Instant::now();
     let killed = Command::new("kill")
         .args(["-INT", &child.id().to_string()])
         .status()
         .unwrap();
     assert!(killed.success());
     let output = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&output.stderr);
+    reader.join().unwrap();
+    seen.extend(lines_rx.try_iter());
+    let stderr = seen.join("\n");
     // An interrupted run is not a success: scripts must not take it for a full run.
     assert!(!output.status.success(), "{stderr}");
     assert!(stderr.contains("interrupted: "), "{stderr}");
     assert!(
-        start.elapsed().as_secs() < 30,
+        interrupted_at.elapsed().as_secs() < 30,
         "the interrupt did not stop the repeats"
     );
     let run = only_run(&out);
