@@ -7,10 +7,127 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::cases::fmt_value;
-use crate::runner::{CaseError, Row, Verdict};
+use crate::runner::{CaseError, Metrics, Row, Verdict};
 
-/// CSV header; one row per case x configuration, units in the names.
-pub const CSV_HEADER: &str = "case,family,parameter,value,backend,configuration,verdict,non_finite,silhouette_mismatch_pct,interior_holes_px,depth_rel_p95,depth_max_over_scene,depth_rel_max,depth_rel_tail_px,normal_deg_mean,normal_deg_tail_px,normal_deg_p95,psnr_db,step_exhaustion_pct,mean_steps,build_ms,render_ms,memory_bytes,error";
+/// One column of `stability.csv`: its header name (units in the name) and its cell for a row.
+/// A new metric is a field of [`crate::runner::Metrics`], its value in `Metrics::measure`, and
+/// one entry in [`COLUMNS`].
+pub struct Column {
+    /// Header name.
+    pub name: &'static str,
+    /// The row's cell, CSV-quoted where needed; empty when the row has no metrics.
+    pub cell: fn(&Row) -> String,
+}
+
+/// The metric `f` reads, or an empty cell when the row has none (a refused configuration).
+fn metric(r: &Row, f: impl Fn(&Metrics) -> String) -> String {
+    r.metrics.as_ref().map(f).unwrap_or_default()
+}
+
+/// The columns of `stability.csv`, in order: one row per case x configuration.
+pub const COLUMNS: &[Column] = &[
+    Column {
+        name: "case",
+        cell: |r| csv_field(&r.case),
+    },
+    Column {
+        name: "family",
+        cell: |r| csv_field(&r.family),
+    },
+    Column {
+        name: "parameter",
+        cell: |r| csv_field(&r.parameter),
+    },
+    Column {
+        name: "value",
+        cell: |r| format!("{}", r.value),
+    },
+    Column {
+        name: "backend",
+        cell: |r| csv_field(&r.backend),
+    },
+    Column {
+        name: "configuration",
+        cell: |r| csv_field(&r.configuration),
+    },
+    Column {
+        name: "verdict",
+        cell: |r| r.verdict.name().to_string(),
+    },
+    Column {
+        name: "non_finite",
+        cell: |r| metric(r, |m| m.non_finite.to_string()),
+    },
+    Column {
+        name: "silhouette_mismatch_pct",
+        cell: |r| metric(r, |m| format!("{:.4}", m.silhouette_mismatch_pct)),
+    },
+    Column {
+        name: "interior_holes_px",
+        cell: |r| metric(r, |m| m.interior_holes.to_string()),
+    },
+    Column {
+        name: "depth_rel_p95",
+        cell: |r| metric(r, |m| format!("{:.3e}", m.depth_rel_p95)),
+    },
+    Column {
+        name: "depth_max_over_scene",
+        cell: |r| metric(r, |m| format!("{:.3e}", m.depth_max_over_scene)),
+    },
+    Column {
+        name: "depth_rel_max",
+        cell: |r| metric(r, |m| format!("{:.3e}", m.depth_rel_max)),
+    },
+    Column {
+        name: "depth_rel_tail_px",
+        cell: |r| metric(r, |m| m.depth_rel_tail_px.to_string()),
+    },
+    Column {
+        name: "normal_deg_mean",
+        cell: |r| metric(r, |m| format!("{:.4}", m.normal_deg_mean)),
+    },
+    Column {
+        name: "normal_deg_tail_px",
+        cell: |r| metric(r, |m| m.normal_deg_tail_px.to_string()),
+    },
+    Column {
+        name: "normal_deg_p95",
+        cell: |r| metric(r, |m| format!("{:.4}", m.normal_deg_p95)),
+    },
+    Column {
+        name: "psnr_db",
+        cell: |r| metric(r, |m| format!("{:.2}", m.psnr_db)),
+    },
+    Column {
+        name: "step_exhaustion_pct",
+        cell: |r| metric(r, |m| format!("{:.4}", m.step_exhaustion_pct)),
+    },
+    Column {
+        name: "mean_steps",
+        cell: |r| metric(r, |m| format!("{:.2}", m.mean_steps)),
+    },
+    Column {
+        name: "build_ms",
+        cell: |r| format!("{:.2}", r.build_ms),
+    },
+    Column {
+        name: "render_ms",
+        cell: |r| format!("{:.2}", r.render_ms),
+    },
+    Column {
+        name: "memory_bytes",
+        cell: |r| r.memory_bytes.to_string(),
+    },
+    Column {
+        name: "error",
+        cell: |r| csv_field(r.error.as_deref().unwrap_or("")),
+    },
+];
+
+/// The CSV header line: the names of [`COLUMNS`], comma-separated.
+pub fn csv_header() -> String {
+    COLUMNS.iter().map(|c| c.name).collect::<Vec<_>>().join(",")
+}
 
 fn csv_field(s: &str) -> String {
     if s.contains([',', '"', '\n']) {
@@ -22,39 +139,11 @@ fn csv_field(s: &str) -> String {
 
 /// The rows as CSV text (header included). Missing metrics are empty fields.
 pub fn to_csv(rows: &[Row]) -> String {
-    let mut out = String::from(CSV_HEADER);
+    let mut out = csv_header();
     out.push('\n');
     for r in rows {
-        let m = |f: &dyn Fn(&crate::runner::Metrics) -> String| {
-            r.metrics.as_ref().map(f).unwrap_or_default()
-        };
-        let fields = [
-            csv_field(&r.case),
-            csv_field(&r.family),
-            csv_field(&r.parameter),
-            format!("{}", r.value),
-            csv_field(&r.backend),
-            csv_field(&r.configuration),
-            r.verdict.name().to_string(),
-            m(&|m| m.non_finite.to_string()),
-            m(&|m| format!("{:.4}", m.silhouette_mismatch_pct)),
-            m(&|m| m.interior_holes.to_string()),
-            m(&|m| format!("{:.3e}", m.depth_rel_p95)),
-            m(&|m| format!("{:.3e}", m.depth_max_over_scene)),
-            m(&|m| format!("{:.3e}", m.depth_rel_max)),
-            m(&|m| m.depth_rel_tail_px.to_string()),
-            m(&|m| format!("{:.4}", m.normal_deg_mean)),
-            m(&|m| m.normal_deg_tail_px.to_string()),
-            m(&|m| format!("{:.4}", m.normal_deg_p95)),
-            m(&|m| format!("{:.2}", m.psnr_db)),
-            m(&|m| format!("{:.4}", m.step_exhaustion_pct)),
-            m(&|m| format!("{:.2}", m.mean_steps)),
-            format!("{:.2}", r.build_ms),
-            format!("{:.2}", r.render_ms),
-            r.memory_bytes.to_string(),
-            csv_field(r.error.as_deref().unwrap_or("")),
-        ];
-        out.push_str(&fields.join(","));
+        let cells: Vec<String> = COLUMNS.iter().map(|c| (c.cell)(r)).collect();
+        out.push_str(&cells.join(","));
         out.push('\n');
     }
     out
