@@ -4,6 +4,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
+use marchmesh_core::compare::Accuracy;
 use serde::{Deserialize, Serialize};
 
 /// One measured configuration. Field order is the CSV column order. `Option` fields are
@@ -151,6 +152,35 @@ pub struct Row {
 }
 
 impl Row {
+    /// Fills the accuracy columns from the comparison with the reference: `accuracy` of the
+    /// render, the scene's size in world units (`None` when unbounded; the `_rel_scene`
+    /// columns stay empty then) and the SSIM (`None` when the image is too small). A new
+    /// accuracy column is its field here and its line below; [`accuracy_columns`] follows.
+    pub fn set_accuracy(
+        &mut self,
+        accuracy: &Accuracy,
+        scene_size: Option<f64>,
+        ssim: Option<f64>,
+    ) {
+        let a = accuracy;
+        let rel = |v: f64| scene_size.filter(|s| *s > 0.0).map(|s| v / s);
+        self.silhouette_mismatch_pct = Some(a.silhouette_mismatch_pct);
+        self.depth_err_mean = Some(a.depth_abs_mean);
+        self.depth_err_p95 = Some(a.depth_abs_p95);
+        self.depth_err_max = Some(a.depth_abs_max);
+        self.depth_err_p95_rel_scene = rel(a.depth_abs_p95);
+        self.depth_err_max_rel_scene = rel(a.depth_abs_max);
+        self.scene_size_world = scene_size;
+        self.normal_err_deg_mean = Some(a.normal_deg_mean);
+        self.normal_err_deg_p95 = Some(a.normal_deg_p95);
+        self.depth_err_rel_max = Some(a.depth_rel_max);
+        self.depth_err_rel_tail_px = Some(a.depth_rel_tail_px as u64);
+        self.normal_err_deg_max = Some(a.normal_deg_max);
+        self.normal_err_deg_tail_px = Some(a.normal_deg_tail_px as u64);
+        self.psnr_db = Some(a.psnr_db.min(100.0));
+        self.ssim = ssim;
+    }
+
     /// Why `column` may be empty in this row, `None` if it must be filled.
     pub fn why_empty(&self, column: &str) -> Option<&'static str> {
         match column {
@@ -161,7 +191,7 @@ impl Row {
             "peak_rss_bytes_build" | "peak_rss_bytes_render" => {
                 Some("peak RSS reset not available on this system")
             }
-            c if ACCURACY_COLUMNS.contains(&c) && !self.notes.is_empty() => {
+            c if !self.notes.is_empty() && accuracy_columns().iter().any(|a| a == c) => {
                 Some("no reference (see notes)")
             }
             "notes" => Some("no remarks"),
@@ -178,24 +208,36 @@ impl Row {
     }
 }
 
-/// Columns filled from the comparison with the reference.
-pub const ACCURACY_COLUMNS: &[&str] = &[
-    "silhouette_mismatch_pct",
-    "depth_err_mean",
-    "depth_err_p95",
-    "depth_err_max",
-    "depth_err_p95_rel_scene",
-    "depth_err_max_rel_scene",
-    "scene_size_world",
-    "normal_err_deg_mean",
-    "normal_err_deg_p95",
-    "depth_err_rel_max",
-    "depth_err_rel_tail_px",
-    "normal_err_deg_max",
-    "normal_err_deg_tail_px",
-    "psnr_db",
-    "ssim",
-];
+/// The columns [`Row::set_accuracy`] fills: those empty in a default row and filled once an
+/// accuracy is set (every column of a comparison with the reference).
+pub fn accuracy_columns() -> &'static [String] {
+    static COLUMNS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
+    COLUMNS.get_or_init(|| {
+        let cells = |row: &Row| -> Vec<String> {
+            let mut w = csv::Writer::from_writer(Vec::new());
+            let _ = w.serialize(row);
+            let bytes = w.into_inner().unwrap_or_default();
+            let text = String::from_utf8_lossy(&bytes);
+            let mut lines = text.lines();
+            let _header = lines.next();
+            lines
+                .next()
+                .unwrap_or("")
+                .split(',')
+                .map(str::to_string)
+                .collect()
+        };
+        let empty = Row::default();
+        let mut filled = Row::default();
+        filled.set_accuracy(&Accuracy::default(), Some(1.0), Some(1.0));
+        csv_header()
+            .into_iter()
+            .zip(cells(&empty).into_iter().zip(cells(&filled)))
+            .filter(|(_, (before, after))| before != after)
+            .map(|(name, _)| name)
+            .collect()
+    })
+}
 
 /// Where and how a run was made.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -1089,6 +1131,35 @@ mod tests {
             Results::merge(vec![], String::new(), String::new()),
             Err(MergeError::Empty)
         );
+    }
+
+    #[test]
+    fn the_accuracy_columns_are_the_ones_set_accuracy_fills() {
+        assert_eq!(
+            accuracy_columns(),
+            [
+                "silhouette_mismatch_pct",
+                "depth_err_mean",
+                "depth_err_p95",
+                "depth_err_max",
+                "depth_err_p95_rel_scene",
+                "depth_err_max_rel_scene",
+                "scene_size_world",
+                "normal_err_deg_mean",
+                "normal_err_deg_p95",
+                "depth_err_rel_max",
+                "depth_err_rel_tail_px",
+                "normal_err_deg_max",
+                "normal_err_deg_tail_px",
+                "psnr_db",
+                "ssim",
+            ]
+        );
+        let row = Row {
+            notes: "no reference".into(),
+            ..Row::default()
+        };
+        assert!(row.why_empty("ssim").is_some() && row.why_empty("steps_mean").is_none());
     }
 
     #[test]

@@ -224,11 +224,10 @@ pub(super) fn prepare(
             None
         }
     };
-    let rel = |v: f64, size: Option<f64>| size.filter(|s| *s > 0.0).map(|s| v / s);
     let kind = c.spec.kind.name();
     let total_rays = s.total_rays();
     let rates = s.mrays_per_thread_second();
-    let row = Row {
+    let mut row = Row {
         config_id: c.id.clone(),
         group: c.group.clone(),
         scene: c.scene.clone(),
@@ -267,21 +266,6 @@ pub(super) fn prepare(
         peak_heap_bytes_render,
         peak_rss_bytes_build,
         peak_rss_bytes_render,
-        silhouette_mismatch_pct: acc.as_ref().map(|a| a.0.silhouette_mismatch_pct),
-        depth_err_mean: acc.as_ref().map(|a| a.0.depth_abs_mean),
-        depth_err_p95: acc.as_ref().map(|a| a.0.depth_abs_p95),
-        depth_err_max: acc.as_ref().map(|a| a.0.depth_abs_max),
-        depth_err_p95_rel_scene: acc.as_ref().and_then(|a| rel(a.0.depth_abs_p95, a.1)),
-        depth_err_max_rel_scene: acc.as_ref().and_then(|a| rel(a.0.depth_abs_max, a.1)),
-        scene_size_world: acc.as_ref().and_then(|a| a.1),
-        normal_err_deg_mean: acc.as_ref().map(|a| a.0.normal_deg_mean),
-        normal_err_deg_p95: acc.as_ref().map(|a| a.0.normal_deg_p95),
-        depth_err_rel_max: acc.as_ref().map(|a| a.0.depth_rel_max),
-        depth_err_rel_tail_px: acc.as_ref().map(|a| a.0.depth_rel_tail_px as u64),
-        normal_err_deg_max: acc.as_ref().map(|a| a.0.normal_deg_max),
-        normal_err_deg_tail_px: acc.as_ref().map(|a| a.0.normal_deg_tail_px as u64),
-        psnr_db: acc.as_ref().map(|a| a.0.psnr_db.min(100.0)),
-        ssim: acc.as_ref().and_then(|a| a.2),
         steps_mean: s.mean_steps(),
         steps_max: s.max_steps_seen,
         step_exhaustion_pct: 100.0 * s.step_exhaustion_rate(),
@@ -291,6 +275,9 @@ pub(super) fn prepare(
         notes: notes.join("; "),
         ..Row::default()
     };
+    if let Some((accuracy, scene_size, ssim)) = &acc {
+        row.set_accuracy(accuracy, *scene_size, *ssim);
+    }
     let histogram = images::steps_histogram(fb);
     drop(warm);
     Ok(Prepared {
