@@ -141,7 +141,7 @@ fn main() -> Res<()> {
             };
             // The preset by its option name (`build=...`), through the same serde names.
             let build_quality = match args.get(5) {
-                None => MeshOptions::DEFAULT.build_quality(),
+                None => MeshOptions::default().build_quality(),
                 Some(name) => {
                     use serde::{Deserialize, de::value::StrDeserializer};
                     let de = StrDeserializer::<serde::de::value::Error>::new(name);
@@ -155,7 +155,7 @@ fn main() -> Res<()> {
                     bvh: Some(kind),
                     build: Some(build_quality),
                     packets: Some(bvh == "wide" || bvh == "wide4x2"),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
             )?;
             let report = g.report();

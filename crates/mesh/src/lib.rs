@@ -601,42 +601,42 @@ mod tests {
             (
                 MeshOptions {
                     surface_px: Some(0.0),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_px",
             ),
             (
                 MeshOptions {
                     surface_px: Some(-1.0),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_px",
             ),
             (
                 MeshOptions {
                     surface_px: Some(f64::NAN),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_px",
             ),
             (
                 MeshOptions {
                     surface_px: Some(f64::INFINITY),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_px",
             ),
             (
                 MeshOptions {
                     surface_res: Some(4),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_res",
             ),
             (
                 MeshOptions {
                     surface_res: Some(MAX_SURFACE_RESOLUTION + 1),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_res",
             ),
@@ -644,7 +644,7 @@ mod tests {
                 MeshOptions {
                     surface_px: Some(1.0),
                     surface_res: Some(64),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "surface_px, surface_res",
             ),
@@ -657,21 +657,21 @@ mod tests {
             (
                 MeshOptions {
                     tess_level: Some(MAX_TESS_LEVEL + 1),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "tess_level must be in 0..=12",
             ),
             (
                 MeshOptions {
                     tess_chord: Some(0.0),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "tess_chord must be",
             ),
             (
                 MeshOptions {
                     tess_px: Some(0.0),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
                 "tess_px must be",
             ),
@@ -681,7 +681,7 @@ mod tests {
         }
         check_options(&MeshOptions {
             surface_px: Some(0.5),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         })
         .expect("valid");
     }

@@ -115,7 +115,7 @@ pub enum Tessellation {
 pub enum MeshPreset {
     /// [`MeshOptions::fast`]: Bvh2, fast build, 1-pixel tessellation, 2-pixel extraction cells.
     Fast,
-    /// [`MeshOptions::DEFAULT`].
+    /// The documented defaults ([`MeshOptions::default`]: every key unset).
     #[default]
     Default,
     /// [`MeshOptions::quality`]: CwBvh, slow build, 0.1-pixel tessellation, half-pixel
@@ -141,7 +141,7 @@ impl MeshPreset {
             instancing: Some(true),
             max_instances: Some(1 << 22),
             max_segments: Some(4096),
-            memory_limit_bytes: 4 << 30,
+            memory_limit_bytes: Some(4 << 30),
         };
         match self {
             MeshPreset::Default => DEFAULT,
@@ -165,11 +165,11 @@ impl MeshPreset {
 
 /// Options of [`crate::build`], and the mesh backend's `key=value` options: a key left out
 /// (`None`) keeps the preset's value. Unknown keys are refused. Build one with
-/// [`MeshOptions::DEFAULT`] or a preset and set fields.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, JsonSchema)]
+/// [`MeshOptions::default`] (every key unset: the default preset) or a preset and set fields.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields, default)]
 pub struct MeshOptions {
-    /// Start from MeshOptions::fast()/DEFAULT/quality(); the other keys override it.
+    /// Start from the fast, default or quality preset; the other keys override it.
     pub preset: Option<MeshPreset>,
     /// BVH layout: binary, compressed 8-wide, or SIMD 8-wide converted from bvh2.
     ///
@@ -228,7 +228,7 @@ pub struct MeshOptions {
     /// sets it from `--memory-limit-mib`. Default 4 GiB.
     #[serde(skip)]
     #[schemars(skip)]
-    pub memory_limit_bytes: u64,
+    pub memory_limit_bytes: Option<u64>,
 }
 
 /// Largest accepted [`Tessellation::FixedLevel`] (`8 * 2^12` segments per turn).
@@ -245,38 +245,21 @@ pub const MAX_SEGMENTS_PER_TURN: u32 = 1 << 16;
 pub const BUILD_BYTES_PER_TRIANGLE: u64 = 320;
 
 impl MeshOptions {
-    /// Every key unset: the default preset's values ([`MeshPreset::values`]).
-    pub const DEFAULT: Self = Self {
-        preset: None,
-        bvh: None,
-        build: None,
-        tess_px: None,
-        tess_chord: None,
-        tess_level: None,
-        surface_px: None,
-        surface_res: None,
-        packets: None,
-        instancing: None,
-        max_instances: None,
-        max_segments: None,
-        memory_limit_bytes: 4 << 30,
-    };
-
     /// The fast preset: Bvh2, `fast_build`, 1-pixel tessellation error, 2-pixel surface
     /// extraction cells. For previews and tests.
-    pub const fn fast() -> Self {
+    pub fn fast() -> Self {
         Self {
             preset: Some(MeshPreset::Fast),
-            ..Self::DEFAULT
+            ..Self::default()
         }
     }
 
     /// The quality preset: CwBvh, `slow_build`, 0.1-pixel tessellation error, half-pixel
     /// surface extraction cells.
-    pub const fn quality() -> Self {
+    pub fn quality() -> Self {
         Self {
             preset: Some(MeshPreset::Quality),
-            ..Self::DEFAULT
+            ..Self::default()
         }
     }
 
@@ -353,11 +336,10 @@ impl MeshOptions {
     pub fn max_segments_per_turn(&self) -> u32 {
         self.pick(|o| o.max_segments)
     }
-}
 
-impl Default for MeshOptions {
-    fn default() -> Self {
-        Self::DEFAULT
+    /// The build's memory limit in bytes (`memory_limit_bytes`, set by the registry).
+    pub fn memory_limit_bytes(&self) -> u64 {
+        self.pick(|o| o.memory_limit_bytes)
     }
 }
 
@@ -370,7 +352,7 @@ mod tests {
         for preset in [MeshPreset::Fast, MeshPreset::Default, MeshPreset::Quality] {
             let o = MeshOptions {
                 preset: Some(preset),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             };
             let v = preset.values();
             assert_eq!(
@@ -418,11 +400,11 @@ mod tests {
             ..fixed
         };
         assert!(both.extraction().is_err());
-        assert_eq!(MeshOptions::DEFAULT.bvh(), BvhKind::Wide);
+        assert_eq!(MeshOptions::default().bvh(), BvhKind::Wide);
         let both = MeshOptions {
             tess_px: Some(1.0),
             tess_level: Some(2),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         };
         assert!(both.tessellation().is_err());
     }

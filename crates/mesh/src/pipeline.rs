@@ -119,7 +119,7 @@ impl ShapeInputs<'_> {
         let mut local_meshes: Vec<Option<LocalMesh>> = Vec::with_capacity(groups.len());
         let mut extract_time = Duration::ZERO;
         let mut budget = BuildBudget {
-            limit_bytes: options.memory_limit_bytes,
+            limit_bytes: options.memory_limit_bytes(),
             planned_bytes: 0,
         };
         budget.take(

@@ -30,7 +30,7 @@ impl marchmesh_core::Backend for MeshBackend {
         memory_limit_bytes: u64,
     ) -> Result<MeshGeometry, MeshError> {
         let options = MeshOptions {
-            memory_limit_bytes,
+            memory_limit_bytes: Some(memory_limit_bytes),
             ..*settings
         };
         crate::build(scene, &options)

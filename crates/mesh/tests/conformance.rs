@@ -34,7 +34,7 @@ conformance_suite!(
     backend = MeshBackend,
     settings = MeshOptions {
         tess_px: Some(0.05),
-        ..MeshOptions::DEFAULT
+        ..MeshOptions::default()
     },
     tolerance = tolerance
 );

@@ -17,7 +17,7 @@ fn sphere_hits_match_the_analytic_sphere_within_the_chord_budget() {
         &s,
         &MeshOptions {
             tess_chord: Some(budget),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect("build");
@@ -87,7 +87,7 @@ fn bunny_hits_match_a_brute_force_f64_ray_caster() {
             &s,
             &MeshOptions {
                 bvh: Some(kind),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             },
         )
         .expect("build");
@@ -179,12 +179,12 @@ fn instancing_gives_the_same_hits_as_flattened_geometry() {
     ];
     for (k, json) in scenes.iter().enumerate() {
         let s = scene(json);
-        let inst = build(&s, &MeshOptions::DEFAULT).expect("instanced");
+        let inst = build(&s, &MeshOptions::default()).expect("instanced");
         let flat = build(
             &s,
             &MeshOptions {
                 instancing: Some(false),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             },
         )
         .expect("flat");
@@ -208,7 +208,7 @@ fn bvh2_and_cwbvh_and_every_preset_agree() {
         &s,
         &MeshOptions {
             bvh: Some(BvhKind::Bvh2),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect("bvh2");
@@ -222,7 +222,7 @@ fn bvh2_and_cwbvh_and_every_preset_agree() {
                 &MeshOptions {
                     bvh: Some(bvh),
                     build: Some(quality),
-                    ..MeshOptions::DEFAULT
+                    ..MeshOptions::default()
                 },
             )
             .expect("build");
@@ -249,8 +249,8 @@ fn glb_export_of_the_bunny_renders_identically_to_the_obj() {
         &glb.display().to_string().replace('\\', "/"),
     );
     let glb_scene = scene(&glb_json);
-    let a = build(&obj_scene, &MeshOptions::DEFAULT).expect("obj");
-    let b = build(&glb_scene, &MeshOptions::DEFAULT).expect("glb");
+    let a = build(&obj_scene, &MeshOptions::default()).expect("obj");
+    let b = build(&glb_scene, &MeshOptions::default()).expect("glb");
     for ray in camera_rays(&obj_scene, 64) {
         assert_eq!(a.closest_hit(&ray), b.closest_hit(&ray));
     }
@@ -269,7 +269,7 @@ fn nan_and_degenerate_meshes_are_handled_with_clear_messages() {
             p.display().to_string().replace('\\', "/")
         )
     };
-    let err = build(&scene(&json(&nan)), &MeshOptions::DEFAULT).expect_err("NaN vertex");
+    let err = build(&scene(&json(&nan)), &MeshOptions::default()).expect_err("NaN vertex");
     let msg = err.to_string();
     assert!(
         msg.contains("nan.obj") && msg.contains("vertex 2") && msg.contains("objects[0]"),
@@ -282,14 +282,14 @@ fn nan_and_degenerate_meshes_are_handled_with_clear_messages() {
         "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nf 1 2 3\nf 1 2 4\nf 1 1 3\n",
     )
     .expect("write");
-    let g = build(&scene(&json(&degenerate)), &MeshOptions::DEFAULT)
+    let g = build(&scene(&json(&degenerate)), &MeshOptions::default())
         .expect("degenerate triangles are skipped");
     assert_eq!(g.triangle_count(), 1);
     let notes = g.report().notes.join("\n");
     assert!(notes.contains("skipped 2 degenerate"), "{notes}");
 
     let missing = dir.join("missing.obj");
-    let msg = build(&scene(&json(&missing)), &MeshOptions::DEFAULT)
+    let msg = build(&scene(&json(&missing)), &MeshOptions::default())
         .expect_err("missing")
         .to_string();
     assert!(msg.contains("missing.obj"), "{msg}");
@@ -303,7 +303,7 @@ fn planes_cover_max_distance_and_are_exact() {
             "objects": [{"shape": {"plane": {"normal": [0, 1, 0.2], "offset": -0.5}}}],
             "render": {"max_distance": 500}}"#,
     );
-    let g = build(&s, &MeshOptions::DEFAULT).expect("plane");
+    let g = build(&s, &MeshOptions::default()).expect("plane");
     let n = DVec3::new(0.0, 1.0, 0.2).normalize();
     let cam = s.camera.position;
     let height = cam.dot(n) + 0.5;
@@ -348,7 +348,7 @@ fn infinite_repetition_is_bounded_and_reported() {
                 "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}],
             "render": {"max_distance": 40}}"#,
     );
-    let g = build(&s, &MeshOptions::DEFAULT).expect("build");
+    let g = build(&s, &MeshOptions::default()).expect("build");
     let report = g.report();
     let cells = report
         .counters
@@ -371,7 +371,7 @@ fn infinite_repetition_is_bounded_and_reported() {
         &s,
         &MeshOptions {
             max_instances: Some(100),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect_err("limit");
@@ -386,7 +386,7 @@ fn a_finite_repetition_over_the_instance_limit_is_not_called_infinite() {
             "objects": [{"shape": {"repeat": {"period": [2, 2, 2], "count": [200, 200, 200],
                 "child": {"shape": {"box": {"half_extents": [0.4, 0.4, 0.4]}}}}}}]}"#,
     );
-    let err = build(&s, &MeshOptions::DEFAULT).expect_err("8M cells are over the default limit");
+    let err = build(&s, &MeshOptions::default()).expect_err("8M cells are over the default limit");
     let msg = err.to_string();
     assert!(msg.starts_with("objects[0]: "), "{msg}");
     assert!(msg.contains("finite repetition"), "{msg}");
@@ -409,7 +409,7 @@ fn depth_error_against_the_analytic_sphere_falls_as_the_screen_budget_shrinks() 
             &s,
             &MeshOptions {
                 tess_px: Some(pixels),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             },
         )
         .expect("build");

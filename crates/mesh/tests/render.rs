@@ -11,7 +11,7 @@ fn render_file(name: &str, side: u32) -> Result<marchmesh_core::RenderOutput, Me
         .expect("scene loads")
         .with_image_size(side, side)
         .expect("size");
-    let g = build(&scene, &MeshOptions::DEFAULT)?;
+    let g = build(&scene, &MeshOptions::default())?;
     Ok(common::render_1t(&scene, &g))
 }
 
@@ -67,7 +67,7 @@ fn mesh_scenes_render() {
                             {{"shape": {{"plane": {{}}}}, "transform": {{"translate": [0, -0.5, 0]}}}}]}}"#
         );
         let scene = common::scene(&json);
-        let g = build(&scene, &MeshOptions::DEFAULT).unwrap_or_else(|e| panic!("{file}: {e}"));
+        let g = build(&scene, &MeshOptions::default()).unwrap_or_else(|e| panic!("{file}: {e}"));
         let out = common::render_1t(&scene, &g);
         assert_eq!(out.stats.non_finite_pixels, 0, "{file}");
         assert!(out.stats.hits > 100, "{file}: {} hits", out.stats.hits);
@@ -93,7 +93,7 @@ fn single_triangle_and_empty_scenes_build() {
             &s,
             &MeshOptions {
                 bvh: Some(bvh),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             },
         )
         .expect("one triangle");
@@ -104,7 +104,7 @@ fn single_triangle_and_empty_scenes_build() {
         assert!(hits > 20, "{bvh:?}: {hits}");
     }
     let empty = common::scene(r#"{"camera": {"width": 8, "height": 8}}"#);
-    let g = build(&empty, &MeshOptions::DEFAULT).expect("empty scene");
+    let g = build(&empty, &MeshOptions::default()).expect("empty scene");
     let r = marchmesh_core::Geometry::closest_hit(&g, &common::camera_rays(&empty, 1)[0]);
     assert!(r.hit().is_none());
 }
@@ -118,12 +118,12 @@ fn instanced_and_flattened_images_match() {
                 {"shape": {"plane": {}}, "transform": {"translate": [0, -0.9, 0]}}],
             "render": {"max_distance": 30}}"#,
     );
-    let inst = build(&s, &MeshOptions::DEFAULT).expect("instanced");
+    let inst = build(&s, &MeshOptions::default()).expect("instanced");
     let flat = build(
         &s,
         &MeshOptions {
             instancing: Some(false),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect("flat");
@@ -146,7 +146,7 @@ fn tiny_scenes_render_with_a_cwbvh_request() {
     );
     let options = MeshOptions {
         bvh: Some(marchmesh_mesh::BvhKind::CwBvh),
-        ..MeshOptions::DEFAULT
+        ..MeshOptions::default()
     };
     let g = build(&scene, &options).unwrap();
     let out = common::render_1t(&scene, &g);

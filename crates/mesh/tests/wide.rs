@@ -95,7 +95,7 @@ fn wide_matches_bvh2_on_the_bunny_at_every_build_preset() {
             &s,
             MeshOptions {
                 build: Some(quality),
-                ..MeshOptions::DEFAULT
+                ..MeshOptions::default()
             },
         );
         let hits = assert_identical(&bvh2, &wide, &camera_rays(&s, 80), &format!("{quality:?}"));
@@ -119,7 +119,7 @@ fn no_ray_slips_between_the_triangles_of_a_closed_sphere() {
         &MeshOptions {
             bvh: Some(BvhKind::Wide),
             tess_level: Some(3),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect("build");
@@ -207,7 +207,7 @@ fn interleaved_batches_match_single_rays_on_a_large_mesh() {
         &MeshOptions {
             bvh: Some(BvhKind::Wide),
             tess_level: Some(6),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
     )
     .expect("build");

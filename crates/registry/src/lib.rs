@@ -589,7 +589,8 @@ mod tests {
         assert_eq!(got, SdfOptions::DEFAULT);
         let m = documented(MESH, option_docs::<MeshBackend>());
         let got = settings::<MeshBackend>(MESH, &m).expect("defaults parse");
-        assert_eq!(resolved(&got), resolved(&MeshOptions::DEFAULT));
+        let defaults = MeshOptions::default();
+        assert_eq!(resolved(&got), resolved(&defaults));
     }
 
     #[test]

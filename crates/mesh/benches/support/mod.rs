@@ -69,7 +69,7 @@ pub fn mesh_case(name: &'static str, file: &str) -> Case {
     Case {
         name,
         scene,
-        options: MeshOptions::DEFAULT,
+        options: MeshOptions::default(),
         tris,
     }
 }
@@ -102,7 +102,7 @@ pub fn sphere_case() -> Case {
         scene,
         options: MeshOptions {
             tess_level: Some(SPHERE_LEVEL),
-            ..MeshOptions::DEFAULT
+            ..MeshOptions::default()
         },
         tris,
     }
