@@ -375,6 +375,9 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         out.push(c);
     }
 
+    // Soft shadows: every shadow method against converged direct light.
+    out.extend(shadow_cases(&base));
+
     // Hostile and hard meshes.
     out.extend(mesh_cases(ctx)?);
 
@@ -403,6 +406,95 @@ pub fn all_cases(ctx: &CaseContext) -> io::Result<Vec<StabilityCase>> {
         out.push(c);
     }
     Ok(out)
+}
+
+/// Area-light samples of the shadow families' truth: the reference's sampled direct light
+/// with this many shadow rays per shading point and light is converged to well below the
+/// methods' errors (its own noise is about 1/32 of the 32-sample one's).
+pub const SHADOW_TRUTH_SAMPLES: u32 = 1024;
+
+/// Area-light samples the shadow families' configurations render with (the scenes' default).
+pub const SHADOW_SAMPLES: u32 = 16;
+
+/// A unit-diameter sphere `occluder_height` above a plane under `light` (the only light), seen
+/// steeply from above so no horizon is in view: the image is direct light and shadow only.
+fn shadow_scene(light: &Value, occluder_height: f64, area_light_samples: u32) -> String {
+    json!({
+        "camera": camera([0.0, 4.5, -2.2], [0.0, 0.0, 0.3], 55.0),
+        "background": { "color": [0.0, 0.0, 0.0] },
+        "lights": [light],
+        "objects": [
+            { "shape": { "plane": { "normal": [0, 1, 0] } }, "material": { "color": [0.8, 0.8, 0.8] } },
+            obj(json!({ "sphere": { "radius": 0.5 } }), [0.0, occluder_height + 0.5, 0.0], [0.9, 0.4, 0.3]),
+        ],
+        "render": { "area_light_samples": area_light_samples, "max_reflection_depth": 0, "max_distance": 100 }
+    })
+    .to_string()
+}
+
+/// A rectangle light `size_x` by `size_z` centred 3 units above the origin, facing down.
+fn rectangle_light(size_x: f64, size_z: f64) -> Value {
+    json!({ "rectangle_light": {
+        "corner": [-0.5 * size_x, 3.0, -0.5 * size_z],
+        "edge_u": [size_x, 0.0, 0.0],
+        "edge_v": [0.0, 0.0, size_z],
+        "intensity": 1.0 } })
+}
+
+/// Shadow families: a sphere casting a penumbra on a plane, swept over the light's size, its
+/// aspect (rectangles of unit area), the occluder's height above the plane (the penumbra's
+/// width) and a sphere light's radius. Each is judged by image against the reference's
+/// converged direct light ([`SHADOW_TRUTH_SAMPLES`]), for every shadow method: sampled shadow
+/// rays on the sdf and mesh backends ([`SHADOW_SAMPLES`] a light) and the sdf backend's one
+/// cone per light (`cone_shadows`, shading at the same sample points).
+fn shadow_cases(base: &Path) -> Vec<StabilityCase> {
+    let case = |family, parameter, value, light: Value, occluder_height| StabilityCase {
+        family,
+        parameter,
+        value,
+        scene_json: shadow_scene(&light, occluder_height, SHADOW_SAMPLES),
+        truth_json: Some(shadow_scene(&light, occluder_height, SHADOW_TRUTH_SAMPLES)),
+        scene_size: 3.0,
+        variants: vec![
+            Variant::default_of(BackendId::of::<SdfBackend>()),
+            variant!(SdfBackend { cone_shadows: true }),
+            variant!(MeshBackend {
+                tess_px: STUDY_MESH_TESS_PX
+            }),
+        ],
+        judge_by_image: true,
+        self_truth: false,
+        base_dir: base.to_path_buf(),
+    };
+    let mut out = Vec::new();
+    for side in [0.25, 0.5, 1.0, 2.0, 4.0] {
+        out.push(case(
+            "shadow_light_size",
+            "side",
+            side,
+            rectangle_light(side, side),
+            0.5,
+        ));
+    }
+    for aspect in [1.0f64, 2.0, 4.0, 8.0] {
+        let light = rectangle_light(aspect.sqrt(), 1.0 / aspect.sqrt());
+        out.push(case("shadow_light_aspect", "aspect", aspect, light, 0.5));
+    }
+    for height in [0.05, 0.25, 0.75, 1.5] {
+        let light = rectangle_light(1.0, 1.0);
+        out.push(case(
+            "shadow_occluder_height",
+            "height",
+            height,
+            light,
+            height,
+        ));
+    }
+    for radius in [0.1, 0.3, 0.6, 1.0] {
+        let light = json!({ "sphere_light": { "position": [0.0, 3.0, 0.0], "radius": radius, "intensity": 1.0 } });
+        out.push(case("shadow_sphere_light", "radius", radius, light, 0.5));
+    }
+    out
 }
 
 /// Mesh families: degenerate/duplicate triangles, slivers, watertightness, open meshes baked

@@ -194,6 +194,29 @@ pub fn ranges(rows: &[Row]) -> BTreeMap<(String, String), BTreeMap<&'static str,
     out
 }
 
+/// The image error over each family's sweep, per configuration: `(lowest PSNR dB, the swept
+/// value where it occurs, highest PSNR dB)` over the rows with metrics (identical images, an
+/// infinite PSNR, count as the highest). Families judged by image (the shadow methods, acne)
+/// read their error bound here.
+pub fn psnr_bounds(rows: &[Row]) -> BTreeMap<(String, String), (f64, f64, f64)> {
+    let mut out: BTreeMap<(String, String), (f64, f64, f64)> = BTreeMap::new();
+    for r in rows {
+        let Some(m) = &r.metrics else { continue };
+        if m.psnr_db.is_nan() {
+            continue;
+        }
+        let e = out
+            .entry((r.family.clone(), r.configuration.clone()))
+            .or_insert((f64::INFINITY, r.value, f64::NEG_INFINITY));
+        if m.psnr_db < e.0 {
+            e.0 = m.psnr_db;
+            e.1 = r.value;
+        }
+        e.2 = e.2.max(m.psnr_db);
+    }
+    out
+}
+
 fn list(values: &[f64]) -> String {
     values
         .iter()
@@ -206,14 +229,17 @@ fn list(values: &[f64]) -> String {
 pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Stability run\n");
+    let truth_samples = crate::cases::SHADOW_TRUTH_SAMPLES;
     let _ = writeln!(
         s,
         "Each case renders {side}x{side} pixels with the exact reference (ground truth) and each \
          configuration. Verdicts: **exact** = no NaN, silhouette <= 0.5%, relative depth p95 <= 1e-3, \
          mean normal error <= 1 deg, step exhaustion <= 0.1%; **degraded** = silhouette <= 5%, depth \
          p95 <= 1e-2, normal <= 5 deg, exhaustion <= 5%; **broken** = worse or any NaN/inf; \
-         **refused** = the backend declined to build (clear error). Image-judged families (acne) \
-         use PSNR >= 40 dB / >= 25 dB against each backend's own render at the default offset. \
+         **refused** = the backend declined to build (clear error). Image-judged families use \
+         PSNR >= 40 dB / >= 25 dB: acne against each backend's own render at the default offset, \
+         the shadow families against the reference's converged direct light ({truth_samples} \
+         samples a light). \
          Rare large errors a p95 hides are reported beside the verdict (not judged): the largest \
          relative depth error and the tail pixels beyond 1e-3 relative depth / 5 deg normal. \
          The mesh backend runs at a 0.05 px chord budget (its accuracy setting) so that its \
@@ -234,6 +260,24 @@ pub fn to_markdown(rows: &[Row], errors: &[CaseError], side: u32) -> String {
             get("degraded"),
             get("broken"),
             get("refused")
+        );
+    }
+    let _ = writeln!(s, "\n## Image error per family and configuration\n");
+    let _ = writeln!(
+        s,
+        "PSNR of each configuration's image against its truth over the family's sweep: the \
+         lowest is the family's error bound for that configuration.\n"
+    );
+    let _ = writeln!(
+        s,
+        "| family | configuration | lowest PSNR dB | at | highest PSNR dB |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|");
+    for ((family, configuration), (lo, at, hi)) in psnr_bounds(rows) {
+        let _ = writeln!(
+            s,
+            "| {family} | {configuration} | {lo:.1} | {} | {hi:.1} |",
+            fmt_value(at)
         );
     }
     let _ = writeln!(s, "\n## All rows\n");

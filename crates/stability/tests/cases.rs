@@ -10,7 +10,7 @@ use marchmesh_scene::parse_scene;
 use marchmesh_stability::cases::{
     CaseContext, cube_with_degenerates_obj, sliver_cylinder_obj, uv_sphere_obj,
 };
-use marchmesh_stability::report::{csv_header, to_csv};
+use marchmesh_stability::report::{csv_header, psnr_bounds, to_csv};
 use marchmesh_stability::runner::interior_holes;
 use marchmesh_stability::{Metrics, Row, Verdict, all_cases};
 
@@ -60,6 +60,10 @@ fn every_generated_case_is_a_valid_scene_with_a_unique_id() {
         "mesh_watertight",
         "bake_teapot_open",
         "acne",
+        "shadow_light_size",
+        "shadow_light_aspect",
+        "shadow_occluder_height",
+        "shadow_sphere_light",
     ] {
         assert!(
             cases.iter().any(|c| c.family == family),
@@ -196,6 +200,46 @@ fn interior_holes_count_only_misses_inside_the_truth() {
     // If the truth misses a neighbour, the pixel is on an edge, not a hole.
     truth.depth[7] = f32::INFINITY;
     assert_eq!(interior_holes(&test, &truth), 0);
+}
+
+#[test]
+fn the_image_error_bound_is_the_lowest_psnr_over_the_sweep() {
+    let row = |value: f64, psnr_db: f64| Row {
+        case: format!("shadow_light_size/side={value}"),
+        family: "shadow_light_size".into(),
+        parameter: "side".into(),
+        value,
+        backend: "sdf".into(),
+        configuration: "sdf[cone_shadows=true]".into(),
+        verdict: Verdict::Exact,
+        metrics: Some(Metrics {
+            psnr_db,
+            ..metrics()
+        }),
+        build_ms: 1.0,
+        render_ms: 2.0,
+        memory_bytes: 100,
+        error: None,
+        notes: vec![],
+    };
+    let refused = Row {
+        metrics: None,
+        verdict: Verdict::Refused,
+        ..row(8.0, 0.0)
+    };
+    let rows = [
+        row(0.5, 45.0),
+        row(2.0, 31.5),
+        row(4.0, f64::INFINITY),
+        refused,
+    ];
+    let bounds = psnr_bounds(&rows);
+    let key = (
+        "shadow_light_size".to_string(),
+        "sdf[cone_shadows=true]".to_string(),
+    );
+    assert_eq!(bounds.get(&key), Some(&(31.5, 2.0, f64::INFINITY)));
+    assert_eq!(bounds.len(), 1);
 }
 
 #[test]
