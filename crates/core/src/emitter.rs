@@ -44,6 +44,22 @@ pub enum Emitter {
     },
 }
 
+/// Most cones [`Emitter::cones_from`] splits a light into.
+pub const MAX_LIGHT_CONES: usize = 4;
+
+/// A cone from a shading point towards (part of) a light.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LightCone {
+    /// Unit axis.
+    pub dir: Vec3,
+    /// Distance to the part's centre along the axis.
+    pub dist: f32,
+    /// Tangent of the half opening angle.
+    pub tan_half_angle: f32,
+    /// The part's share of the light's solid angle (the weights of one light sum to 1).
+    pub weight: f32,
+}
+
 /// A point on a light chosen for a shading point.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LightSample {
@@ -166,21 +182,31 @@ impl Emitter {
         }
     }
 
-    /// The cone from `p` towards the light's centre that subtends about the light's solid
-    /// angle: `(unit axis, distance to the centre, tangent of the half angle)`. A sphere's cone
-    /// is exact; a rectangle becomes the disk of its projected area. `None` when `p` is
-    /// inside the sphere or behind the rectangle.
-    pub fn cone_from(&self, p: Vec3) -> Option<(Vec3, f32, f32)> {
+    /// Cones from `p` that together subtend about the light's solid angle, for one-query
+    /// visibility estimates: the first `count` entries of the array. A sphere is one exact
+    /// cone. A rectangle is split along its longer edge into `n = min(round(aspect),`
+    /// [`MAX_LIGHT_CONES`]`)` parts of aspect near 1, each the disk of its projected area
+    /// (one disk for a long light would give it a round penumbra); weights are each part's
+    /// share of the solid angle (`area cos / d^2`), summing to 1 (exactly 1 for one cone).
+    /// Empty when `p` is inside the sphere or behind the rectangle.
+    pub fn cones_from(&self, p: Vec3) -> ([LightCone; MAX_LIGHT_CONES], usize) {
+        let mut cones = [LightCone::default(); MAX_LIGHT_CONES];
         match *self {
             Emitter::Sphere { center, radius, .. } => {
                 let to = center - p;
                 let d2 = to.length_squared();
                 let r2 = radius * radius;
                 if d2 <= r2 {
-                    return None;
+                    return (cones, 0);
                 }
                 let d = d2.sqrt();
-                Some((to / d, d, radius / (d2 - r2).sqrt()))
+                cones[0] = LightCone {
+                    dir: to / d,
+                    dist: d,
+                    tan_half_angle: radius / (d2 - r2).sqrt(),
+                    weight: 1.0,
+                };
+                (cones, 1)
             }
             Emitter::Rectangle {
                 corner,
@@ -190,15 +216,45 @@ impl Emitter {
                 area,
                 ..
             } => {
-                let to = corner + 0.5 * (edge_u + edge_v) - p;
-                let d = to.length();
-                let dir = to / d;
-                let cos_light = -normal.dot(dir);
-                if d.is_nan() || d <= 0.0 || cos_light.is_nan() || cos_light <= 0.0 {
-                    return None;
+                let (long, short) = if edge_u.length_squared() >= edge_v.length_squared() {
+                    (edge_u, edge_v)
+                } else {
+                    (edge_v, edge_u)
+                };
+                let aspect = (long.length() / short.length()).round();
+                let parts = if aspect.is_finite() && aspect >= 1.0 {
+                    (aspect as usize).min(MAX_LIGHT_CONES)
+                } else {
+                    1
+                };
+                let part_area = area / parts as f32;
+                let mut total = 0.0f32;
+                for (i, cone) in cones.iter_mut().enumerate().take(parts) {
+                    let centre = corner + (i as f32 + 0.5) / parts as f32 * long + 0.5 * short;
+                    let to = centre - p;
+                    let d = to.length();
+                    let dir = to / d;
+                    let cos_light = -normal.dot(dir);
+                    if d.is_nan() || d <= 0.0 || cos_light.is_nan() || cos_light <= 0.0 {
+                        return (cones, 0);
+                    }
+                    let radius = (part_area * cos_light / std::f32::consts::PI).sqrt();
+                    let weight = part_area * cos_light / (d * d);
+                    total += weight;
+                    *cone = LightCone {
+                        dir,
+                        dist: d,
+                        tan_half_angle: radius / d,
+                        weight,
+                    };
                 }
-                let radius = (area * cos_light / std::f32::consts::PI).sqrt();
-                Some((dir, d, radius / d))
+                if !(total.is_finite() && total > 0.0) {
+                    return (cones, 0);
+                }
+                for cone in cones.iter_mut().take(parts) {
+                    cone.weight /= total;
+                }
+                (cones, parts)
             }
         }
     }
@@ -265,6 +321,52 @@ mod tests {
             emission: Vec3::ONE,
             casts_shadows: true,
         }
+    }
+
+    #[test]
+    fn a_square_is_one_cone_and_a_long_rectangle_one_per_squarish_part() {
+        let (cones, n) = square().cones_from(Vec3::ZERO);
+        assert_eq!(n, 1);
+        assert_eq!(cones[0].weight, 1.0);
+        assert_eq!(cones[0].dir, Vec3::Y);
+        // The disk of the square's area seen head-on from 2 units: radius sqrt(4 / pi).
+        let want = (4.0 / std::f32::consts::PI).sqrt() / 2.0;
+        assert!((cones[0].tan_half_angle - want).abs() < 1e-6);
+
+        // 8 x 1 at y = 2: split into MAX_LIGHT_CONES parts along x.
+        let edge_u = Vec3::new(8.0, 0.0, 0.0);
+        let edge_v = Vec3::new(0.0, 0.0, 1.0);
+        let long = Emitter::Rectangle {
+            corner: Vec3::new(-4.0, 2.0, -0.5),
+            edge_u,
+            edge_v,
+            normal: edge_u.cross(edge_v).normalize(),
+            area: 8.0,
+            emission: Vec3::ONE,
+            casts_shadows: true,
+        };
+        let (cones, n) = long.cones_from(Vec3::ZERO);
+        assert_eq!(n, MAX_LIGHT_CONES);
+        let sum: f32 = cones[..n].iter().map(|c| c.weight).sum();
+        assert!((sum - 1.0).abs() < 1e-6, "{sum}");
+        // Seen from below the centre: the inner parts subtend more than the outer ones, and
+        // the split is symmetric.
+        assert!(cones[1].weight > cones[0].weight);
+        assert!((cones[0].weight - cones[3].weight).abs() < 1e-6);
+        assert!(cones[0].dir.x < 0.0 && cones[3].dir.x > 0.0);
+        // Behind the light: nothing.
+        assert_eq!(long.cones_from(Vec3::new(0.0, 3.0, 0.0)).1, 0);
+        // A sphere: one exact cone, none from inside.
+        let sphere = Emitter::Sphere {
+            center: Vec3::new(0.0, 2.0, 0.0),
+            radius: 1.0,
+            emission: Vec3::ONE,
+            casts_shadows: true,
+        };
+        let (cones, n) = sphere.cones_from(Vec3::ZERO);
+        assert_eq!(n, 1);
+        assert!((cones[0].tan_half_angle - 1.0 / 3f32.sqrt()).abs() < 1e-6);
+        assert_eq!(sphere.cones_from(Vec3::new(0.0, 2.5, 0.0)).1, 0);
     }
 
     #[test]

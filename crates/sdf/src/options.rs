@@ -199,7 +199,10 @@ pub struct SdfOptions {
     /// sampled rays.
     ///
     /// Quilez's penumbra estimate, an approximation, instead of the integrator's sampled
-    /// shadow rays (exact as the sample count grows). Default false.
+    /// shadow rays (exact as the sample count grows); a long rectangle light takes one cone
+    /// per squarish part (`marchmesh_core::emitter::Emitter::cones_from`). Its error per
+    /// light size, aspect and occluder distance is the stability study's `shadow_*`
+    /// families. Default false.
     pub cone_shadows: bool,
     /// Ambient occlusion from this many field taps along the normal (approximate); 0 =
     /// sampled rays.

@@ -338,8 +338,9 @@ pub(super) fn trace_tile(
                     ShadingLight::Area(emitter)
                         if emitter.casts_shadows() && shortcuts.cone_shadows =>
                     {
-                        // Shade the sampled points without rays, then scale the sum by one
-                        // cone-visibility estimate towards the light.
+                        // Shade the sampled points without rays, then scale the sum by the
+                        // cone-visibility estimates of the light's parts, weighted by their
+                        // solid angles (one cone for spheres and squarish rectangles).
                         let rotation = rotation_of(pixel_key, li as u64);
                         let share = local_weight / sh.area_samples as f32;
                         let mut total = Vec3::ZERO;
@@ -352,19 +353,20 @@ pub(super) fn trace_tile(
                                     * emitter.emission();
                             }
                         }
-                        if let (true, Some((dir, dist, tan_half_angle))) =
-                            (total != Vec3::ZERO, emitter.cone_from(hit.position))
-                        {
-                            cones.push(Cone {
-                                origin,
-                                dir,
-                                t_max: (dist - offset).max(0.0),
-                                tan_half_angle,
-                            });
-                            cone_pending.push(PendingLight {
-                                path: pi as u32,
-                                amount: total,
-                            });
+                        let (parts, count) = emitter.cones_from(hit.position);
+                        if total != Vec3::ZERO {
+                            for part in &parts[..count] {
+                                cones.push(Cone {
+                                    origin,
+                                    dir: part.dir,
+                                    t_max: (part.dist - offset).max(0.0),
+                                    tan_half_angle: part.tan_half_angle,
+                                });
+                                cone_pending.push(PendingLight {
+                                    path: pi as u32,
+                                    amount: total * part.weight,
+                                });
+                            }
                         }
                         continue;
                     }
