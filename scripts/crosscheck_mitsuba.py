@@ -139,10 +139,18 @@ def plane_square(m, normal, offset):
 # --- scene translation -------------------------------------------------------------------
 
 class Translator:
-    def __init__(self, mi, scene, scene_dir, camera_position):
+    """The scene's objects as Mitsuba shapes in render space.
+
+    `bsdf` (optional) maps an object's effective material (its own, else the one it inherits
+    from its CSG or repeat parent, else `{}`) to a Mitsuba BSDF dictionary given to each of its
+    shapes; without it shapes get none (Mitsuba's default), which the depth AOVs ignore.
+    """
+
+    def __init__(self, mi, scene, scene_dir, camera_position, bsdf=None):
         self.mi = mi
         self.scene = scene
         self.scene_dir = scene_dir
+        self.bsdf = bsdf
         self.eye = np.array(camera_position, dtype=float)
         self.max_distance = scene.get("render", {}).get("max_distance", 1000.0)
         self.shapes = {}
@@ -150,14 +158,17 @@ class Translator:
         # precise near the camera.
         self.to_render = translate(-self.eye)
 
-    def add(self, shape):
+    def add(self, shape, material=None):
+        if self.bsdf is not None and isinstance(shape, dict):
+            shape["bsdf"] = self.bsdf(material or {})
         self.shapes[f"shape_{len(self.shapes)}"] = shape
 
     def xf(self, m):
         return self.mi.ScalarTransform4f(m.tolist())
 
-    def node(self, obj, parent, path):
+    def node(self, obj, parent, path, material=None):
         m = parent @ object_transform(obj)
+        material = obj.get("material", material)
         shape = obj.get("shape")
         if not isinstance(shape, dict) or len(shape) != 1:
             raise Unsupported(f"{path}.shape: expected one shape")
@@ -166,24 +177,30 @@ class Translator:
         spath = f"{path}.shape.{kind}"
         if kind == "sphere":
             s = uniform_scale(m, spath)
-            self.add({"type": "sphere", "center": m[:3, 3].tolist(), "radius": s * p.get("radius", 1.0)})
+            self.add({"type": "sphere", "center": m[:3, 3].tolist(), "radius": s * p.get("radius", 1.0)},
+                     material)
         elif kind == "box":
             h = p.get("half_extents", [0.5, 0.5, 0.5])
-            self.add({"type": "cube", "to_world": self.xf(m @ scale(h))})
+            self.add({"type": "cube", "to_world": self.xf(m @ scale(h))}, material)
         elif kind == "cylinder":
             s = uniform_scale(m, spath)
             r, hh = p.get("radius", 0.5), 0.5 * p.get("height", 1.0)
             p0 = (m @ np.array([0, -hh, 0, 1]))[:3]
             p1 = (m @ np.array([0, hh, 0, 1]))[:3]
-            self.add({"type": "cylinder", "p0": p0.tolist(), "p1": p1.tolist(), "radius": s * r})
+            self.add({"type": "cylinder", "p0": p0.tolist(), "p1": p1.tolist(), "radius": s * r},
+                     material)
             # Caps: Mitsuba's disk is the unit disk in z = 0 with normal +z; rotate it onto y.
             onto_y = np.array([[1, 0, 0, 0], [0, 0, 1, 0], [0, -1, 0, 0], [0, 0, 0, 1]], dtype=float)
             for y in (-hh, hh):
-                self.add({"type": "disk", "to_world": self.xf(m @ translate([0, y, 0]) @ onto_y @ scale([r, r, 1]))})
+                self.add({"type": "disk", "to_world": self.xf(m @ translate([0, y, 0]) @ onto_y @ scale([r, r, 1]))},
+                         material)
         elif kind == "triangle":
             v = np.array(p["vertices"], dtype=float)
             w = [(m @ np.append(x, 1.0))[:3] for x in v]
-            mesh = self.mi.Mesh(f"triangle_{len(self.shapes)}", 3, 1)
+            props = self.mi.Properties()
+            if self.bsdf is not None:
+                props["bsdf"] = self.mi.load_dict(self.bsdf(material or {}))
+            mesh = self.mi.Mesh(f"triangle_{len(self.shapes)}", 3, 1, props)
             params = self.mi.traverse(mesh)
             params["vertex_positions"] = np.array(w, dtype=np.float32).ravel()
             params["faces"] = np.array([0, 1, 2], dtype=np.uint32)
@@ -199,16 +216,16 @@ class Translator:
             with open(full, "rb") as fh:
                 has_normals = any(line.startswith(b"vn ") for line in fh)
             self.add({"type": "obj", "filename": full, "to_world": self.xf(m),
-                      "face_normals": not has_normals})
+                      "face_normals": not has_normals}, material)
         elif kind == "plane":
             x, y, z, foot = plane_square(m.tolist(), p.get("normal", [0, 1, 0]), p.get("offset", 0.0))
             frame = np.eye(4)
             frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, y, z, foot
             self.add({"type": "rectangle",
-                      "to_world": self.xf(frame @ scale([self.max_distance] * 2 + [1]))})
+                      "to_world": self.xf(frame @ scale([self.max_distance] * 2 + [1]))}, material)
         elif kind == "union":
             for i, c in enumerate(p.get("children", [])):
-                self.node(c, m, f"{spath}.children[{i}]")
+                self.node(c, m, f"{spath}.children[{i}]", material)
         elif kind == "repeat":
             period = p.get("period", [0, 0, 0])
             count = p.get("count", [None, None, None])
@@ -224,7 +241,7 @@ class Translator:
             for ox in ranges[0]:
                 for oy in ranges[1]:
                     for oz in ranges[2]:
-                        self.node(p["child"], m @ translate([ox, oy, oz]), f"{spath}.child")
+                        self.node(p["child"], m @ translate([ox, oy, oz]), f"{spath}.child", material)
         else:
             raise Unsupported(f"{spath}: {kind} has no exact Mitsuba counterpart")
 

@@ -140,3 +140,38 @@ fn the_mitsuba_crosscheck_places_planes_in_render_space() {
     );
     assert!(out.contains("Ran 2 tests"), "{out}");
 }
+
+/// The Mitsuba path-tracing cross-check's decision rule, on synthetic images without numpy
+/// or Mitsuba: unbiased renders pass at any noise level (where a fixed PSNR threshold failed
+/// them), a bias hidden in the mean or concentrated in a few pixels fails the noise check,
+/// one beyond the mean tolerance fails the mean check.
+#[test]
+fn the_mitsuba_path_tracing_crosscheck_decides_by_bias_against_noise() {
+    let Some(python) = marchmesh_testkit::tools::require(
+        marchmesh_testkit::tools::Tool::Python,
+        "the_mitsuba_path_tracing_crosscheck_decides_by_bias_against_noise",
+    ) else {
+        return;
+    };
+    let o = Command::new(python)
+        .args(["-m", "unittest", "-v", "test_crosscheck_mitsuba_pt.Verdict"])
+        .current_dir(marchmesh_testkit::repo_root().join("scripts"))
+        .output()
+        .unwrap();
+    let out = text(&o.stderr);
+    assert!(o.status.success(), "{out}");
+    for name in [
+        "test_unbiased_renders_pass_whatever_their_noise",
+        "test_a_bias_hidden_in_the_mean_fails_the_noise_check",
+        "test_a_large_bias_in_a_few_pixels_fails_the_noise_check",
+        "test_a_uniform_bias_beyond_the_mean_tolerance_fails",
+    ] {
+        // unittest -v prints `name ... ok` or, from Python 3.11, `name (module.Class.name) ... ok`.
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with(name) && l.ends_with("... ok")),
+            "{name}: {out}"
+        );
+    }
+    assert!(out.contains("Ran 7 tests"), "{out}");
+}

@@ -1,7 +1,8 @@
 //! The backend conformance suite.
 //!
-//! Every backend runs the same small scenes (64x64) and compares its AOVs with the exact
-//! reference pixel by pixel (`marchmesh_core::compare`). A backend's test file instantiates
+//! Every backend runs the same small scenes (64x64 unless a case states its own size) and
+//! compares its AOVs with the exact reference pixel by pixel (`marchmesh_core::compare`). A
+//! backend's test file instantiates
 //! the suite with [`conformance_suite!`], giving its [`Backend`] type, optionally its settings
 //! (default: the backend's defaults), and its tolerances per case (the way `fidget` runs one
 //! test suite on every evaluator):
@@ -27,19 +28,23 @@ use marchmesh_core::{
 use marchmesh_reference::ReferenceBackend;
 use marchmesh_scene::Scene;
 
-/// Image side of every conformance render, pixels.
+/// Image side of a conformance render, pixels, unless its case states its size.
 pub const SIDE: u32 = 64;
 
 /// What a backend must meet on one case: the core's [`Tolerance`], shared with the
 /// stability study's verdicts.
 pub use marchmesh_core::Tolerance;
 
-/// A conformance scene: its id, its name and its JSON (camera size is forced to 64x64).
+/// A conformance scene: its id, its name, its image size and its JSON (the camera's size in
+/// the JSON is replaced by `size`).
 pub struct Case {
     /// Which case.
     pub id: CaseId,
     /// Test name (the id's name).
     pub name: &'static str,
+    /// Image width and height: [`SIDE`] x [`SIDE`] unless the case states its own (a
+    /// situation that shows only at a finer pixel grid).
+    pub size: (u32, u32),
     /// Scene JSON; relative mesh paths resolve against `scenes/` of the repository.
     pub json: &'static str,
 }
@@ -51,9 +56,10 @@ macro_rules! cam {
 }
 
 /// Declares every case once: the [`CaseId`] enum (tolerances match on it, so a misspelt case
-/// fails to compile) and [`CASES`].
+/// fails to compile) and [`CASES`]. `name => json` renders at [`SIDE`] x [`SIDE`],
+/// `name (W x H) => json` at W x H.
 macro_rules! cases {
-    ($($name:ident => $json:expr,)*) => {
+    ($($name:ident $(($w:literal x $h:literal))? => $json:expr,)*) => {
         /// A conformance case. [`conformance_suite!`] must list every variant (an exhaustive
         /// match in its expansion fails to compile otherwise).
         #[allow(non_camel_case_types)]
@@ -67,8 +73,15 @@ macro_rules! cases {
 
         /// Every case, each a small scene exercising one shape, operator or numerical
         /// situation.
-        pub const CASES: &[Case] = &[$(Case { id: CaseId::$name, name: stringify!($name), json: $json }),*];
+        pub const CASES: &[Case] = &[$(Case {
+            id: CaseId::$name,
+            name: stringify!($name),
+            size: cases!(@size $(($w, $h))?),
+            json: $json,
+        }),*];
     };
+    (@size) => { (SIDE, SIDE) };
+    (@size ($w:literal, $h:literal)) => { ($w, $h) };
 }
 
 cases! {
@@ -218,8 +231,10 @@ cases! {
                 {"shape": {"box": {"half_extents": [3, 3, 4]}}},
                 {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [0.3, 0, 2.5]}, "material": {"color": [1, 0, 0]}}]}}}]}"#,
     // The camera inside a box minus a sphere, looking at the exit surface across the seam
-    // where the removed sphere meets the box's face (sphere tracing once left holes along it).
-    camera_inside_subtraction_seam => r#"{"camera": {"position": [0.2, 0.1, -0.3], "look_at": [0.5, -0.2, 3], "vfov_deg": 70, "width": 256, "height": 192},
+    // where the removed sphere meets the box's face, which is also the scene box's (sphere
+    // tracing once left holes along it, seen at this size: rays that run within the hit shell
+    // along the sphere and leave through the face).
+    camera_inside_subtraction_seam (256 x 192) => r#"{"camera": {"position": [0.2, 0.1, -0.3], "look_at": [0.5, -0.2, 3], "vfov_deg": 70, "width": 256, "height": 192},
             "objects": [{"shape": {"subtraction": {"children": [
                 {"shape": {"box": {"half_extents": [1.5, 1.0, 1.5]}}},
                 {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [0.6, 0.2, 1.6]}}]}},
@@ -260,12 +275,13 @@ pub fn scenes_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes")
 }
 
-/// Parses case `id` at 64x64.
+/// Parses case `id` at its size ([`Case::size`]).
 pub fn case_scene(id: CaseId) -> Scene {
     let case = id.case();
     let name = case.name;
+    let (w, h) = case.size;
     marchmesh_scene::parse_scene(case.json, case.name, &scenes_dir())
-        .and_then(|s| s.with_image_size(SIDE, SIDE).map_err(|e| panic!("{e}")))
+        .and_then(|s| s.with_image_size(w, h).map_err(|e| panic!("{e}")))
         .unwrap_or_else(|e| panic!("conformance case {name} is invalid: {e}"))
 }
 
@@ -435,12 +451,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_case_parses_at_the_suite_size_and_ids_index_their_entries() {
+    fn every_case_parses_at_its_size_and_ids_index_their_entries() {
         for (k, c) in CASES.iter().enumerate() {
             assert_eq!(c.id as usize, k, "{}", c.name);
             assert_eq!(c.id.name(), c.name);
             let s = case_scene(c.id);
-            assert_eq!((s.camera.width, s.camera.height), (SIDE, SIDE));
+            assert_eq!((s.camera.width, s.camera.height), c.size, "{}", c.name);
         }
+        assert_eq!(CaseId::sphere.case().size, (SIDE, SIDE));
+        assert_eq!(
+            CaseId::camera_inside_subtraction_seam.case().size,
+            (256, 192)
+        );
     }
 }

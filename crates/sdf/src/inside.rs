@@ -4,10 +4,16 @@
 //! ray sees the first boundary crossing of any of them, even from inside another one. The
 //! union field the tracer marches cannot show a surface that lies inside another solid (the
 //! union has no boundary there), so when the camera is inside a solid the backend also keeps
-//! one field per top-level object, and rays that start inside march the unsigned distance to
-//! the nearest top-level surface, `min_k |d_k|`, with the same state machine (every surface
-//! then behaves like a sheet, which the tracer already handles). What is not visible gets no
-//! secondary rays, so a camera outside every solid never needs this.
+//! one field per top-level object, and rays that start inside march the distance to the
+//! nearest top-level surface with the same state machine: `min_k o_k d_k`, each object's
+//! distance oriented by its sign where the ray starts (`o_k = -1` inside it, `+1` outside), so
+//! the first crossing of any top-level surface is a sign change the tracer brackets. Only an
+//! object whose surface the ray starts on (within the shell: a secondary ray leaving it) has
+//! no known side and enters unsigned, `|d_k|`, a sheet, which the tracer also handles. (With
+//! every object unsigned, a ray running within the shell along one surface and leaving
+//! through another where they meet, as at the seam where a removed sphere cuts a box's face,
+//! had no sign change to find and could walk out through the exit.) What is not visible gets
+//! no secondary rays, so a camera outside every solid never needs this.
 
 use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_field::{Field, FieldError, FieldOptions};
@@ -16,6 +22,34 @@ use marchmesh_scene::{MaterialId, Scene};
 /// Most top-level objects kept as separate fields; beyond it a camera inside a solid sees the
 /// union's boundary (said in the report's notes).
 pub(crate) const MAX_INSIDE_OBJECTS: usize = 256;
+
+/// How each top-level object's distance enters one ray's march ([`Inside::sides`]): bit `k`
+/// of `flip` set when the ray starts inside object `k` (its distance is negated), of `sheet`
+/// when it starts on its surface (its distance enters unsigned).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Sides {
+    flip: [u64; MAX_INSIDE_OBJECTS / 64],
+    sheet: [u64; MAX_INSIDE_OBJECTS / 64],
+}
+
+impl Sides {
+    #[inline]
+    fn bit(words: &[u64; MAX_INSIDE_OBJECTS / 64], k: usize) -> bool {
+        words[k / 64] >> (k % 64) & 1 == 1
+    }
+
+    /// Object `k`'s distance `d` oriented for the ray.
+    #[inline]
+    fn orient(&self, k: usize, d: f32) -> f32 {
+        if Self::bit(&self.sheet, k) {
+            d.abs()
+        } else if Self::bit(&self.flip, k) {
+            -d
+        } else {
+            d
+        }
+    }
+}
 
 /// One field per top-level object, for rays starting inside a solid.
 #[derive(Debug)]
@@ -52,6 +86,35 @@ impl Inside {
     /// Number of per-object fields.
     pub(crate) fn len(&self) -> usize {
         self.objects.len()
+    }
+
+    /// The sides of every object at a ray's first sample point `start`: the surfaces within
+    /// `shell` of it are sheets (the ray starts on them), the others signed, positive at
+    /// `start`.
+    pub(crate) fn sides(&self, start: Vec3, shell: f32) -> Sides {
+        let mut sides = Sides::default();
+        for (k, f) in self.objects.iter().enumerate() {
+            let d = f.distance(start);
+            let bit = 1u64 << (k % 64);
+            if d.abs() < shell || d.is_nan() {
+                sides.sheet[k / 64] |= bit;
+            } else if d < 0.0 {
+                sides.flip[k / 64] |= bit;
+            }
+        }
+        sides
+    }
+
+    /// The distance a ray with `sides` marches: `min_k` of the objects' oriented distances
+    /// (positive before the ray's first crossing of a top-level surface, negative just after
+    /// it unless that surface is a sheet).
+    #[inline]
+    pub(crate) fn oriented(&self, p: Vec3, sides: &Sides) -> f32 {
+        let mut best = f32::INFINITY;
+        for (k, f) in self.objects.iter().enumerate() {
+            best = best.min(sides.orient(k, f.distance(p)));
+        }
+        best
     }
 
     /// Unsigned distance to the nearest top-level surface, and that object's index.

@@ -296,7 +296,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     );
     if let Some(inside) = &inside {
         notes.push(format!(
-            "camera inside a solid: rays starting inside one trace the nearest of the {} top-level surfaces (min |d_k|), one field per object",
+            "camera inside a solid: rays starting inside one trace the nearest of the {} top-level surfaces (min_k of each distance oriented by the side of it the ray starts on), one field per object",
             inside.len()
         ));
     } else if field.distance_f64(DVec3::ZERO) < 0.0 {
@@ -542,9 +542,12 @@ impl SdfGeometry {
         )
     }
 
-    /// [`Self::run_with`] on the distance to the nearest solid of `inside` (rays starting
-    /// inside a solid), with plain steps: the per-object fields have no directional bounds.
+    /// [`Self::run_with`] on the distance to the nearest top-level surface of `inside` (rays
+    /// starting inside a solid), each object's distance oriented by the side of it the ray
+    /// starts on ([`Inside::sides`]), with plain steps: the per-object fields have no
+    /// directional bounds. `m` must not have been fed yet.
     fn run_inside(m: &mut March, params: &Params, inside: &Inside) -> Termination {
+        let sides = inside.sides(m.point(), m.shell(params));
         Self::run_with(
             m,
             // The per-object fields answer no receding checks either.
@@ -552,9 +555,9 @@ impl SdfGeometry {
                 recede_checks: false,
                 ..*params
             },
-            |p| inside.nearest(p).0,
+            |p| inside.oriented(p, &sides),
             |p, _, _| {
-                let d = inside.nearest(p).0;
+                let d = inside.oriented(p, &sides);
                 (d, d.abs())
             },
             |_, _| false,

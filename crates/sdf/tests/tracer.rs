@@ -923,3 +923,57 @@ fn a_long_near_pass_within_the_shell_is_a_miss() {
     let h = g.closest_hit(&floor);
     assert!(h.hit().is_some(), "{h:?}");
 }
+
+#[test]
+fn a_camera_inside_a_subtraction_sees_the_exit_along_the_seam() {
+    // The camera inside a box minus a sphere, looking across the circle where the removed
+    // sphere cuts the box's far face (which is also the scene box's face). Rays running
+    // within the shell along the sphere and leaving through the face had no sign change to
+    // show the exit when every surface marched unsigned, and a shell step of eps / 2 left
+    // the range at the scene box before sampling past the face: 1 hole and 1 wrong surface at
+    // the default shell, 18 holes at eps_px = 0.5. Every pixel must find the reference's
+    // surface, at every shell width.
+    let s = marchmesh_testkit::scene(
+        r#"{ "camera": { "position": [0.2, 0.1, -0.3], "look_at": [0.5, -0.2, 3], "vfov_deg": 70, "width": 256, "height": 192 },
+             "objects": [ { "shape": { "subtraction": { "children": [
+                 { "shape": { "box": { "half_extents": [1.5, 1.0, 1.5] } } },
+                 { "shape": { "sphere": { "radius": 0.7 } }, "transform": { "translate": [0.6, 0.2, 1.6] } } ] } },
+               "transform": { "translate": [0, 0, 0.5] } } ] }"#,
+    );
+    let truth = marchmesh_testkit::render_with(
+        &s,
+        &marchmesh_reference::build(&s, &Default::default()).unwrap(),
+        2,
+    );
+    for eps_px in [SdfOptions::DEFAULT.eps_px, 0.5, 2.0] {
+        let g = build(
+            &s,
+            &SdfOptions {
+                eps_px,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .unwrap();
+        let out = marchmesh_testkit::render_with(&s, &g, 2);
+        let (mut holes, mut extra, mut wrong) = (Vec::new(), 0, Vec::new());
+        for (i, (&d, &r)) in out
+            .framebuffer
+            .depth
+            .iter()
+            .zip(&truth.framebuffer.depth)
+            .enumerate()
+        {
+            let px = (i % 256, i / 256);
+            match (d.is_finite(), r.is_finite()) {
+                (false, true) => holes.push(px),
+                (true, false) => extra += 1,
+                (true, true) if (d - r).abs() > 1e-3 * r => wrong.push((px, d, r)),
+                _ => {}
+            }
+        }
+        assert!(
+            holes.is_empty() && extra == 0 && wrong.is_empty(),
+            "eps_px {eps_px}: holes at {holes:?}, {extra} extra hits, wrong depth at {wrong:?}"
+        );
+    }
+}

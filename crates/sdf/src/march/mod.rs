@@ -444,6 +444,13 @@ impl March {
         self.base + self.t
     }
 
+    /// The shell epsilon at the current point ([`March::point`]): before the first sample,
+    /// how close to a surface the ray's start counts as starting on it.
+    #[inline]
+    pub fn shell(&self, p: &Params) -> f32 {
+        self.eps(p)
+    }
+
     /// The shell epsilon, never below f32 resolution of positions here (a smaller one could
     /// never be reached and would exhaust the steps).
     #[inline]

@@ -415,7 +415,16 @@ impl March {
             trial: false,
             left: if receding { left.max(1) } else { left - 1 },
         };
-        self.t = t + s.max(0.5 * eps);
+        // A step of eps / 2 is longer than the distance: where it would pass the end of the
+        // range, look at the end first (a solid's exit surface can lie on the scene box, e.g.
+        // a face of the box the camera is inside, and the step would leave the range
+        // without the sample past the surface that shows the crossing).
+        let next = t + s.max(0.5 * eps);
+        self.t = if t < self.t_end {
+            next.min(self.t_end)
+        } else {
+            next
+        };
         if receding && p.segment && self.evals >= self.seg_from {
             // A ray receding from a surface it passes within the shell, nearly parallel to it
             // (skimming a cylinder's cap within 0.05 px: ~500 steps of its height), crawls at
