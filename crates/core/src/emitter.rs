@@ -47,6 +47,11 @@ pub enum Emitter {
 /// Most cones [`Emitter::cones_from`] splits a light into.
 pub const MAX_LIGHT_CONES: usize = 4;
 
+/// Tangent of the half angle beyond which [`Emitter::cones_from`] splits a squarish light
+/// into four cones: one cone's penumbra estimate degrades as it widens (the stability
+/// study's `shadow_light_size` and `shadow_sphere_light` families measure it).
+pub const CONE_SPLIT_TAN: f32 = 0.25;
+
 /// A cone from a shading point towards (part of) a light.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LightCone {
@@ -183,11 +188,16 @@ impl Emitter {
     }
 
     /// Cones from `p` that together subtend about the light's solid angle, for one-query
-    /// visibility estimates: the first `count` entries of the array. A sphere is one exact
-    /// cone. A rectangle is split along its longer edge into `n = min(round(aspect),`
-    /// [`MAX_LIGHT_CONES`]`)` parts of aspect near 1, each the disk of its projected area
-    /// (one disk for a long light would give it a round penumbra); weights are each part's
-    /// share of the solid angle (`area cos / d^2`), summing to 1 (exactly 1 for one cone).
+    /// visibility estimates: the first `count` entries of the array, with weights (each part's
+    /// share of the solid angle) summing to 1 (exactly 1 for one cone). A cone's penumbra
+    /// estimate degrades as it widens and is round whatever the light's shape, so:
+    /// - a sphere is one exact cone, or four (its disk's quadrants, each the disk of a
+    ///   quarter of its area around the quadrant's centroid) when its half angle's tangent is
+    ///   over [`CONE_SPLIT_TAN`];
+    /// - a rectangle is split along its longer edge into `min(round(aspect),`
+    ///   [`MAX_LIGHT_CONES`]`)` parts of aspect near 1, and a squarish one whose disk is
+    ///   wider than [`CONE_SPLIT_TAN`] into 2 x 2; each part is the disk of its projected area.
+    ///
     /// Empty when `p` is inside the sphere or behind the rectangle.
     pub fn cones_from(&self, p: Vec3) -> ([LightCone; MAX_LIGHT_CONES], usize) {
         let mut cones = [LightCone::default(); MAX_LIGHT_CONES];
@@ -200,13 +210,38 @@ impl Emitter {
                     return (cones, 0);
                 }
                 let d = d2.sqrt();
-                cones[0] = LightCone {
-                    dir: to / d,
-                    dist: d,
-                    tan_half_angle: radius / (d2 - r2).sqrt(),
-                    weight: 1.0,
-                };
-                (cones, 1)
+                let dir = to / d;
+                let tan_half_angle = radius / (d2 - r2).sqrt();
+                if tan_half_angle <= CONE_SPLIT_TAN {
+                    cones[0] = LightCone {
+                        dir,
+                        dist: d,
+                        tan_half_angle,
+                        weight: 1.0,
+                    };
+                    return (cones, 1);
+                }
+                // Quadrants of the disk of angular radius `alpha`: each centroid lies
+                // 4 alpha / (3 pi) from the centre along both axes, each quarter disk is
+                // replaced by the disk of its area (angular radius alpha / 2).
+                let alpha = tan_half_angle.atan();
+                let off = 4.0 * alpha / (3.0 * std::f32::consts::PI);
+                let (b1, b2) = dir.any_orthonormal_pair();
+                let tan_part = (0.5 * alpha).tan();
+                for (cone, (sx, sy)) in
+                    cones
+                        .iter_mut()
+                        .zip([(1.0, 1.0), (-1.0, 1.0), (-1.0, -1.0), (1.0, -1.0)])
+                {
+                    let axis = (dir + off.tan() * (sx * b1 + sy * b2)).normalize();
+                    *cone = LightCone {
+                        dir: axis,
+                        dist: d,
+                        tan_half_angle: tan_part,
+                        weight: 0.25,
+                    };
+                }
+                (cones, 4)
             }
             Emitter::Rectangle {
                 corner,
@@ -222,15 +257,29 @@ impl Emitter {
                     (edge_v, edge_u)
                 };
                 let aspect = (long.length() / short.length()).round();
-                let parts = if aspect.is_finite() && aspect >= 1.0 {
+                let mut along = if aspect.is_finite() && aspect >= 1.0 {
                     (aspect as usize).min(MAX_LIGHT_CONES)
                 } else {
                     1
                 };
+                let mut across = 1;
+                if along == 1 {
+                    let to = corner + 0.5 * (long + short) - p;
+                    let d = to.length();
+                    let cos_light = -normal.dot(to / d);
+                    let tan_whole = (area * cos_light.max(0.0) / std::f32::consts::PI).sqrt() / d;
+                    if tan_whole > CONE_SPLIT_TAN {
+                        (along, across) = (2, 2);
+                    }
+                }
+                let parts = along * across;
                 let part_area = area / parts as f32;
                 let mut total = 0.0f32;
-                for (i, cone) in cones.iter_mut().enumerate().take(parts) {
-                    let centre = corner + (i as f32 + 0.5) / parts as f32 * long + 0.5 * short;
+                for (k, cone) in cones.iter_mut().enumerate().take(parts) {
+                    let (i, j) = (k % along, k / along);
+                    let centre = corner
+                        + (i as f32 + 0.5) / along as f32 * long
+                        + (j as f32 + 0.5) / across as f32 * short;
                     let to = centre - p;
                     let d = to.length();
                     let dir = to / d;
@@ -325,13 +374,23 @@ mod tests {
 
     #[test]
     fn a_square_is_one_cone_and_a_long_rectangle_one_per_squarish_part() {
-        let (cones, n) = square().cones_from(Vec3::ZERO);
+        // The 2 x 2 square seen head-on from 10 units: one cone, the disk of its area.
+        let far = Vec3::new(0.0, -8.0, 0.0);
+        let (cones, n) = square().cones_from(far);
         assert_eq!(n, 1);
         assert_eq!(cones[0].weight, 1.0);
         assert_eq!(cones[0].dir, Vec3::Y);
-        // The disk of the square's area seen head-on from 2 units: radius sqrt(4 / pi).
-        let want = (4.0 / std::f32::consts::PI).sqrt() / 2.0;
+        let want = (4.0 / std::f32::consts::PI).sqrt() / 10.0;
         assert!((cones[0].tan_half_angle - want).abs() < 1e-6);
+        // From 2 units the disk is wider than CONE_SPLIT_TAN: four equal quarters.
+        let (cones, n) = square().cones_from(Vec3::ZERO);
+        assert_eq!(n, 4);
+        for c in &cones {
+            assert!((c.weight - 0.25).abs() < 1e-6);
+            // Towards a quarter's centre (+-0.5, 2, +-0.5).
+            let q = Vec3::new(0.5 * c.dir.x.signum(), 2.0, 0.5 * c.dir.z.signum());
+            assert!(c.dir.dot(q.normalize()) > 0.999_99, "{:?}", c.dir);
+        }
 
         // 8 x 1 at y = 2: split into MAX_LIGHT_CONES parts along x.
         let edge_u = Vec3::new(8.0, 0.0, 0.0);
@@ -356,17 +415,28 @@ mod tests {
         assert!(cones[0].dir.x < 0.0 && cones[3].dir.x > 0.0);
         // Behind the light: nothing.
         assert_eq!(long.cones_from(Vec3::new(0.0, 3.0, 0.0)).1, 0);
-        // A sphere: one exact cone, none from inside.
-        let sphere = Emitter::Sphere {
+        // A sphere: one exact cone when narrow, its quadrants when wide, none from inside.
+        let sphere = |radius: f32| Emitter::Sphere {
             center: Vec3::new(0.0, 2.0, 0.0),
-            radius: 1.0,
+            radius,
             emission: Vec3::ONE,
             casts_shadows: true,
         };
-        let (cones, n) = sphere.cones_from(Vec3::ZERO);
+        let (cones, n) = sphere(0.2).cones_from(Vec3::ZERO);
         assert_eq!(n, 1);
-        assert!((cones[0].tan_half_angle - 1.0 / 3f32.sqrt()).abs() < 1e-6);
-        assert_eq!(sphere.cones_from(Vec3::new(0.0, 2.5, 0.0)).1, 0);
+        assert!((cones[0].tan_half_angle - 0.2 / (4.0f32 - 0.04).sqrt()).abs() < 1e-6);
+        let (cones, n) = sphere(1.0).cones_from(Vec3::ZERO);
+        assert_eq!(n, 4);
+        let alpha = (1.0f32 / 3f32.sqrt()).atan();
+        for c in &cones {
+            assert_eq!(c.weight, 0.25);
+            assert!((c.tan_half_angle - (0.5 * alpha).tan()).abs() < 1e-6);
+            // Each quadrant's axis stays inside the sphere's disk.
+            assert!(c.dir.dot(Vec3::Y) > alpha.cos());
+        }
+        let mean: Vec3 = cones.iter().map(|c| c.dir).sum::<Vec3>() / 4.0;
+        assert!(mean.normalize().dot(Vec3::Y) > 0.999_99);
+        assert_eq!(sphere(1.0).cones_from(Vec3::new(0.0, 2.5, 0.0)).1, 0);
     }
 
     #[test]
