@@ -467,6 +467,63 @@ fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
 }
 
 #[test]
+fn results_whose_failures_repeat_a_row_or_each_other_are_refused_by_every_reader() {
+    let dir = tmp("report-duplicate-failures");
+    let good = run_dir(&dir, "good", &small_run());
+    let failure = |id: &str| Failure {
+        config_id: id.into(),
+        error: "boom".into(),
+    };
+    let mut beside = small_run();
+    beside.failures = vec![failure(&beside.rows[1].config_id.clone())];
+    let beside = run_dir(&dir, "beside", &beside);
+    let mut twice = small_run();
+    twice.failures = vec![failure("g/s/sdf:z/x1/t1"), failure("g/s/sdf:z/x1/t1")];
+    let twice = run_dir(&dir, "twice", &twice);
+    for (run, id, reason) in [
+        (
+            &beside,
+            "g/s/mesh:b/x1/t1",
+            "listed as failed but has a row",
+        ),
+        (&twice, "g/s/sdf:z/x1/t1", "listed as failed twice"),
+    ] {
+        let findings = dir.join("F.md");
+        let merged = dir.join("m");
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+            vec![
+                "findings",
+                run.to_str().unwrap(),
+                "-o",
+                findings.to_str().unwrap(),
+            ],
+            vec![
+                "merge",
+                "-o",
+                merged.to_str().unwrap(),
+                run.to_str().unwrap(),
+            ],
+        ] {
+            let o = marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert!(!o.status.success(), "{args:?}");
+            assert!(
+                e.contains("results.json")
+                    && e.contains("failures[")
+                    && e.contains(id)
+                    && e.contains(reason)
+                    && !e.contains("shards must not overlap"),
+                "{args:?}: {e}"
+            );
+        }
+        assert!(!findings.exists() && !merged.exists());
+        assert!(!run.join("summary.md").exists());
+    }
+}
+
+#[test]
 fn results_listing_a_configuration_as_missing_twice_or_beside_its_row_are_refused() {
     let dir = tmp("report-duplicate-missing");
     let mut twice = small_run();

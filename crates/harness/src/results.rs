@@ -429,10 +429,11 @@ impl Results {
         Ok(results)
     }
 
-    /// Refuses a configuration id with more than one row, or listed as missing twice or
-    /// beside its row (no run writes either; reports would count it twice and `merge` would
-    /// take the file for two overlapping shards). Returns the JSON path of the first such
-    /// entry and the reason naming the id and where it first appeared.
+    /// Refuses a configuration id with more than one row, a failure listed twice or beside a
+    /// row, or an id listed as missing twice or beside a row or failure (no run writes any of
+    /// these; reports would count it twice and `merge` would take the file for two
+    /// overlapping shards). Returns the JSON path of the first such entry and the reason
+    /// naming the id and where it first appeared.
     pub fn check_unique_rows(&self) -> Result<(), (String, String)> {
         let mut first = std::collections::HashMap::with_capacity(self.rows.len());
         for (i, r) in self.rows.iter().enumerate() {
@@ -446,12 +447,34 @@ impl Results {
                 ));
             }
         }
+        let mut failed = std::collections::HashMap::with_capacity(self.failures.len());
+        for (i, f) in self.failures.iter().enumerate() {
+            let id = &f.config_id;
+            if let Some(&j) = first.get(id.as_str()) {
+                return Err((
+                    format!("failures[{i}].config_id"),
+                    format!("configuration {id} is listed as failed but has a row (rows[{j}])"),
+                ));
+            }
+            if let Some(j) = failed.insert(id.as_str(), i) {
+                return Err((
+                    format!("failures[{i}].config_id"),
+                    format!("configuration {id} is listed as failed twice (also failures[{j}])"),
+                ));
+            }
+        }
         let mut listed = std::collections::HashMap::with_capacity(self.missing.len());
         for (i, id) in self.missing.iter().enumerate() {
             if let Some(&j) = first.get(id.as_str()) {
                 return Err((
                     format!("missing[{i}]"),
                     format!("configuration {id} is listed as missing but has a row (rows[{j}])"),
+                ));
+            }
+            if let Some(&j) = failed.get(id.as_str()) {
+                return Err((
+                    format!("missing[{i}]"),
+                    format!("configuration {id} is listed as missing but failed (failures[{j}])"),
                 ));
             }
             if let Some(j) = listed.insert(id.as_str(), i) {
@@ -774,7 +797,7 @@ pub enum MergeError {
         /// Its commit.
         other_commit: String,
     },
-    /// A configuration was measured (or failed) in two inputs.
+    /// A configuration was measured, failed or listed as missing in two inputs.
     #[error("configuration {config_id} is in both {first} and {other}: shards must not overlap")]
     Overlap {
         /// The configuration.
@@ -793,7 +816,8 @@ impl Results {
     /// [`Results::merged_from`]; the merged provenance is the first input's with `command`.
     ///
     /// Errors: no input, inputs of different suites or commits (a dirty tree counts as a
-    /// different commit), or a configuration present in two inputs.
+    /// different commit), or a configuration present in two inputs (as a row, a failure or
+    /// missing: the merged file would list it twice, which no reader accepts).
     pub fn merge(
         inputs: Vec<(String, Results)>,
         run_id: String,
@@ -833,7 +857,8 @@ impl Results {
                 .rows
                 .iter()
                 .map(|x| &x.config_id)
-                .chain(r.failures.iter().map(|f| &f.config_id));
+                .chain(r.failures.iter().map(|f| &f.config_id))
+                .chain(r.missing.iter());
             for id in ids {
                 if let Some(prev) = owner.insert(id.clone(), name.clone()) {
                     return Err(MergeError::Overlap {
@@ -1089,6 +1114,55 @@ mod tests {
             Results::merge(vec![], String::new(), String::new()),
             Err(MergeError::Empty)
         );
+    }
+
+    #[test]
+    fn merge_refuses_a_configuration_missing_in_one_input_and_measured_in_another() {
+        use tests_support::{results, row};
+        let a = results(vec![row("sdf", "a", 1.0, None, 1)]);
+        let mut b = results(vec![]);
+        b.interrupted = true;
+        b.missing = vec![a.rows[0].config_id.clone()];
+        let e = Results::merge(
+            vec![("A".into(), a), ("B".into(), b)],
+            String::new(),
+            String::new(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, MergeError::Overlap { .. }), "{e}");
+    }
+
+    #[test]
+    fn failures_repeating_a_row_or_each_other_are_refused_naming_the_id() {
+        use tests_support::{results, row};
+        let base = results(vec![row("sdf", "a", 1.0, None, 1)]);
+        let id = base.rows[0].config_id.clone();
+        let failure = |id: &str| Failure {
+            config_id: id.into(),
+            error: "boom".into(),
+        };
+        let mut beside = base.clone();
+        beside.failures = vec![failure(&id)];
+        let (at, why) = beside.check_unique_rows().unwrap_err();
+        assert_eq!(at, "failures[0].config_id");
+        assert!(
+            why.contains(&id) && why.contains("failed but has a row"),
+            "{why}"
+        );
+        let mut twice = base.clone();
+        twice.failures = vec![failure("zz"), failure("zz")];
+        let (at, why) = twice.check_unique_rows().unwrap_err();
+        assert_eq!(at, "failures[1].config_id");
+        assert!(why.contains("zz") && why.contains("failed twice"), "{why}");
+        let mut missing = base.clone();
+        missing.failures = vec![failure("zz")];
+        missing.missing = vec!["zz".into()];
+        let (at, why) = missing.check_unique_rows().unwrap_err();
+        assert_eq!(at, "missing[0]");
+        assert!(why.contains("missing but failed"), "{why}");
+        let mut fine = base;
+        fine.failures = vec![failure("zz")];
+        fine.check_unique_rows().unwrap();
     }
 
     #[test]
