@@ -307,6 +307,19 @@ fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
             "sdf option grid_res: must be in",
             "mesh_grid_resolution",
         ),
+        // The scene has no mesh to bake: the range is checked all the same.
+        (
+            "sdf",
+            &["grid_res=513"][..],
+            "sdf option grid_res: must be in 4..=512",
+            "mesh_grid_resolution",
+        ),
+        (
+            "sdf",
+            &["grid_res=2"][..],
+            "sdf option grid_res: must be in 4..=512",
+            "mesh_grid_resolution",
+        ),
     ] {
         let mut args = vec!["render", "s.json", "--backend", backend, "-o", "o.png"];
         for o in options {
