@@ -588,6 +588,10 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
     let plots_dir = out
         .parent()
         .map_or_else(|| PathBuf::from(&plots_link), |p| p.join(&plots_link));
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        marchmesh_safeio::check_folder_path(parent)
+            .with_context(|| format!("--out {}", out.display()))?;
+    }
     // Checked before anything is written: with --force only a regular file is replaced.
     if let Ok(meta) = std::fs::symlink_metadata(out)
         && !meta.file_type().is_file()
@@ -740,7 +744,7 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         .file_name()
         .map_or_else(|| "merged".into(), |n| n.to_string_lossy().into_owned());
     let merged = Results::merge(inputs, run_id, command_line())?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    marchmesh_safeio::create_folder(out).with_context(|| format!("creating {}", out.display()))?;
     let plots = report::write_run(&merged, out)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the merged run into {}", out.display()))?;
@@ -1054,7 +1058,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     if let Some(dir) = &args.write_scenes {
         refuse_non_empty(dir, "--write-scenes")?;
     }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    marchmesh_safeio::create_folder(&out).with_context(|| format!("creating {}", out.display()))?;
     let ctx = marchmesh_stability::CaseContext {
         generated_dir: out.join("generated"),
         scenes_dir: root.join("scenes"),

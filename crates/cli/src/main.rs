@@ -651,7 +651,7 @@ fn scenes(out: Option<&Path>) -> Result<()> {
     for (name, bytes) in files {
         let path = dir.join(name);
         if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent)
+            marchmesh_safeio::create_folder(parent)
                 .with_context(|| format!("creating {}", parent.display()))?;
         }
         marchmesh_safeio::publish_new(&path, bytes)
@@ -667,20 +667,12 @@ fn scenes(out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-/// Refuses an output folder `dir` (given as `flag`) that exists but is not a folder (symbolic
-/// links are followed: a link to a folder is the user's choice), naming it plainly instead of
-/// the OS error ("File exists") creating inside it would give.
+/// Refuses an output folder `dir` (given as `flag`) that, or a folder above which, exists but
+/// is not a folder: a file, a special file or a dangling symbolic link (a link to a folder is
+/// the user's choice), naming it plainly instead of the OS error ("Not a directory", "File
+/// exists") creating inside it would give.
 pub(crate) fn refuse_file_as_folder(dir: &Path, flag: &str) -> Result<()> {
-    if let Ok(meta) = std::fs::metadata(dir)
-        && !meta.is_dir()
-    {
-        bail!(
-            "{flag} {}: {} is a file, not a folder (nothing was written)",
-            dir.display(),
-            dir.display()
-        );
-    }
-    Ok(())
+    marchmesh_safeio::check_folder_path(dir).map_err(|e| anyhow::anyhow!("{flag} {e}"))
 }
 
 /// Refuses to replace an existing file unless `force`.
@@ -709,6 +701,8 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
         && !dir.is_dir()
     {
+        marchmesh_safeio::check_folder_path(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         bail!(
             "cannot write {}: folder {} does not exist",
             path.display(),
