@@ -730,14 +730,22 @@ fn render(args: RenderArgs) -> Result<()> {
         );
     }
     let jpeg = output_is_jpeg(&args.out)?;
+    // The AOV folder is created only when there is something to put in it (after the
+    // render): a render stopped early or failing leaves no empty folder behind.
     if let Some(dir) = &args.aov {
         refuse_file_as_folder(dir, "--aov")?;
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating AOV folder {}", dir.display()))?;
     }
     let targets = render_targets(&args.out, args.aov.as_deref());
     for t in &targets {
-        check_writable(t, args.force)?;
+        // A file in a folder the AOV folder's creation will make (the AOV folder or one above
+        // it, e.g. `-o new/a.png --aov new/aov`) cannot exist yet: nothing to check.
+        let in_folder_to_make = t
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty() && !p.exists())
+            .is_some_and(|p| args.aov.as_deref().is_some_and(|a| a.starts_with(p)));
+        if !in_folder_to_make {
+            check_writable(t, args.force)?;
+        }
     }
     let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
     let scene_path = assets::scene_file(&args.scene)?;
@@ -847,7 +855,16 @@ fn render(args: RenderArgs) -> Result<()> {
             exr_aov::encode(&out.framebuffer)?,
         ));
     }
-    publish_all(&files, args.force)?;
+    let created = match &args.aov {
+        Some(dir) => marchmesh_safeio::create_folder_tracked(dir)
+            .with_context(|| format!("creating AOV folder {}", dir.display()))?,
+        None => Vec::new(),
+    };
+    if let Err(e) = publish_all(&files, args.force) {
+        // publish_all removed what it wrote; the folders made for it go too.
+        marchmesh_safeio::remove_created_folders(&created);
+        return Err(e);
+    }
     let report = geometry.report();
     let s = &out.stats;
     let secs = out.elapsed.as_secs_f64();

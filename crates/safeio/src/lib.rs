@@ -339,6 +339,46 @@ pub fn create_folder(dir: &Path) -> Result<(), SafeIoError> {
     })
 }
 
+/// [`create_folder`] that returns the folders this call created, top down (empty when `dir`
+/// existed), each made by one `create_dir`, so a folder someone else made meanwhile is not
+/// counted. A command that gives up before filling them removes them again with
+/// [`remove_created_folders`], leaving nothing it made and nothing that was there before.
+///
+/// Errors: those of [`create_folder`]; the folders created before the error are removed.
+pub fn create_folder_tracked(dir: &Path) -> Result<Vec<PathBuf>, SafeIoError> {
+    check_folder_path(dir)?;
+    let mut missing: Vec<&Path> = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .take_while(|a| std::fs::symlink_metadata(a).is_err())
+        .collect();
+    missing.reverse();
+    let mut created = Vec::new();
+    for at in missing {
+        match std::fs::create_dir(at) {
+            Ok(()) => created.push(at.to_path_buf()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && at.is_dir() => {}
+            Err(e) => {
+                remove_created_folders(&created);
+                return Err(check_folder_path(dir)
+                    .err()
+                    .unwrap_or_else(|| io_error(at, "cannot create the folder")(e)));
+            }
+        }
+    }
+    Ok(created)
+}
+
+/// Removes the folders of [`create_folder_tracked`], deepest first, each only if it is still
+/// empty (a folder someone has put anything in stays, and so do the folders above it).
+pub fn remove_created_folders(created: &[PathBuf]) {
+    for dir in created.iter().rev() {
+        if std::fs::remove_dir(dir).is_err() {
+            return;
+        }
+    }
+}
+
 /// Creates `dir` (and missing parents) or reuses it if it is a real folder, refusing it when
 /// it is a symbolic link, file or special file ([`check_own_folder`], checked before and
 /// after creating) or when a folder above it is not one ([`check_folder_path`]).
@@ -572,6 +612,26 @@ mod tests {
         std::os::unix::fs::symlink(&dir, &linked).unwrap();
         create_folder(&linked.join("a/b")).unwrap();
         assert!(dir.join("a/b").is_dir());
+    }
+
+    #[test]
+    fn tracked_folders_are_the_ones_made_and_only_empty_ones_are_removed() {
+        let dir = scratch("tracked");
+        let kept = dir.join("kept");
+        std::fs::create_dir(&kept).unwrap();
+        let created = create_folder_tracked(&kept.join("a/b")).unwrap();
+        assert_eq!(created, vec![kept.join("a"), kept.join("a/b")]);
+        assert!(create_folder_tracked(&kept.join("a/b")).unwrap().is_empty());
+        remove_created_folders(&created);
+        assert!(!kept.join("a").exists() && kept.is_dir());
+        let created = create_folder_tracked(&kept.join("a/b")).unwrap();
+        std::fs::write(kept.join("a/b/mine"), b"x").unwrap();
+        remove_created_folders(&created);
+        assert_eq!(std::fs::read(kept.join("a/b/mine")).unwrap(), b"x");
+        let file = dir.join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = create_folder_tracked(&file.join("a")).unwrap_err();
+        assert!(e.to_string().contains("is a file, not a folder"), "{e}");
     }
 
     #[test]
