@@ -519,6 +519,19 @@ fn measure(
         elapsed.as_secs_f64(),
     );
     print_answer(&results, dir, report_written.is_ok());
+    // Where the lists below can also be read: only files this run has written in full (a
+    // summary.md written before a later report file failed lacks that failure).
+    let (json_written, summary_written) = match &report_written {
+        Ok(_) => (true, true),
+        Err(e) => (e.results_json, false),
+    };
+    let listed_in = |file: &str, written: bool| {
+        if written {
+            format!("listed above and in {}", dir.join(file).display())
+        } else {
+            format!("listed above; {file} was not written")
+        }
+    };
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
@@ -530,25 +543,25 @@ fn measure(
     }
     if results.interrupted {
         bail!(
-            "interrupted: {} of {} configurations missing (listed in {})",
+            "interrupted: {} of {} configurations missing ({})",
             results.missing.len(),
             configs.len(),
-            dir.join("results.json").display()
+            listed_in("results.json", json_written)
         );
     }
     if !results.write_errors.is_empty() {
         bail!(
-            "{} files of the run could not be written (listed above and in {})",
+            "{} files of the run could not be written ({})",
             results.write_errors.len(),
-            dir.join("summary.md").display()
+            listed_in("summary.md", summary_written)
         );
     }
     if !results.failures.is_empty() {
         bail!(
-            "{} of {} configurations failed (see {})",
+            "{} of {} configurations failed ({})",
             results.failures.len(),
             configs.len(),
-            dir.join("summary.md").display()
+            listed_in("summary.md", summary_written)
         );
     }
     Ok(())

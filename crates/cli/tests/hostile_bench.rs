@@ -541,6 +541,45 @@ fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
     assert!(run.join("summary.md").exists());
 }
 
+/// An interrupted run of the smoke suite in `dir/name` (results.json only, no images/),
+/// with `missing` left to measure.
+fn interrupted_smoke_run(dir: &Path, name: &str, missing: &[&str]) -> PathBuf {
+    let mut res = results(vec![]);
+    res.suite = "smoke".into();
+    res.suite_file = repo()
+        .join("scenes/suites/smoke.json")
+        .display()
+        .to_string();
+    res.interrupted = true;
+    res.missing = missing.iter().map(|m| m.to_string()).collect();
+    run_dir(dir, name, &res)
+}
+
+#[test]
+fn a_summary_that_could_not_be_written_is_not_named_as_listing_anything() {
+    let dir = tmp("bench-summary-unwritten");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    // A folder where summary.md goes: the report cannot be written (and is not replaced).
+    std::fs::create_dir(run.join("summary.md")).unwrap();
+    std::fs::write(run.join("summary.md/keep.txt"), b"mine").unwrap();
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("could not be written")
+            && e.contains("summary.md was not written")
+            && !e.contains("and in"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read(run.join("summary.md/keep.txt")).unwrap(),
+        b"mine"
+    );
+    // results.json, written before the summary, holds the measured row.
+    let done = marchmesh_harness::results::Results::read_json(&run.join("results.json")).unwrap();
+    assert_eq!(done.rows.len(), 1);
+}
+
 #[test]
 fn resuming_a_run_that_would_duplicate_rows_or_write_through_a_link_is_refused() {
     let dir = tmp("bench-resume-hostile");
