@@ -467,6 +467,40 @@ fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
 }
 
 #[test]
+fn report_beside_a_results_file_keeps_a_summary_and_page_it_did_not_write() {
+    let dir = tmp("report-users-files");
+    let folder = run_dir(&dir, "downloads", &small_run());
+    for (file, mine) in [
+        ("summary.md", &b"my own notes"[..]),
+        ("report.html", &b"<html>my page</html>"[..]),
+    ] {
+        std::fs::write(folder.join(file), mine).unwrap();
+        let o = marchmesh(
+            &["report", folder.join("results.json").to_str().unwrap()],
+            &dir,
+        );
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{e}");
+        assert!(
+            e.contains(file) && e.contains("not written by a marchmesh report"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(folder.join(file)).unwrap(), mine);
+        std::fs::remove_file(folder.join(file)).unwrap();
+    }
+    // The report's own files are regenerated, again and again.
+    for _ in 0..2 {
+        let o = marchmesh(&["report", folder.to_str().unwrap()], &dir);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    assert!(
+        std::fs::read_to_string(folder.join("summary.md"))
+            .unwrap()
+            .starts_with("# Benchmark `")
+    );
+}
+
+#[test]
 fn results_whose_failures_repeat_a_row_or_each_other_are_refused_by_every_reader() {
     let dir = tmp("report-duplicate-failures");
     let good = run_dir(&dir, "good", &small_run());

@@ -38,6 +38,8 @@ fn write_report_noting_summary(
     marchmesh_safeio::check_own_folder(&dir.join("plots")).map_err(|e| e.to_string())?;
     let summary = dir.join("summary.md");
     let html = dir.join("report.html");
+    check_regenerable(&summary, SUMMARY_MARK)?;
+    check_regenerable(&html, HTML_MARK)?;
     marchmesh_safeio::replace_regular(&summary, summary_markdown(&res.markdown_safe()).as_bytes())
         .map_err(|e| e.to_string())?;
     *summary_written = true;
@@ -45,6 +47,50 @@ fn write_report_noting_summary(
     marchmesh_safeio::replace_regular(&html, crate::html::report_html(res, dir).as_bytes())
         .map_err(|e| e.to_string())?;
     Ok(plots)
+}
+
+/// How every `summary.md` a run's report writes starts.
+const SUMMARY_MARK: &str = "# Benchmark `";
+
+/// What the head of every `report.html` holds.
+const HTML_MARK: &str = "<title>marchmesh ";
+
+/// Bytes at the start of a report file searched for its mark.
+const MARK_WINDOW: u64 = 4096;
+
+/// Refuses to replace `path` when it is a regular file that a run's report did not write
+/// (its first [`MARK_WINDOW`] bytes lack `mark`): `report FILE.json` writes beside the file,
+/// and a `summary.md` or `report.html` of the user's there is not ours to overwrite. An
+/// absent file, or one that is not regular (refused when replaced), passes.
+fn check_regenerable(path: &Path, mark: &str) -> Result<(), String> {
+    use std::io::Read;
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    if !meta.file_type().is_file() {
+        return Ok(());
+    }
+    let mut head = Vec::new();
+    marchmesh_safeio::open_regular(path, u64::MAX)
+        .and_then(|(file, _)| {
+            file.take(MARK_WINDOW)
+                .read_to_end(&mut head)
+                .map_err(|source| marchmesh_safeio::SafeIoError::Io {
+                    path: path.to_path_buf(),
+                    action: "cannot read",
+                    source,
+                })
+        })
+        .map_err(|e| e.to_string())?;
+    let ours = head.windows(mark.len()).any(|w| w == mark.as_bytes());
+    if ours {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: exists and was not written by a marchmesh report (no {mark:?} in its head): not replaced (move it away to regenerate the report)",
+            path.display()
+        ))
+    }
 }
 
 /// Creates a fresh run folder `<out>/<UTC timestamp>-<suite>` (suffix `-2`, `-3`, ... if the
