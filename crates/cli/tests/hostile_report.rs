@@ -466,6 +466,106 @@ fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
     assert!(!run.join("summary.md").exists());
 }
 
+fn anchor(file: &str, ours: f64) -> marchmesh_harness::anchors::Anchor {
+    marchmesh_harness::anchors::Anchor {
+        tool: "embree".into(),
+        version: "4".into(),
+        backend: "mesh".into(),
+        file: file.into(),
+        date_utc: "2026-01-01T00:00:00Z".into(),
+        load_average_start: "0".into(),
+        load_average_end: "0".into(),
+        entries: vec![marchmesh_harness::anchors::AnchorEntry {
+            subject: "bunny.obj".into(),
+            tracer: "wide1".into(),
+            unit: "Mrays/s".into(),
+            ours,
+            anchor: 2.0,
+            ratio: ours / 2.0,
+        }],
+    }
+}
+
+#[test]
+fn absurd_anchor_rates_in_results_are_refused_naming_the_entry() {
+    let dir = tmp("report-anchor-values");
+    let good = run_dir(&dir, "good", &small_run());
+    for (name, ours) in [("huge", 1e308), ("negative", -1.0), ("zero", 0.0)] {
+        let mut res = small_run();
+        res.anchors = vec![anchor("a.json", ours)];
+        let run = run_dir(&dir, name, &res);
+        let findings = dir.join("F.md");
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+            vec![
+                "findings",
+                run.to_str().unwrap(),
+                "-o",
+                findings.to_str().unwrap(),
+            ],
+        ] {
+            let o = marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+            assert!(
+                e.contains("results.json") && e.contains("anchors[0].entries[0].ours"),
+                "{args:?}: {e}"
+            );
+        }
+        assert!(!findings.exists() && !run.join("summary.md").exists());
+    }
+}
+
+#[test]
+fn thousands_of_anchors_and_skipped_scenes_are_merged_and_summarised_in_linear_time() {
+    let dir = tmp("report-many-anchors");
+    let mut a = small_run();
+    a.rows.truncate(1);
+    a.anchors = (0..20_000)
+        .map(|i| anchor(&format!("{i}.json"), 1.0))
+        .collect();
+    a.skipped = (0..100_000)
+        .map(|i| format!("scene {i}: skipped"))
+        .collect();
+    let mut b = small_run();
+    b.rows.drain(..1);
+    b.anchors = a.anchors.clone();
+    b.skipped = a.skipped.clone();
+    let a = run_dir(&dir, "a", &a);
+    let b = run_dir(&dir, "b", &b);
+    let merged = dir.join("m");
+    let findings = dir.join("F.md");
+    let start = std::time::Instant::now();
+    for args in [
+        vec![
+            "merge",
+            "-o",
+            merged.to_str().unwrap(),
+            a.to_str().unwrap(),
+            b.to_str().unwrap(),
+        ],
+        vec![
+            "findings",
+            a.to_str().unwrap(),
+            b.to_str().unwrap(),
+            "-o",
+            findings.to_str().unwrap(),
+        ],
+    ] {
+        let o = marchmesh(&args, &dir);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    }
+    // Comparing every anchor (and skipped scene) with every other took minutes at this count.
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(60),
+        "{:?}",
+        start.elapsed()
+    );
+    let m = Results::read_json(&merged.join("results.json")).unwrap();
+    assert_eq!((m.anchors.len(), m.skipped.len()), (20_000, 100_000));
+}
+
 #[test]
 fn report_beside_a_results_file_keeps_a_summary_and_page_it_did_not_write() {
     let dir = tmp("report-users-files");

@@ -608,6 +608,29 @@ impl Results {
                 }
             }
         }
+        for (i, r) in self.references.iter().enumerate() {
+            for (name, x) in [("build_ms", r.build_ms), ("render_ms", r.render_ms)] {
+                if let Some(x) = x.filter(|&x| bad(x, true)) {
+                    return Err((format!("references[{i}].{name}"), reason(name, x)));
+                }
+            }
+        }
+        // Anchor rates and ratios are positive like the anchor files they were read from
+        // (a 300-digit rate would be printed in full in every table).
+        for (i, a) in self.anchors.iter().enumerate() {
+            for (j, e) in a.entries.iter().enumerate() {
+                for (name, x) in [("ours", e.ours), ("anchor", e.anchor), ("ratio", e.ratio)] {
+                    if bad(x, true) || x <= 0.0 {
+                        return Err((
+                            format!("anchors[{i}].entries[{j}].{name}"),
+                            format!(
+                                "{name} = {x} is not a rate or ratio (finite, positive, at most {MAX_RESULT_VALUE:e})"
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
         for (id, bins) in &self.steps_histograms {
             let at = format!("steps_histograms.{id}");
             if bins.len() > MAX_HISTOGRAM_BINS {
@@ -892,6 +915,9 @@ impl Results {
             write_errors: Vec::new(),
             anchors: Vec::new(),
         };
+        // Anchors seen so far, by content: a set, so thousands of them merge in linear time.
+        let mut seen_anchors = std::collections::HashSet::new();
+        let mut seen_skipped = std::collections::HashSet::new();
         for (_, r) in inputs {
             out.merged_from.push(MergedShard {
                 run_id: r.run_id.clone(),
@@ -909,7 +935,7 @@ impl Results {
             }));
             out.failures.extend(r.failures);
             for s in r.skipped {
-                if !out.skipped.contains(&s) {
+                if seen_skipped.insert(s.clone()) {
                     out.skipped.push(s);
                 }
             }
@@ -919,7 +945,7 @@ impl Results {
             out.missing.extend(r.missing);
             out.write_errors.extend(r.write_errors);
             for a in r.anchors {
-                if !out.anchors.contains(&a) {
+                if seen_anchors.insert(crate::anchors::identity(&a)) {
                     out.anchors.push(a);
                 }
             }
