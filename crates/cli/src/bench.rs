@@ -432,6 +432,12 @@ fn resume(args: &BenchArgs, run: &Path, stop: Arc<AtomicBool>) -> Result<()> {
             unknown[0]
         );
     }
+    // A run folder copied without its images (or whose images/ was removed) gets the folder
+    // back: the images of the resumed configurations are written into it, not lost.
+    if let Some(images) = &options.images_dir {
+        marchmesh_safeio::own_folder(images)
+            .map_err(|e| anyhow::anyhow!("{e}: nothing was measured"))?;
+    }
     // Reference images the interrupted run already wrote stay; a second copy is not an error.
     let existing_images: std::collections::HashSet<PathBuf> = std::fs::read_dir(run.join("images"))
         .map(|d| d.flatten().map(|e| e.path()).collect())

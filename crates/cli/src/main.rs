@@ -148,8 +148,13 @@ struct BenchArgs {
     memory_limit_mib: u64,
     /// Resume the interrupted or killed run in this run folder: measure the configurations
     /// its results.json lists as missing (with the same --filter, --threads and --quick as
-    /// the original run) into the same folder, keeping what it measured.
-    #[arg(long, value_name = "RUN", conflicts_with_all = ["list", "shard"])]
+    /// the original run) into the same folder, keeping what it measured. The suite, folder,
+    /// seed and anchors are the run's: giving them too is an error, not silently ignored.
+    #[arg(
+        long,
+        value_name = "RUN",
+        conflicts_with_all = ["list", "shard", "suite", "results_dir", "seed", "anchor"]
+    )]
     resume: Option<PathBuf>,
     /// Record an external anchor run with this run (repeatable): the JSON of
     /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf

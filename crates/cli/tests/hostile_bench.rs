@@ -525,9 +525,14 @@ fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
         res.missing.len()
     );
     let run = json.parent().unwrap();
-    let mut resume_args = args.to_vec();
-    resume_args.truncate(5);
-    resume_args.extend(["--resume", run.to_str().unwrap()]);
+    // The run's --filter again; the suite is the run's own.
+    let resume_args = [
+        "bench",
+        "--filter",
+        "smoke/csg/",
+        "--resume",
+        run.to_str().unwrap(),
+    ];
     let o = marchmesh(&resume_args, &repo());
     if res.missing.is_empty() {
         // The run finished before the kill: nothing to resume, said so.
@@ -553,6 +558,46 @@ fn interrupted_smoke_run(dir: &Path, name: &str, missing: &[&str]) -> PathBuf {
     res.interrupted = true;
     res.missing = missing.iter().map(|m| m.to_string()).collect();
     run_dir(dir, name, &res)
+}
+
+#[test]
+fn resuming_a_run_without_its_images_folder_writes_the_images_into_a_new_one() {
+    let dir = tmp("bench-resume-no-images");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let images: Vec<_> = std::fs::read_dir(run.join("images"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        images.iter().any(|n| n.starts_with("smoke_csg_sdf")),
+        "{images:?}"
+    );
+}
+
+#[test]
+fn options_a_resumed_run_cannot_honour_are_refused_not_ignored() {
+    let dir = tmp("bench-resume-conflicts");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    let before = std::fs::read(run.join("results.json")).unwrap();
+    for extra in [
+        &["--suite", "default"][..],
+        &["--out", "elsewhere"][..],
+        &["--results-dir", "elsewhere"][..],
+        &["--seed", "7"][..],
+        &["--anchor", "a.json"][..],
+    ] {
+        let mut args = vec!["bench", "--resume", run.to_str().unwrap()];
+        args.extend(extra);
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {e}");
+        assert!(e.contains("cannot be used with"), "{extra:?}: {e}");
+    }
+    assert_eq!(std::fs::read(run.join("results.json")).unwrap(), before);
+    assert!(!dir.join("elsewhere").exists());
 }
 
 #[test]
