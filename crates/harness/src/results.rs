@@ -346,6 +346,16 @@ pub const MAX_RESULT_VALUE: f64 = 1e15;
 /// `2^(k-1)..2^k - 1` steps, so a 64-bit step count fills at most 65.
 pub const MAX_HISTOGRAM_BINS: usize = 65;
 
+/// `x` as an error message shows it: in scientific notation when it is huge (1e308 in full
+/// is 309 digits) or tiny.
+fn short_number(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-6..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// Why results could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ResultsError {
@@ -582,7 +592,8 @@ impl Results {
             |x: f64, time: bool| !x.is_finite() || x.abs() > MAX_RESULT_VALUE || (time && x < 0.0);
         let reason = |what: &str, x: f64| {
             format!(
-                "{what} = {x} is not a measurement (finite, at most {MAX_RESULT_VALUE:e} in magnitude, times not negative)"
+                "{what} = {} is not a measurement (finite, at most {MAX_RESULT_VALUE:e} in magnitude, times not negative)",
+                short_number(x)
             )
         };
         for (i, r) in self.rows.iter().enumerate() {
@@ -624,7 +635,8 @@ impl Results {
                         return Err((
                             format!("anchors[{i}].entries[{j}].{name}"),
                             format!(
-                                "{name} = {x} is not a rate or ratio (finite, positive, at most {MAX_RESULT_VALUE:e})"
+                                "{name} = {} is not a rate or ratio (finite, positive, at most {MAX_RESULT_VALUE:e})",
+                                short_number(x)
                             ),
                         ));
                     }
