@@ -1073,11 +1073,13 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     };
     // --out is the run folder itself: it must be new or empty, so no file is ever replaced.
     refuse_non_empty(&out, "--out")?;
-    let out_existed = out.exists();
     if let Some(dir) = &args.write_scenes {
         refuse_non_empty(dir, "--write-scenes")?;
     }
-    marchmesh_safeio::create_folder(&out).with_context(|| format!("creating {}", out.display()))?;
+    // The folders made here (the run folder and any missing above it) go again if the run
+    // measures nothing.
+    let created = marchmesh_safeio::create_folder_tracked(&out)
+        .with_context(|| format!("creating {}", out.display()))?;
     let ctx = marchmesh_stability::CaseContext {
         generated_dir: out.join("generated"),
         scenes_dir: root.join("scenes"),
@@ -1088,9 +1090,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         Err(e) => {
             // Leave no partial generated/ behind: the folder was new or empty.
             let _ = std::fs::remove_dir_all(&ctx.generated_dir);
-            if !out_existed {
-                let _ = std::fs::remove_dir(&out);
-            }
+            marchmesh_safeio::remove_created_folders(&created);
             return Err(e).with_context(|| {
                 format!(
                     "generating the cases under {} (removed again)",
@@ -1127,17 +1127,15 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         });
     bar.finish_and_clear();
     if rows.is_empty() && errors.is_empty() {
-        // Leave nothing behind for a run that measured nothing (the folder was new or empty).
-        if out_existed {
-            if let Ok(entries) = std::fs::read_dir(&out) {
-                for e in entries.flatten() {
-                    let _ = std::fs::remove_dir_all(e.path())
-                        .or_else(|_| std::fs::remove_file(e.path()));
-                }
+        // Leave nothing behind for a run that measured nothing: the folder was new or empty,
+        // so what is in it is this run's; then the folders this run made.
+        if let Ok(entries) = std::fs::read_dir(&out) {
+            for e in entries.flatten() {
+                let _ =
+                    std::fs::remove_dir_all(e.path()).or_else(|_| std::fs::remove_file(e.path()));
             }
-        } else {
-            let _ = std::fs::remove_dir_all(&out);
         }
+        marchmesh_safeio::remove_created_folders(&created);
         bail!(
             "no stability case matches the filter {:?}",
             args.filter.as_deref().unwrap_or("")

@@ -257,6 +257,15 @@ fn item11_stability_fails_when_the_filter_matches_nothing() {
         !dir.join("run").exists(),
         "a run that measured nothing leaves no folder"
     );
+    // Nor the folders it made above its own, while the user's folder stays.
+    std::fs::create_dir(dir.join("mine")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["stability", "--filter", "no-such-case-xyz", "--out"])
+        .arg(dir.join("mine/new/run"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(dir.join("mine").is_dir() && !dir.join("mine/new").exists());
 }
 
 #[test]
