@@ -378,8 +378,12 @@ pub(crate) fn read_cached<T>(
                 file.display()
             )),
         },
+        // No file, or the cache folder is not a folder (said once, when writing).
         Err(marchmesh_safeio::SafeIoError::Io { source, .. })
-            if source.kind() == std::io::ErrorKind::NotFound => {}
+            if matches!(
+                source.kind(),
+                std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory
+            ) => {}
         Err(e) => notes.push(format!("{what} cache file rejected ({e}); re-baked")),
     }
     None
@@ -395,10 +399,11 @@ pub(crate) fn write_cached(file: &Path, what: &str, bytes: &[u8], notes: &mut Ve
 }
 
 /// Writes `bytes` to `path` atomically (unique temp file in the same directory, then
-/// rename). Creates the directory if needed.
+/// rename). Creates the directory if needed; when it, or a folder above it, is a file or a
+/// dangling symbolic link, the error names which.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)?;
+    marchmesh_safeio::create_folder(dir).map_err(std::io::Error::other)?;
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
@@ -407,15 +412,26 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let tmp = dir.join(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
+    write_via(path, &tmp, bytes)
+}
+
+/// Writes `bytes` to the new file `tmp` and renames it to `path`. `tmp` is created new
+/// (never opened if anything, a symbolic link included, is already there: a link planted at
+/// the name in a shared cache folder is not written through); on failure it is removed only
+/// if this call created it.
+fn write_via(path: &Path, tmp: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(tmp)?;
     let res = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
         f.write_all(bytes)?;
         f.sync_all()?;
-        drop(f);
-        std::fs::rename(&tmp, path)
+        std::fs::rename(tmp, path)
     })();
+    drop(f);
     if res.is_err() {
-        let _ = std::fs::remove_file(&tmp);
+        let _ = std::fs::remove_file(tmp);
     }
     res
 }
@@ -423,6 +439,35 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn a_link_planted_at_the_temporary_name_is_not_written_through() {
+        let dir = std::env::temp_dir().join(format!("bake-cache-link-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let victim = dir.join("victim");
+        std::fs::write(&victim, b"precious").unwrap();
+        let tmp = dir.join(".grid.tmp");
+        std::os::unix::fs::symlink(&victim, &tmp).unwrap();
+        let target = dir.join("grid.sdfgrid");
+        assert!(write_via(&target, &tmp, b"grid").is_err());
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        assert!(
+            std::fs::symlink_metadata(&tmp)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert!(!target.exists());
+        write_atomic(&target, b"grid").unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"grid");
+        // A cache folder that is a file is named as one, not as "File exists".
+        let e = write_atomic(&victim.join("grid.sdfgrid"), b"grid").unwrap_err();
+        assert!(e.to_string().contains("is a file, not a folder"), "{e}");
+        assert_eq!(std::fs::read(&victim).unwrap(), b"precious");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     fn grid() -> DistanceGrid {
         DistanceGrid {

@@ -432,6 +432,12 @@ fn resume(args: &BenchArgs, run: &Path, stop: Arc<AtomicBool>) -> Result<()> {
             unknown[0]
         );
     }
+    // A run folder copied without its images (or whose images/ was removed) gets the folder
+    // back: the images of the resumed configurations are written into it, not lost.
+    if let Some(images) = &options.images_dir {
+        marchmesh_safeio::own_folder(images)
+            .map_err(|e| anyhow::anyhow!("{e}: nothing was measured"))?;
+    }
     // Reference images the interrupted run already wrote stay; a second copy is not an error.
     let existing_images: std::collections::HashSet<PathBuf> = std::fs::read_dir(run.join("images"))
         .map(|d| d.flatten().map(|e| e.path()).collect())
@@ -519,6 +525,19 @@ fn measure(
         elapsed.as_secs_f64(),
     );
     print_answer(&results, dir, report_written.is_ok());
+    // Where the lists below can also be read: only files this run has written in full (a
+    // summary.md written before a later report file failed lacks that failure).
+    let (json_written, summary_written) = match &report_written {
+        Ok(_) => (true, true),
+        Err(e) => (e.results_json, false),
+    };
+    let listed_in = |file: &str, written: bool| {
+        if written {
+            format!("listed above and in {}", dir.join(file).display())
+        } else {
+            format!("listed above; {file} was not written")
+        }
+    };
     for f in &results.failures {
         eprintln!("failed: {}: {}", f.config_id, f.error);
     }
@@ -530,25 +549,25 @@ fn measure(
     }
     if results.interrupted {
         bail!(
-            "interrupted: {} of {} configurations missing (listed in {})",
+            "interrupted: {} of {} configurations missing ({})",
             results.missing.len(),
             configs.len(),
-            dir.join("results.json").display()
+            listed_in("results.json", json_written)
         );
     }
     if !results.write_errors.is_empty() {
         bail!(
-            "{} files of the run could not be written (listed above and in {})",
+            "{} files of the run could not be written ({})",
             results.write_errors.len(),
-            dir.join("summary.md").display()
+            listed_in("summary.md", summary_written)
         );
     }
     if !results.failures.is_empty() {
         bail!(
-            "{} of {} configurations failed (see {})",
+            "{} of {} configurations failed ({})",
             results.failures.len(),
             configs.len(),
-            dir.join("summary.md").display()
+            listed_in("summary.md", summary_written)
         );
     }
     Ok(())
@@ -588,6 +607,10 @@ pub fn findings(runs: &[PathBuf], anchors: &[PathBuf], out: &Path, force: bool) 
     let plots_dir = out
         .parent()
         .map_or_else(|| PathBuf::from(&plots_link), |p| p.join(&plots_link));
+    if let Some(parent) = out.parent().filter(|p| !p.as_os_str().is_empty()) {
+        marchmesh_safeio::check_folder_path(parent)
+            .with_context(|| format!("--out {}", out.display()))?;
+    }
     // Checked before anything is written: with --force only a regular file is replaced.
     if let Ok(meta) = std::fs::symlink_metadata(out)
         && !meta.file_type().is_file()
@@ -740,7 +763,7 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         .file_name()
         .map_or_else(|| "merged".into(), |n| n.to_string_lossy().into_owned());
     let merged = Results::merge(inputs, run_id, command_line())?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    marchmesh_safeio::create_folder(out).with_context(|| format!("creating {}", out.display()))?;
     let plots = report::write_run(&merged, out)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("writing the merged run into {}", out.display()))?;
@@ -1050,11 +1073,13 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
     };
     // --out is the run folder itself: it must be new or empty, so no file is ever replaced.
     refuse_non_empty(&out, "--out")?;
-    let out_existed = out.exists();
     if let Some(dir) = &args.write_scenes {
         refuse_non_empty(dir, "--write-scenes")?;
     }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    // The folders made here (the run folder and any missing above it) go again if the run
+    // measures nothing.
+    let created = marchmesh_safeio::create_folder_tracked(&out)
+        .with_context(|| format!("creating {}", out.display()))?;
     let ctx = marchmesh_stability::CaseContext {
         generated_dir: out.join("generated"),
         scenes_dir: root.join("scenes"),
@@ -1065,9 +1090,7 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         Err(e) => {
             // Leave no partial generated/ behind: the folder was new or empty.
             let _ = std::fs::remove_dir_all(&ctx.generated_dir);
-            if !out_existed {
-                let _ = std::fs::remove_dir(&out);
-            }
+            marchmesh_safeio::remove_created_folders(&created);
             return Err(e).with_context(|| {
                 format!(
                     "generating the cases under {} (removed again)",
@@ -1104,17 +1127,15 @@ pub fn stability(args: StabilityArgs) -> Result<()> {
         });
     bar.finish_and_clear();
     if rows.is_empty() && errors.is_empty() {
-        // Leave nothing behind for a run that measured nothing (the folder was new or empty).
-        if out_existed {
-            if let Ok(entries) = std::fs::read_dir(&out) {
-                for e in entries.flatten() {
-                    let _ = std::fs::remove_dir_all(e.path())
-                        .or_else(|_| std::fs::remove_file(e.path()));
-                }
+        // Leave nothing behind for a run that measured nothing: the folder was new or empty,
+        // so what is in it is this run's; then the folders this run made.
+        if let Ok(entries) = std::fs::read_dir(&out) {
+            for e in entries.flatten() {
+                let _ =
+                    std::fs::remove_dir_all(e.path()).or_else(|_| std::fs::remove_file(e.path()));
             }
-        } else {
-            let _ = std::fs::remove_dir_all(&out);
         }
+        marchmesh_safeio::remove_created_folders(&created);
         bail!(
             "no stability case matches the filter {:?}",
             args.filter.as_deref().unwrap_or("")

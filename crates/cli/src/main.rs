@@ -148,8 +148,13 @@ struct BenchArgs {
     memory_limit_mib: u64,
     /// Resume the interrupted or killed run in this run folder: measure the configurations
     /// its results.json lists as missing (with the same --filter, --threads and --quick as
-    /// the original run) into the same folder, keeping what it measured.
-    #[arg(long, value_name = "RUN", conflicts_with_all = ["list", "shard"])]
+    /// the original run) into the same folder, keeping what it measured. The suite, folder,
+    /// seed and anchors are the run's: giving them too is an error, not silently ignored.
+    #[arg(
+        long,
+        value_name = "RUN",
+        conflicts_with_all = ["list", "shard", "suite", "results_dir", "seed", "anchor"]
+    )]
     resume: Option<PathBuf>,
     /// Record an external anchor run with this run (repeatable): the JSON of
     /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf
@@ -651,7 +656,7 @@ fn scenes(out: Option<&Path>) -> Result<()> {
     for (name, bytes) in files {
         let path = dir.join(name);
         if let Some(parent) = path.parent() {
-            std::fs::create_dir_all(parent)
+            marchmesh_safeio::create_folder(parent)
                 .with_context(|| format!("creating {}", parent.display()))?;
         }
         marchmesh_safeio::publish_new(&path, bytes)
@@ -667,20 +672,12 @@ fn scenes(out: Option<&Path>) -> Result<()> {
     Ok(())
 }
 
-/// Refuses an output folder `dir` (given as `flag`) that exists but is not a folder (symbolic
-/// links are followed: a link to a folder is the user's choice), naming it plainly instead of
-/// the OS error ("File exists") creating inside it would give.
+/// Refuses an output folder `dir` (given as `flag`) that, or a folder above which, exists but
+/// is not a folder: a file, a special file or a dangling symbolic link (a link to a folder is
+/// the user's choice), naming it plainly instead of the OS error ("Not a directory", "File
+/// exists") creating inside it would give.
 pub(crate) fn refuse_file_as_folder(dir: &Path, flag: &str) -> Result<()> {
-    if let Ok(meta) = std::fs::metadata(dir)
-        && !meta.is_dir()
-    {
-        bail!(
-            "{flag} {}: {} is a file, not a folder (nothing was written)",
-            dir.display(),
-            dir.display()
-        );
-    }
-    Ok(())
+    marchmesh_safeio::check_folder_path(dir).map_err(|e| anyhow::anyhow!("{flag} {e}"))
 }
 
 /// Refuses to replace an existing file unless `force`.
@@ -709,6 +706,8 @@ fn check_writable(path: &Path, force: bool) -> Result<()> {
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
         && !dir.is_dir()
     {
+        marchmesh_safeio::check_folder_path(dir)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         bail!(
             "cannot write {}: folder {} does not exist",
             path.display(),
@@ -736,14 +735,22 @@ fn render(args: RenderArgs) -> Result<()> {
         );
     }
     let jpeg = output_is_jpeg(&args.out)?;
+    // The AOV folder is created only when there is something to put in it (after the
+    // render): a render stopped early or failing leaves no empty folder behind.
     if let Some(dir) = &args.aov {
         refuse_file_as_folder(dir, "--aov")?;
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("creating AOV folder {}", dir.display()))?;
     }
     let targets = render_targets(&args.out, args.aov.as_deref());
     for t in &targets {
-        check_writable(t, args.force)?;
+        // A file in a folder the AOV folder's creation will make (the AOV folder or one above
+        // it, e.g. `-o new/a.png --aov new/aov`) cannot exist yet: nothing to check.
+        let in_folder_to_make = t
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty() && !p.exists())
+            .is_some_and(|p| args.aov.as_deref().is_some_and(|a| a.starts_with(p)));
+        if !in_folder_to_make {
+            check_writable(t, args.force)?;
+        }
     }
     let memory_limit_bytes = args.memory_limit_mib.saturating_mul(1 << 20);
     let scene_path = assets::scene_file(&args.scene)?;
@@ -853,7 +860,16 @@ fn render(args: RenderArgs) -> Result<()> {
             exr_aov::encode(&out.framebuffer)?,
         ));
     }
-    publish_all(&files, args.force)?;
+    let created = match &args.aov {
+        Some(dir) => marchmesh_safeio::create_folder_tracked(dir)
+            .with_context(|| format!("creating AOV folder {}", dir.display()))?,
+        None => Vec::new(),
+    };
+    if let Err(e) = publish_all(&files, args.force) {
+        // publish_all removed what it wrote; the folders made for it go too.
+        marchmesh_safeio::remove_created_folders(&created);
+        return Err(e);
+    }
     let report = geometry.report();
     let s = &out.stats;
     let secs = out.elapsed.as_secs_f64();

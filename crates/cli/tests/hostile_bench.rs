@@ -525,9 +525,14 @@ fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
         res.missing.len()
     );
     let run = json.parent().unwrap();
-    let mut resume_args = args.to_vec();
-    resume_args.truncate(5);
-    resume_args.extend(["--resume", run.to_str().unwrap()]);
+    // The run's --filter again; the suite is the run's own.
+    let resume_args = [
+        "bench",
+        "--filter",
+        "smoke/csg/",
+        "--resume",
+        run.to_str().unwrap(),
+    ];
     let o = marchmesh(&resume_args, &repo());
     if res.missing.is_empty() {
         // The run finished before the kill: nothing to resume, said so.
@@ -539,6 +544,85 @@ fn a_killed_run_says_so_and_resumes_into_the_same_folder() {
     assert!(!done.interrupted && done.missing.is_empty());
     assert_eq!(done.rows.len(), 2, "{:?}", done.rows.len());
     assert!(run.join("summary.md").exists());
+}
+
+/// An interrupted run of the smoke suite in `dir/name` (results.json only, no images/),
+/// with `missing` left to measure.
+fn interrupted_smoke_run(dir: &Path, name: &str, missing: &[&str]) -> PathBuf {
+    let mut res = results(vec![]);
+    res.suite = "smoke".into();
+    res.suite_file = repo()
+        .join("scenes/suites/smoke.json")
+        .display()
+        .to_string();
+    res.interrupted = true;
+    res.missing = missing.iter().map(|m| m.to_string()).collect();
+    run_dir(dir, name, &res)
+}
+
+#[test]
+fn resuming_a_run_without_its_images_folder_writes_the_images_into_a_new_one() {
+    let dir = tmp("bench-resume-no-images");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let images: Vec<_> = std::fs::read_dir(run.join("images"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(
+        images.iter().any(|n| n.starts_with("smoke_csg_sdf")),
+        "{images:?}"
+    );
+}
+
+#[test]
+fn options_a_resumed_run_cannot_honour_are_refused_not_ignored() {
+    let dir = tmp("bench-resume-conflicts");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    let before = std::fs::read(run.join("results.json")).unwrap();
+    for extra in [
+        &["--suite", "default"][..],
+        &["--out", "elsewhere"][..],
+        &["--results-dir", "elsewhere"][..],
+        &["--seed", "7"][..],
+        &["--anchor", "a.json"][..],
+    ] {
+        let mut args = vec!["bench", "--resume", run.to_str().unwrap()];
+        args.extend(extra);
+        let o = marchmesh(&args, &dir);
+        let e = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{extra:?}: {e}");
+        assert!(e.contains("cannot be used with"), "{extra:?}: {e}");
+    }
+    assert_eq!(std::fs::read(run.join("results.json")).unwrap(), before);
+    assert!(!dir.join("elsewhere").exists());
+}
+
+#[test]
+fn a_summary_that_could_not_be_written_is_not_named_as_listing_anything() {
+    let dir = tmp("bench-summary-unwritten");
+    let run = interrupted_smoke_run(&dir, "run", &["smoke/csg/sdf:eps_px=1/max32/t1"]);
+    // A folder where summary.md goes: the report cannot be written (and is not replaced).
+    std::fs::create_dir(run.join("summary.md")).unwrap();
+    std::fs::write(run.join("summary.md/keep.txt"), b"mine").unwrap();
+    let o = marchmesh(&["bench", "--resume", run.to_str().unwrap()], &dir);
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(
+        e.contains("could not be written")
+            && e.contains("summary.md was not written")
+            && !e.contains("and in"),
+        "{e}"
+    );
+    assert_eq!(
+        std::fs::read(run.join("summary.md/keep.txt")).unwrap(),
+        b"mine"
+    );
+    // results.json, written before the summary, holds the measured row.
+    let done = marchmesh_harness::results::Results::read_json(&run.join("results.json")).unwrap();
+    assert_eq!(done.rows.len(), 1);
 }
 
 #[test]

@@ -257,6 +257,15 @@ fn item11_stability_fails_when_the_filter_matches_nothing() {
         !dir.join("run").exists(),
         "a run that measured nothing leaves no folder"
     );
+    // Nor the folders it made above its own, while the user's folder stays.
+    std::fs::create_dir(dir.join("mine")).unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_marchmesh"))
+        .args(["stability", "--filter", "no-such-case-xyz", "--out"])
+        .arg(dir.join("mine/new/run"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "{}", stderr(&o));
+    assert!(dir.join("mine").is_dir() && !dir.join("mine/new").exists());
 }
 
 #[test]
@@ -376,4 +385,47 @@ fn output_folders_given_as_files_are_named_as_files() {
         assert_eq!(std::fs::read(dir.join(f)).unwrap(), b"mine");
     }
     assert!(!dir.join("a.png").exists());
+}
+
+#[test]
+fn paths_through_a_file_or_a_dangling_link_name_the_component_and_the_reason() {
+    let dir = tmp("folder-path-deeper");
+    std::fs::write(dir.join("afile"), b"mine").unwrap();
+    std::os::unix::fs::symlink(dir.join("nowhere"), dir.join("dangling")).unwrap();
+    let run = support::run_dir(
+        &dir,
+        "run",
+        &support::results(vec![support::row("s", "sdf", "a", 2.0, Some(40.0))]),
+    );
+    let run = run.to_str().unwrap();
+    for (parent, reason) in [
+        ("afile", "afile is a file, not a folder"),
+        ("dangling", "which does not exist"),
+    ] {
+        let deep = format!("{parent}/x/y");
+        let png = format!("{parent}/x.png");
+        let md = format!("{parent}/F.md");
+        let cases: Vec<Vec<&str>> = vec![
+            vec!["render", "s.json", "-o", &png],
+            vec!["render", "s.json", "-o", "a.png", "--aov", &deep],
+            vec!["render", "s.json", "-o", "a.png", "--aov", parent],
+            vec!["scenes", "-o", &deep],
+            vec!["merge", "-o", &deep, run],
+            vec!["findings", run, "-o", &md],
+            vec!["stability", "--out", &deep, "--filter", "nothing"],
+            vec!["bench", "--suite", "smoke", "--out", &deep],
+        ];
+        for args in cases {
+            scene(&dir);
+            let o = support::marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert!(!o.status.success(), "{args:?}");
+            assert!(
+                e.contains(reason) && !e.contains("os error"),
+                "{args:?}: {e}"
+            );
+        }
+    }
+    assert_eq!(std::fs::read(dir.join("afile")).unwrap(), b"mine");
+    assert!(!dir.join("nowhere").exists() && !dir.join("a.png").exists());
 }

@@ -202,6 +202,9 @@ fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
             "render": {"integrator": "path", "samples_per_pixel": 65536, "max_bounces": 64}}"#,
     )
     .unwrap();
+    // An AOV folder inside one of the user's: neither the new folders nor the user's are left
+    // behind changed when the render stops early.
+    std::fs::create_dir(dir.join("mine")).unwrap();
     let start = std::time::Instant::now();
     let o = marchmesh(
         &[
@@ -209,6 +212,8 @@ fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
             scene.to_str().unwrap(),
             "--out",
             "a.png",
+            "--aov",
+            "mine/new/aov",
             "--max-seconds",
             "2",
         ],
@@ -223,6 +228,42 @@ fn long_renders_print_an_estimate_and_stop_at_max_seconds() {
     );
     assert!(start.elapsed() < std::time::Duration::from_secs(60));
     assert!(!dir.join("a.png").exists());
+    assert!(dir.join("mine").is_dir() && !dir.join("mine/new").exists());
+}
+
+#[test]
+fn a_failed_render_leaves_no_aov_folder_it_made_and_keeps_the_users() {
+    let dir = tmp("render-aov-failed");
+    std::fs::write(
+        dir.join("s.json"),
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    )
+    .unwrap();
+    // The image cannot be published (a file is in its place), so the AOVs are not either.
+    std::fs::write(dir.join("a.png"), b"mine").unwrap();
+    std::fs::create_dir(dir.join("kept")).unwrap();
+    for aov in ["new/aov", "kept"] {
+        let o = marchmesh(&["render", "s.json", "-o", "a.png", "--aov", aov], &dir);
+        assert!(!o.status.success());
+        assert!(stderr(&o).contains("already exists"), "{}", stderr(&o));
+    }
+    assert!(!dir.join("new").exists());
+    assert!(dir.join("kept").is_dir());
+    assert_eq!(std::fs::read(dir.join("a.png")).unwrap(), b"mine");
+    // A render that succeeds makes the folders and fills them.
+    let o = marchmesh(
+        &["render", "s.json", "-o", "b.png", "--aov", "new/aov"],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(std::fs::read_dir(dir.join("new/aov")).unwrap().count() > 0);
+    // The image may go into a folder that making the AOV folder makes.
+    let o = marchmesh(
+        &["render", "s.json", "-o", "new2/c.png", "--aov", "new2/aov"],
+        &dir,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.join("new2/c.png").is_file());
 }
 
 #[test]
@@ -305,6 +346,19 @@ fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
             "sdf",
             &["grid=sparse", "grid_res=513"][..],
             "sdf option grid_res: must be in",
+            "mesh_grid_resolution",
+        ),
+        // The scene has no mesh to bake: the range is checked all the same.
+        (
+            "sdf",
+            &["grid_res=513"][..],
+            "sdf option grid_res: must be in 4..=512",
+            "mesh_grid_resolution",
+        ),
+        (
+            "sdf",
+            &["grid_res=2"][..],
+            "sdf option grid_res: must be in 4..=512",
             "mesh_grid_resolution",
         ),
     ] {

@@ -466,6 +466,199 @@ fn results_with_a_repeated_configuration_are_refused_naming_the_file_and_id() {
     assert!(!run.join("summary.md").exists());
 }
 
+fn anchor(file: &str, ours: f64) -> marchmesh_harness::anchors::Anchor {
+    marchmesh_harness::anchors::Anchor {
+        tool: "embree".into(),
+        version: "4".into(),
+        backend: "mesh".into(),
+        file: file.into(),
+        date_utc: "2026-01-01T00:00:00Z".into(),
+        load_average_start: "0".into(),
+        load_average_end: "0".into(),
+        entries: vec![marchmesh_harness::anchors::AnchorEntry {
+            subject: "bunny.obj".into(),
+            tracer: "wide1".into(),
+            unit: "Mrays/s".into(),
+            ours,
+            anchor: 2.0,
+            ratio: ours / 2.0,
+        }],
+    }
+}
+
+#[test]
+fn absurd_anchor_rates_in_results_are_refused_naming_the_entry() {
+    let dir = tmp("report-anchor-values");
+    let good = run_dir(&dir, "good", &small_run());
+    for (name, ours) in [("huge", 1e308), ("negative", -1.0), ("zero", 0.0)] {
+        let mut res = small_run();
+        res.anchors = vec![anchor("a.json", ours)];
+        let run = run_dir(&dir, name, &res);
+        let findings = dir.join("F.md");
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+            vec![
+                "findings",
+                run.to_str().unwrap(),
+                "-o",
+                findings.to_str().unwrap(),
+            ],
+        ] {
+            let o = marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert_eq!(o.status.code(), Some(1), "{args:?}: {e}");
+            assert!(
+                e.contains("results.json") && e.contains("anchors[0].entries[0].ours"),
+                "{args:?}: {e}"
+            );
+            // Shown short, not as its 309 digits.
+            assert!(ours != 1e308 || e.contains("ours = 1e308"), "{e}");
+        }
+        assert!(!findings.exists() && !run.join("summary.md").exists());
+    }
+}
+
+#[test]
+fn thousands_of_anchors_and_skipped_scenes_are_merged_and_summarised_in_linear_time() {
+    let dir = tmp("report-many-anchors");
+    let mut a = small_run();
+    a.rows.truncate(1);
+    a.anchors = (0..20_000)
+        .map(|i| anchor(&format!("{i}.json"), 1.0))
+        .collect();
+    a.skipped = (0..100_000)
+        .map(|i| format!("scene {i}: skipped"))
+        .collect();
+    let mut b = small_run();
+    b.rows.drain(..1);
+    b.anchors = a.anchors.clone();
+    b.skipped = a.skipped.clone();
+    let a = run_dir(&dir, "a", &a);
+    let b = run_dir(&dir, "b", &b);
+    let merged = dir.join("m");
+    let findings = dir.join("F.md");
+    let start = std::time::Instant::now();
+    for args in [
+        vec![
+            "merge",
+            "-o",
+            merged.to_str().unwrap(),
+            a.to_str().unwrap(),
+            b.to_str().unwrap(),
+        ],
+        vec![
+            "findings",
+            a.to_str().unwrap(),
+            b.to_str().unwrap(),
+            "-o",
+            findings.to_str().unwrap(),
+        ],
+    ] {
+        let o = marchmesh(&args, &dir);
+        assert!(o.status.success(), "{args:?}: {}", stderr(&o));
+    }
+    // Comparing every anchor (and skipped scene) with every other took minutes at this count.
+    assert!(
+        start.elapsed() < std::time::Duration::from_secs(60),
+        "{:?}",
+        start.elapsed()
+    );
+    let m = Results::read_json(&merged.join("results.json")).unwrap();
+    assert_eq!((m.anchors.len(), m.skipped.len()), (20_000, 100_000));
+}
+
+#[test]
+fn report_beside_a_results_file_keeps_a_summary_and_page_it_did_not_write() {
+    let dir = tmp("report-users-files");
+    let folder = run_dir(&dir, "downloads", &small_run());
+    for (file, mine) in [
+        ("summary.md", &b"my own notes"[..]),
+        ("report.html", &b"<html>my page</html>"[..]),
+    ] {
+        std::fs::write(folder.join(file), mine).unwrap();
+        let o = marchmesh(
+            &["report", folder.join("results.json").to_str().unwrap()],
+            &dir,
+        );
+        let e = stderr(&o);
+        assert!(!o.status.success(), "{e}");
+        assert!(
+            e.contains(file) && e.contains("not written by a marchmesh report"),
+            "{e}"
+        );
+        assert_eq!(std::fs::read(folder.join(file)).unwrap(), mine);
+        std::fs::remove_file(folder.join(file)).unwrap();
+    }
+    // The report's own files are regenerated, again and again.
+    for _ in 0..2 {
+        let o = marchmesh(&["report", folder.to_str().unwrap()], &dir);
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    assert!(
+        std::fs::read_to_string(folder.join("summary.md"))
+            .unwrap()
+            .starts_with("# Benchmark `")
+    );
+}
+
+#[test]
+fn results_whose_failures_repeat_a_row_or_each_other_are_refused_by_every_reader() {
+    let dir = tmp("report-duplicate-failures");
+    let good = run_dir(&dir, "good", &small_run());
+    let failure = |id: &str| Failure {
+        config_id: id.into(),
+        error: "boom".into(),
+    };
+    let mut beside = small_run();
+    beside.failures = vec![failure(&beside.rows[1].config_id.clone())];
+    let beside = run_dir(&dir, "beside", &beside);
+    let mut twice = small_run();
+    twice.failures = vec![failure("g/s/sdf:z/x1/t1"), failure("g/s/sdf:z/x1/t1")];
+    let twice = run_dir(&dir, "twice", &twice);
+    for (run, id, reason) in [
+        (
+            &beside,
+            "g/s/mesh:b/x1/t1",
+            "listed as failed but has a row",
+        ),
+        (&twice, "g/s/sdf:z/x1/t1", "listed as failed twice"),
+    ] {
+        let findings = dir.join("F.md");
+        let merged = dir.join("m");
+        for args in [
+            vec!["report", run.to_str().unwrap()],
+            vec!["compare", good.to_str().unwrap(), run.to_str().unwrap()],
+            vec![
+                "findings",
+                run.to_str().unwrap(),
+                "-o",
+                findings.to_str().unwrap(),
+            ],
+            vec![
+                "merge",
+                "-o",
+                merged.to_str().unwrap(),
+                run.to_str().unwrap(),
+            ],
+        ] {
+            let o = marchmesh(&args, &dir);
+            let e = stderr(&o);
+            assert!(!o.status.success(), "{args:?}");
+            assert!(
+                e.contains("results.json")
+                    && e.contains("failures[")
+                    && e.contains(id)
+                    && e.contains(reason)
+                    && !e.contains("shards must not overlap"),
+                "{args:?}: {e}"
+            );
+        }
+        assert!(!findings.exists() && !merged.exists());
+        assert!(!run.join("summary.md").exists());
+    }
+}
+
 #[test]
 fn results_listing_a_configuration_as_missing_twice_or_beside_its_row_are_refused() {
     let dir = tmp("report-duplicate-missing");

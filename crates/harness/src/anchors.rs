@@ -253,6 +253,29 @@ pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
     Ok(anchor)
 }
 
+/// What makes two anchors the same (every field, the numbers by their bits), as a key for a
+/// set: runs of one session share their anchors, and merging or summarising thousands of them
+/// must not compare each with every other.
+pub fn identity(a: &Anchor) -> String {
+    let mut key = format!(
+        "{:?}\0{:?}\0{:?}\0{:?}\0{:?}\0{:?}\0{:?}",
+        a.tool, a.version, a.backend, a.file, a.date_utc, a.load_average_start, a.load_average_end
+    );
+    for e in &a.entries {
+        let _ = write!(
+            key,
+            "\0{:?}\0{:?}\0{:?}\0{:x}\0{:x}\0{:x}",
+            e.subject,
+            e.tracer,
+            e.unit,
+            e.ours.to_bits(),
+            e.anchor.to_bits(),
+            e.ratio.to_bits()
+        );
+    }
+    key
+}
+
 /// A Markdown section: one table per anchor, marchmesh's rate, the anchor's and the ratio.
 /// Empty for no anchors.
 pub fn anchors_markdown(anchors: &[Anchor]) -> String {

@@ -388,6 +388,16 @@ pub const MAX_RESULT_VALUE: f64 = 1e15;
 /// `2^(k-1)..2^k - 1` steps, so a 64-bit step count fills at most 65.
 pub const MAX_HISTOGRAM_BINS: usize = 65;
 
+/// `x` as an error message shows it: in scientific notation when it is huge (1e308 in full
+/// is 309 digits) or tiny.
+fn short_number(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-6..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
 /// Why results could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum ResultsError {
@@ -471,10 +481,11 @@ impl Results {
         Ok(results)
     }
 
-    /// Refuses a configuration id with more than one row, or listed as missing twice or
-    /// beside its row (no run writes either; reports would count it twice and `merge` would
-    /// take the file for two overlapping shards). Returns the JSON path of the first such
-    /// entry and the reason naming the id and where it first appeared.
+    /// Refuses a configuration id with more than one row, a failure listed twice or beside a
+    /// row, or an id listed as missing twice or beside a row or failure (no run writes any of
+    /// these; reports would count it twice and `merge` would take the file for two
+    /// overlapping shards). Returns the JSON path of the first such entry and the reason
+    /// naming the id and where it first appeared.
     pub fn check_unique_rows(&self) -> Result<(), (String, String)> {
         let mut first = std::collections::HashMap::with_capacity(self.rows.len());
         for (i, r) in self.rows.iter().enumerate() {
@@ -488,12 +499,34 @@ impl Results {
                 ));
             }
         }
+        let mut failed = std::collections::HashMap::with_capacity(self.failures.len());
+        for (i, f) in self.failures.iter().enumerate() {
+            let id = &f.config_id;
+            if let Some(&j) = first.get(id.as_str()) {
+                return Err((
+                    format!("failures[{i}].config_id"),
+                    format!("configuration {id} is listed as failed but has a row (rows[{j}])"),
+                ));
+            }
+            if let Some(j) = failed.insert(id.as_str(), i) {
+                return Err((
+                    format!("failures[{i}].config_id"),
+                    format!("configuration {id} is listed as failed twice (also failures[{j}])"),
+                ));
+            }
+        }
         let mut listed = std::collections::HashMap::with_capacity(self.missing.len());
         for (i, id) in self.missing.iter().enumerate() {
             if let Some(&j) = first.get(id.as_str()) {
                 return Err((
                     format!("missing[{i}]"),
                     format!("configuration {id} is listed as missing but has a row (rows[{j}])"),
+                ));
+            }
+            if let Some(&j) = failed.get(id.as_str()) {
+                return Err((
+                    format!("missing[{i}]"),
+                    format!("configuration {id} is listed as missing but failed (failures[{j}])"),
                 ));
             }
             if let Some(j) = listed.insert(id.as_str(), i) {
@@ -601,7 +634,8 @@ impl Results {
             |x: f64, time: bool| !x.is_finite() || x.abs() > MAX_RESULT_VALUE || (time && x < 0.0);
         let reason = |what: &str, x: f64| {
             format!(
-                "{what} = {x} is not a measurement (finite, at most {MAX_RESULT_VALUE:e} in magnitude, times not negative)"
+                "{what} = {} is not a measurement (finite, at most {MAX_RESULT_VALUE:e} in magnitude, times not negative)",
+                short_number(x)
             )
         };
         for (i, r) in self.rows.iter().enumerate() {
@@ -623,6 +657,30 @@ impl Results {
                 for (name, x) in [("wall_ms", Some(t.wall_ms)), ("cpu_ms", t.cpu_ms)] {
                     if let Some(x) = x.filter(|&x| bad(x, true)) {
                         return Err((format!("timings.{id}[{j}].{name}"), reason(name, x)));
+                    }
+                }
+            }
+        }
+        for (i, r) in self.references.iter().enumerate() {
+            for (name, x) in [("build_ms", r.build_ms), ("render_ms", r.render_ms)] {
+                if let Some(x) = x.filter(|&x| bad(x, true)) {
+                    return Err((format!("references[{i}].{name}"), reason(name, x)));
+                }
+            }
+        }
+        // Anchor rates and ratios are positive like the anchor files they were read from
+        // (a 300-digit rate would be printed in full in every table).
+        for (i, a) in self.anchors.iter().enumerate() {
+            for (j, e) in a.entries.iter().enumerate() {
+                for (name, x) in [("ours", e.ours), ("anchor", e.anchor), ("ratio", e.ratio)] {
+                    if bad(x, true) || x <= 0.0 {
+                        return Err((
+                            format!("anchors[{i}].entries[{j}].{name}"),
+                            format!(
+                                "{name} = {} is not a rate or ratio (finite, positive, at most {MAX_RESULT_VALUE:e})",
+                                short_number(x)
+                            ),
+                        ));
                     }
                 }
             }
@@ -816,7 +874,7 @@ pub enum MergeError {
         /// Its commit.
         other_commit: String,
     },
-    /// A configuration was measured (or failed) in two inputs.
+    /// A configuration was measured, failed or listed as missing in two inputs.
     #[error("configuration {config_id} is in both {first} and {other}: shards must not overlap")]
     Overlap {
         /// The configuration.
@@ -835,7 +893,8 @@ impl Results {
     /// [`Results::merged_from`]; the merged provenance is the first input's with `command`.
     ///
     /// Errors: no input, inputs of different suites or commits (a dirty tree counts as a
-    /// different commit), or a configuration present in two inputs.
+    /// different commit), or a configuration present in two inputs (as a row, a failure or
+    /// missing: the merged file would list it twice, which no reader accepts).
     pub fn merge(
         inputs: Vec<(String, Results)>,
         run_id: String,
@@ -875,7 +934,8 @@ impl Results {
                 .rows
                 .iter()
                 .map(|x| &x.config_id)
-                .chain(r.failures.iter().map(|f| &f.config_id));
+                .chain(r.failures.iter().map(|f| &f.config_id))
+                .chain(r.missing.iter());
             for id in ids {
                 if let Some(prev) = owner.insert(id.clone(), name.clone()) {
                     return Err(MergeError::Overlap {
@@ -909,6 +969,9 @@ impl Results {
             write_errors: Vec::new(),
             anchors: Vec::new(),
         };
+        // Anchors seen so far, by content: a set, so thousands of them merge in linear time.
+        let mut seen_anchors = std::collections::HashSet::new();
+        let mut seen_skipped = std::collections::HashSet::new();
         for (_, r) in inputs {
             out.merged_from.push(MergedShard {
                 run_id: r.run_id.clone(),
@@ -926,7 +989,7 @@ impl Results {
             }));
             out.failures.extend(r.failures);
             for s in r.skipped {
-                if !out.skipped.contains(&s) {
+                if seen_skipped.insert(s.clone()) {
                     out.skipped.push(s);
                 }
             }
@@ -936,7 +999,7 @@ impl Results {
             out.missing.extend(r.missing);
             out.write_errors.extend(r.write_errors);
             for a in r.anchors {
-                if !out.anchors.contains(&a) {
+                if seen_anchors.insert(crate::anchors::identity(&a)) {
                     out.anchors.push(a);
                 }
             }
@@ -1160,6 +1223,55 @@ mod tests {
             ..Row::default()
         };
         assert!(row.why_empty("ssim").is_some() && row.why_empty("steps_mean").is_none());
+    }
+
+    #[test]
+    fn merge_refuses_a_configuration_missing_in_one_input_and_measured_in_another() {
+        use tests_support::{results, row};
+        let a = results(vec![row("sdf", "a", 1.0, None, 1)]);
+        let mut b = results(vec![]);
+        b.interrupted = true;
+        b.missing = vec![a.rows[0].config_id.clone()];
+        let e = Results::merge(
+            vec![("A".into(), a), ("B".into(), b)],
+            String::new(),
+            String::new(),
+        )
+        .unwrap_err();
+        assert!(matches!(e, MergeError::Overlap { .. }), "{e}");
+    }
+
+    #[test]
+    fn failures_repeating_a_row_or_each_other_are_refused_naming_the_id() {
+        use tests_support::{results, row};
+        let base = results(vec![row("sdf", "a", 1.0, None, 1)]);
+        let id = base.rows[0].config_id.clone();
+        let failure = |id: &str| Failure {
+            config_id: id.into(),
+            error: "boom".into(),
+        };
+        let mut beside = base.clone();
+        beside.failures = vec![failure(&id)];
+        let (at, why) = beside.check_unique_rows().unwrap_err();
+        assert_eq!(at, "failures[0].config_id");
+        assert!(
+            why.contains(&id) && why.contains("failed but has a row"),
+            "{why}"
+        );
+        let mut twice = base.clone();
+        twice.failures = vec![failure("zz"), failure("zz")];
+        let (at, why) = twice.check_unique_rows().unwrap_err();
+        assert_eq!(at, "failures[1].config_id");
+        assert!(why.contains("zz") && why.contains("failed twice"), "{why}");
+        let mut missing = base.clone();
+        missing.failures = vec![failure("zz")];
+        missing.missing = vec!["zz".into()];
+        let (at, why) = missing.check_unique_rows().unwrap_err();
+        assert_eq!(at, "missing[0]");
+        assert!(why.contains("missing but failed"), "{why}");
+        let mut fine = base;
+        fine.failures = vec![failure("zz")];
+        fine.check_unique_rows().unwrap();
     }
 
     #[test]

@@ -112,10 +112,16 @@ impl PairedRatio {
     /// pairs up.
     pub fn of(a: &[(u32, f64)], b: &[(u32, f64)]) -> Option<Self> {
         let ok = |v: f64| v.is_finite() && v > 0.0;
+        // The first usable sample of each round of `a`, looked up by round: linear in the
+        // samples (a results.json may hold millions of them).
+        let mut by_round = std::collections::HashMap::with_capacity(a.len());
+        for &(r, x) in a.iter().filter(|(_, x)| ok(*x)) {
+            by_round.entry(r).or_insert(x);
+        }
         let ratios: Vec<f64> = b
             .iter()
             .filter(|(_, y)| ok(*y))
-            .filter_map(|(r, y)| a.iter().find(|(q, x)| q == r && ok(*x)).map(|(_, x)| y / x))
+            .filter_map(|(r, y)| by_round.get(r).map(|x| y / x))
             .collect();
         let s = Summary::of(&ratios)?;
         Some(Self {
@@ -287,6 +293,21 @@ mod tests {
         assert!(!p.decisive());
         assert!(PairedRatio::of(&a, &[(9, 1.0)]).is_none());
         assert!(PairedRatio::of(&[(0, 0.0)], &[(0, 1.0)]).is_none());
+        // A round's first usable sample of `a` is the one paired.
+        let p = PairedRatio::of(&[(0, 0.0), (0, 2.0), (0, 4.0)], &[(0, 1.0)]).unwrap();
+        assert_eq!((p.rounds, p.median), (1, 0.5));
+    }
+
+    #[test]
+    fn pairing_a_million_rounds_takes_linear_time() {
+        let n = 1_000_000u32;
+        let a: Vec<(u32, f64)> = (0..n).map(|r| (r, 1.0)).collect();
+        let b: Vec<(u32, f64)> = (0..n).rev().map(|r| (r, 2.0)).collect();
+        let start = std::time::Instant::now();
+        let p = PairedRatio::of(&a, &b).unwrap();
+        assert_eq!((p.rounds, p.median), (n as usize, 2.0));
+        // Searching `a` for each sample of `b` took hours here.
+        assert!(start.elapsed() < std::time::Duration::from_secs(30));
     }
 
     #[test]

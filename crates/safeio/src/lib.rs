@@ -10,6 +10,9 @@
 //! - [`own_folder`] creates or reuses a folder the tools own inside a run folder or beside
 //!   an output (`plots/`, `images/`, `<stem>-plots/`) and refuses one that is a symbolic link
 //!   or not a folder, so nothing is ever written or deleted through a planted link.
+//! - [`create_folder`] creates a folder the user named, and [`check_folder_path`] says which
+//!   component of its path is a file or a dangling symbolic link, instead of the OS's
+//!   "Not a directory" or "File exists".
 
 use std::fs::File;
 use std::io::{Read, Write};
@@ -69,6 +72,18 @@ pub enum SafeIoError {
         /// What it is instead (`"a symbolic link"`, `"a file"`, `"a device, FIFO or socket"`).
         kind: &'static str,
     },
+    /// A folder to write into, or one of the folders above it, exists but is not a folder
+    /// (a file, a special file, or a symbolic link to one or to nothing): the OS would only
+    /// say "Not a directory" or "File exists".
+    #[error("{}{} {reason} (nothing was written)", above(path, at), at.display())]
+    NotAFolderOnPath {
+        /// The folder asked for.
+        path: PathBuf,
+        /// The component of it (the folder itself or one above it) that is not a folder.
+        at: PathBuf,
+        /// What it is instead, as a predicate (`"is a file, not a folder"`).
+        reason: String,
+    },
     /// The target already exists (or was created by a concurrent writer) and overwriting
     /// was not allowed.
     #[error("{}: already exists (nothing was overwritten)", path.display())]
@@ -76,6 +91,16 @@ pub enum SafeIoError {
         /// The target.
         path: PathBuf,
     },
+}
+
+/// `"{path}: "` when the component `at` that is not a folder lies above `path`, else nothing
+/// (the message then names the path once).
+fn above(path: &Path, at: &Path) -> String {
+    if path == at {
+        String::new()
+    } else {
+        format!("{}: ", path.display())
+    }
 }
 
 /// The read cap in bytes: [`READ_CAP_ENV`] in MiB if set, else [`DEFAULT_READ_CAP_BYTES`].
@@ -228,18 +253,141 @@ pub fn check_own_folder(dir: &Path) -> Result<bool, SafeIoError> {
             }),
         },
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(false),
-        Err(e) => Err(io_error(dir, "cannot inspect")(e)),
+        // "Not a directory": a folder above it is a file; say which.
+        Err(e) => Err(check_folder_path(dir)
+            .err()
+            .unwrap_or_else(|| io_error(dir, "cannot inspect")(e))),
+    }
+}
+
+/// Why `at`, an existing path, cannot be walked into as a folder, or `None` when it is a
+/// folder (or a symbolic link to one) or cannot be inspected (the OS error comes later).
+fn not_a_folder_reason(at: &Path) -> Option<String> {
+    let own = std::fs::symlink_metadata(at).ok()?;
+    let link = own.file_type().is_symlink();
+    let target = || std::fs::read_link(at).map_or_else(|_| "?".into(), |t| t.display().to_string());
+    let meta = match std::fs::metadata(at) {
+        Ok(m) => m,
+        Err(e) if link && e.kind() == std::io::ErrorKind::NotFound => {
+            return Some(format!(
+                "is a symbolic link to {}, which does not exist",
+                target()
+            ));
+        }
+        Err(e) if link => {
+            return Some(format!(
+                "is a symbolic link to {} that cannot be followed ({e})",
+                target()
+            ));
+        }
+        Err(_) => return None,
+    };
+    if meta.is_dir() {
+        return None;
+    }
+    let what = if meta.is_file() {
+        "a file"
+    } else {
+        "a device, FIFO or socket"
+    };
+    Some(if link {
+        format!("is a symbolic link to {what}, not a folder")
+    } else {
+        format!("is {what}, not a folder")
+    })
+}
+
+/// Checks that `dir` can be a folder to write into: each component of it that exists, from
+/// the top down, is a folder or a symbolic link to one (links are the user's choice). A
+/// component that does not exist ends the check: it and what lies under it can be created.
+///
+/// Errors: [`SafeIoError::NotAFolderOnPath`] naming `dir`, the component that is a file, a
+/// special file or a symbolic link to one or to nothing, and which of these it is.
+pub fn check_folder_path(dir: &Path) -> Result<(), SafeIoError> {
+    let mut ancestors: Vec<&Path> = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .collect();
+    ancestors.reverse();
+    for at in ancestors {
+        if std::fs::symlink_metadata(at).is_err() {
+            break;
+        }
+        if let Some(reason) = not_a_folder_reason(at) {
+            return Err(SafeIoError::NotAFolderOnPath {
+                path: dir.to_path_buf(),
+                at: at.to_path_buf(),
+                reason,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Creates `dir` and the folders above it that are missing (or reuses them), with an error
+/// that names the component which is not a folder ([`check_folder_path`]) instead of the
+/// OS's "Not a directory" or "File exists".
+///
+/// Errors: [`SafeIoError::NotAFolderOnPath`], or the OS error naming the folder.
+pub fn create_folder(dir: &Path) -> Result<(), SafeIoError> {
+    check_folder_path(dir)?;
+    std::fs::create_dir_all(dir).map_err(|e| {
+        // Something may have been put in the way since the check.
+        check_folder_path(dir)
+            .err()
+            .unwrap_or_else(|| io_error(dir, "cannot create the folder")(e))
+    })
+}
+
+/// [`create_folder`] that returns the folders this call created, top down (empty when `dir`
+/// existed), each made by one `create_dir`, so a folder someone else made meanwhile is not
+/// counted. A command that gives up before filling them removes them again with
+/// [`remove_created_folders`], leaving nothing it made and nothing that was there before.
+///
+/// Errors: those of [`create_folder`]; the folders created before the error are removed.
+pub fn create_folder_tracked(dir: &Path) -> Result<Vec<PathBuf>, SafeIoError> {
+    check_folder_path(dir)?;
+    let mut missing: Vec<&Path> = dir
+        .ancestors()
+        .filter(|a| !a.as_os_str().is_empty())
+        .take_while(|a| std::fs::symlink_metadata(a).is_err())
+        .collect();
+    missing.reverse();
+    let mut created = Vec::new();
+    for at in missing {
+        match std::fs::create_dir(at) {
+            Ok(()) => created.push(at.to_path_buf()),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && at.is_dir() => {}
+            Err(e) => {
+                remove_created_folders(&created);
+                return Err(check_folder_path(dir)
+                    .err()
+                    .unwrap_or_else(|| io_error(at, "cannot create the folder")(e)));
+            }
+        }
+    }
+    Ok(created)
+}
+
+/// Removes the folders of [`create_folder_tracked`], deepest first, each only if it is still
+/// empty (a folder someone has put anything in stays, and so do the folders above it).
+pub fn remove_created_folders(created: &[PathBuf]) {
+    for dir in created.iter().rev() {
+        if std::fs::remove_dir(dir).is_err() {
+            return;
+        }
     }
 }
 
 /// Creates `dir` (and missing parents) or reuses it if it is a real folder, refusing it when
 /// it is a symbolic link, file or special file ([`check_own_folder`], checked before and
-/// after creating).
+/// after creating) or when a folder above it is not one ([`check_folder_path`]).
 ///
-/// Errors: [`SafeIoError::NotOwnFolder`], or the OS error naming the folder.
+/// Errors: [`SafeIoError::NotOwnFolder`], [`SafeIoError::NotAFolderOnPath`], or the OS
+/// error naming the folder.
 pub fn own_folder(dir: &Path) -> Result<(), SafeIoError> {
     if !check_own_folder(dir)? {
-        std::fs::create_dir_all(dir).map_err(io_error(dir, "cannot create the folder"))?;
+        create_folder(dir)?;
         check_own_folder(dir)?;
     }
     Ok(())
@@ -422,6 +570,68 @@ mod tests {
             assert!(e.to_string().contains(kind), "{e}");
         }
         assert!(!check_own_folder(&dir.join("absent")).unwrap());
+    }
+
+    #[test]
+    fn folders_through_a_file_or_a_dangling_link_are_refused_naming_the_component() {
+        let dir = scratch("folder-path");
+        let file = dir.join("file.txt");
+        std::fs::write(&file, b"x").unwrap();
+        let dangling = dir.join("dangling");
+        std::os::unix::fs::symlink(dir.join("nowhere"), &dangling).unwrap();
+        let to_file = dir.join("to-file");
+        std::os::unix::fs::symlink(&file, &to_file).unwrap();
+        for (path, at, reason) in [
+            (file.join("x/y"), &file, "is a file, not a folder"),
+            (file.clone(), &file, "is a file, not a folder"),
+            (dangling.join("x"), &dangling, "which does not exist"),
+            (dangling.clone(), &dangling, "which does not exist"),
+            (to_file.join("x"), &to_file, "is a symbolic link to a file"),
+        ] {
+            let mut errors = vec![
+                check_folder_path(&path).unwrap_err(),
+                create_folder(&path).unwrap_err(),
+            ];
+            if path != *at {
+                // The last component itself is `NotOwnFolder`'s case.
+                errors.push(own_folder(&path).unwrap_err());
+            }
+            for e in errors {
+                let text = e.to_string();
+                let said = if path == *at {
+                    format!("{} is", at.display())
+                } else {
+                    format!("{}: {} is", path.display(), at.display())
+                };
+                assert!(text.starts_with(&said) && text.contains(reason), "{text}");
+            }
+        }
+        assert!(!dir.join("nowhere").exists());
+        assert_eq!(std::fs::read(&file).unwrap(), b"x");
+        let linked = dir.join("linked");
+        std::os::unix::fs::symlink(&dir, &linked).unwrap();
+        create_folder(&linked.join("a/b")).unwrap();
+        assert!(dir.join("a/b").is_dir());
+    }
+
+    #[test]
+    fn tracked_folders_are_the_ones_made_and_only_empty_ones_are_removed() {
+        let dir = scratch("tracked");
+        let kept = dir.join("kept");
+        std::fs::create_dir(&kept).unwrap();
+        let created = create_folder_tracked(&kept.join("a/b")).unwrap();
+        assert_eq!(created, vec![kept.join("a"), kept.join("a/b")]);
+        assert!(create_folder_tracked(&kept.join("a/b")).unwrap().is_empty());
+        remove_created_folders(&created);
+        assert!(!kept.join("a").exists() && kept.is_dir());
+        let created = create_folder_tracked(&kept.join("a/b")).unwrap();
+        std::fs::write(kept.join("a/b/mine"), b"x").unwrap();
+        remove_created_folders(&created);
+        assert_eq!(std::fs::read(kept.join("a/b/mine")).unwrap(), b"x");
+        let file = dir.join("file");
+        std::fs::write(&file, b"x").unwrap();
+        let e = create_folder_tracked(&file.join("a")).unwrap_err();
+        assert!(e.to_string().contains("is a file, not a folder"), "{e}");
     }
 
     #[test]

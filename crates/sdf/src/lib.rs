@@ -201,26 +201,22 @@ fn check(ok: bool, name: &'static str, reason: &str) -> Result<(), SdfError> {
     }
 }
 
-/// Compiles `scene` for sphere tracing. Errors name the offending node, mesh file or option.
-pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> {
-    let (eps_abs, eps_cone) = match opts.hit_epsilon() {
-        HitEpsilon::Absolute(e) => {
-            check(
-                e > 0.0 && e.is_finite(),
-                "eps_abs",
-                &format!("must be a finite length in world units > 0, got {e}"),
-            )?;
-            (e, 0.0)
-        }
-        HitEpsilon::PixelCone(k) => {
-            check(
-                k > 0.0 && k.is_finite(),
-                "eps_px",
-                &format!("must be a finite fraction of the pixel footprint > 0, got {k}"),
-            )?;
-            (0.0, k * scene.camera.pixel_angle())
-        }
-    };
+/// Checks the options that need no scene: every range, whether or not the scene has meshes
+/// to bake (a `grid_res` out of range is an error on a scene of spheres too, so a suite
+/// fails when loaded rather than when its first mesh scene is built). Errors name the key.
+pub fn check_options(opts: &SdfOptions) -> Result<(), SdfError> {
+    match opts.hit_epsilon() {
+        HitEpsilon::Absolute(e) => check(
+            e > 0.0 && e.is_finite(),
+            "eps_abs",
+            &format!("must be a finite length in world units > 0, got {e}"),
+        )?,
+        HitEpsilon::PixelCone(k) => check(
+            k > 0.0 && k.is_finite(),
+            "eps_px",
+            &format!("must be a finite fraction of the pixel footprint > 0, got {k}"),
+        )?,
+    }
     check(opts.max_steps >= 1, "max_steps", "must be >= 1")?;
     check(
         (1.0..2.0).contains(&opts.relaxation),
@@ -232,31 +228,41 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         "normal_step",
         "must be > 0",
     )?;
-    let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
-    check(max_distance > 0.0, "max_distance", "must be > 0")?;
+    if let Some(d) = opts.max_distance {
+        check(d > 0.0, "max_distance", "must be > 0")?;
+    }
+    use marchmesh_field::bake::{MAX_BAND_VOXELS, MAX_RESOLUTION, MIN_BAND_VOXELS, MIN_RESOLUTION};
     check(
-        opts.grid_res >= 2,
+        (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.grid_res),
         "grid_res",
-        &format!("must be >= 2, got {}", opts.grid_res),
+        &format!(
+            "must be in {MIN_RESOLUTION}..={MAX_RESOLUTION} cells, got {}",
+            opts.grid_res
+        ),
     )?;
     if let MeshGrid::Sparse { band_voxels, .. } = opts.mesh_grid() {
-        use marchmesh_field::bake::{
-            MAX_BAND_VOXELS, MAX_RESOLUTION, MIN_BAND_VOXELS, MIN_RESOLUTION,
-        };
-        check(
-            (MIN_RESOLUTION..=MAX_RESOLUTION).contains(&opts.grid_res),
-            "grid_res",
-            &format!(
-                "must be in {MIN_RESOLUTION}..={MAX_RESOLUTION} cells for sparse grids (grid=sparse), got {}",
-                opts.grid_res
-            ),
-        )?;
         check(
             (MIN_BAND_VOXELS..=MAX_BAND_VOXELS).contains(&band_voxels),
             "band",
             &format!("must be in {MIN_BAND_VOXELS}..={MAX_BAND_VOXELS} cells"),
         )?;
     }
+    check(
+        opts.prune_depth <= MAX_PRUNE_DEPTH,
+        "prune_depth",
+        &format!("must be in 0..={MAX_PRUNE_DEPTH}"),
+    )
+}
+
+/// Compiles `scene` for sphere tracing. Errors name the offending node, mesh file or option.
+pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> {
+    check_options(opts)?;
+    let (eps_abs, eps_cone) = match opts.hit_epsilon() {
+        HitEpsilon::Absolute(e) => (e, 0.0),
+        HitEpsilon::PixelCone(k) => (0.0, k * scene.camera.pixel_angle()),
+    };
+    let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
+    check(max_distance > 0.0, "max_distance", "must be > 0")?;
     check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
     let field_opts = field_options(opts);
@@ -266,11 +272,6 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     } else {
         field.without_bounds()
     };
-    check(
-        opts.prune_depth <= MAX_PRUNE_DEPTH,
-        "prune_depth",
-        &format!("must be in 0..={MAX_PRUNE_DEPTH}"),
-    )?;
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
         field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
     }

@@ -28,6 +28,12 @@ impl marchmesh_core::Backend for SdfBackend {
         crate::build(scene, &options)
     }
 
+    /// Every range that needs no scene ([`crate::check_options`]), so a suite with an
+    /// out-of-range option fails when loaded.
+    fn check(settings: &SdfOptions) -> Result<(), SdfError> {
+        crate::check_options(settings)
+    }
+
     /// The hit epsilon: `eps_abs` when given, else `eps_px`.
     fn quality_knob(settings: &SdfOptions) -> Result<Option<QualityKnob>, SdfError> {
         Ok(Some(match settings.hit_epsilon() {

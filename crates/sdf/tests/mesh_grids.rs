@@ -160,6 +160,33 @@ fn stored_normals_shade_the_facets_through_the_scene_transform() {
 }
 
 #[test]
+fn grid_res_out_of_range_is_refused_by_name_on_a_scene_without_meshes() {
+    let scene = marchmesh_testkit::scene(
+        r#"{"camera": {"width": 8, "height": 8}, "objects": [{"shape": {"sphere": {}}}]}"#,
+    );
+    for res in [0, 3, 513, 100_000] {
+        let opts = SdfOptions {
+            grid_res: res,
+            ..SdfOptions::DEFAULT
+        };
+        let err = build(&scene, &opts).expect_err("refused").to_string();
+        assert!(
+            err.contains("sdf option grid_res: must be in 4..=512"),
+            "{err}"
+        );
+        let err = marchmesh_sdf::check_options(&opts).expect_err("refused");
+        assert!(err.to_string().contains("grid_res"), "{err}");
+    }
+    for res in [4, 512] {
+        let opts = SdfOptions {
+            grid_res: res,
+            ..SdfOptions::DEFAULT
+        };
+        build(&scene, &opts).expect("in range");
+    }
+}
+
+#[test]
 fn sparse_grid_options_out_of_range_are_refused_by_name_before_baking() {
     let scene = marchmesh_scene::load(&scenes_dir().join("generated/mesh_bunny.json"))
         .expect("committed scene")

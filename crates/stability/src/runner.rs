@@ -358,7 +358,7 @@ pub fn run_cases(
 /// case id, so any case can be re-rendered with `marchmesh render`. Mesh paths are rewritten
 /// relative to `dir` (the meshes themselves are not copied). Returns the file names written.
 pub fn write_scenes(cases: &[&StabilityCase], dir: &Path) -> std::io::Result<Vec<String>> {
-    std::fs::create_dir_all(dir)?;
+    marchmesh_safeio::create_folder(dir).map_err(std::io::Error::other)?;
     let dir_abs = std::path::absolute(dir)?;
     let mut written = Vec::new();
     for c in cases {

@@ -124,9 +124,9 @@ pub fn run(
     dir: &Path,
     overlay: bool,
 ) -> Result<FramesFile, ViewerError> {
-    std::fs::create_dir_all(dir).map_err(|source| ViewerError::Output {
+    marchmesh_safeio::create_folder(dir).map_err(|e| ViewerError::Output {
         path: dir.to_path_buf(),
-        reason: format!("cannot create the frames folder: {source}"),
+        reason: format!("cannot create the frames folder: {e}"),
     })?;
     let mut targets: Vec<PathBuf> = (0..script.frame_count())
         .map(|i| dir.join(frame_file_name(i)))

@@ -224,12 +224,13 @@ pub fn write_findings(
     }
     // How far each backend is from its field's best, as the runs recorded it.
     let mut anchors: Vec<crate::anchors::Anchor> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
     for a in runs
         .iter()
         .flat_map(|r| &r.results.anchors)
         .chain(more_anchors)
     {
-        if !anchors.contains(a) {
+        if seen.insert(crate::anchors::identity(a)) {
             anchors.push(a.clone());
         }
     }

@@ -25,15 +25,72 @@ use crate::results::Results;
 /// names. A `plots/` that is a symbolic link, file or special file is refused before
 /// anything is written.
 pub fn write_report(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+    write_report_noting_summary(res, dir, &mut false)
+}
+
+/// [`write_report`], setting `summary_written` once `summary.md` is written (so a caller
+/// whose later step failed knows whether the summary it names exists).
+fn write_report_noting_summary(
+    res: &Results,
+    dir: &Path,
+    summary_written: &mut bool,
+) -> Result<Vec<String>, String> {
     marchmesh_safeio::check_own_folder(&dir.join("plots")).map_err(|e| e.to_string())?;
     let summary = dir.join("summary.md");
+    let html = dir.join("report.html");
+    check_regenerable(&summary, SUMMARY_MARK)?;
+    check_regenerable(&html, HTML_MARK)?;
     marchmesh_safeio::replace_regular(&summary, summary_markdown(&res.markdown_safe()).as_bytes())
         .map_err(|e| e.to_string())?;
+    *summary_written = true;
     let plots = write_plots(res, &dir.join("plots"))?;
-    let html = dir.join("report.html");
     marchmesh_safeio::replace_regular(&html, crate::html::report_html(res, dir).as_bytes())
         .map_err(|e| e.to_string())?;
     Ok(plots)
+}
+
+/// How every `summary.md` a run's report writes starts.
+const SUMMARY_MARK: &str = "# Benchmark `";
+
+/// What the head of every `report.html` holds.
+const HTML_MARK: &str = "<title>marchmesh ";
+
+/// Bytes at the start of a report file searched for its mark.
+const MARK_WINDOW: u64 = 4096;
+
+/// Refuses to replace `path` when it is a regular file that a run's report did not write
+/// (its first [`MARK_WINDOW`] bytes lack `mark`): `report FILE.json` writes beside the file,
+/// and a `summary.md` or `report.html` of the user's there is not ours to overwrite. An
+/// absent file, or one that is not regular (refused when replaced), passes.
+fn check_regenerable(path: &Path, mark: &str) -> Result<(), String> {
+    use std::io::Read;
+    let Ok(meta) = std::fs::symlink_metadata(path) else {
+        return Ok(());
+    };
+    if !meta.file_type().is_file() {
+        return Ok(());
+    }
+    let mut head = Vec::new();
+    marchmesh_safeio::open_regular(path, u64::MAX)
+        .and_then(|(file, _)| {
+            file.take(MARK_WINDOW)
+                .read_to_end(&mut head)
+                .map_err(|source| marchmesh_safeio::SafeIoError::Io {
+                    path: path.to_path_buf(),
+                    action: "cannot read",
+                    source,
+                })
+        })
+        .map_err(|e| e.to_string())?;
+    let ours = head.windows(mark.len()).any(|w| w == mark.as_bytes());
+    if ours {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: exists and was not written by a marchmesh report (no {mark:?} in its head): not replaced (move it away to regenerate the report)",
+            path.display()
+        ))
+    }
 }
 
 /// Creates a fresh run folder `<out>/<UTC timestamp>-<suite>` (suffix `-2`, `-3`, ... if the
@@ -62,16 +119,51 @@ pub fn create_run_dir(out: &Path, suite: &str) -> std::io::Result<(String, std::
     Err(std::io::Error::other(format!("too many runs named {base}")))
 }
 
+/// Why [`write_run`] stopped, and which of the files a message may point to it had written
+/// by then.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{reason}")]
+pub struct RunWriteError {
+    /// `results.json` holds `res` (it was written and read back).
+    pub results_json: bool,
+    /// `summary.md` was written from `res`.
+    pub summary_md: bool,
+    /// What failed, naming the file.
+    pub reason: String,
+}
+
 /// Writes `results.json`, then reads it back and writes `results.csv`, `summary.md`,
 /// `plots/` and `report.html` from what was read, so `marchmesh report` on the folder reproduces them exactly.
 /// Returns the plot file names.
-pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
+///
+/// Errors: the first write that failed, with which of `results.json` and `summary.md` were
+/// written before it.
+pub fn write_run(res: &Results, dir: &Path) -> Result<Vec<String>, RunWriteError> {
+    let mut failed = RunWriteError {
+        results_json: false,
+        summary_md: false,
+        reason: String::new(),
+    };
     let json = dir.join("results.json");
-    res.write_json(&json).map_err(|e| e.to_string())?;
-    let back = Results::read_json(&json).map_err(|e| e.to_string())?;
+    let back = res
+        .write_json(&json)
+        .and_then(|()| Results::read_json(&json))
+        .map_err(|e| RunWriteError {
+            reason: e.to_string(),
+            ..failed.clone()
+        })?;
+    failed.results_json = true;
     back.write_csv(&dir.join("results.csv"))
-        .map_err(|e| e.to_string())?;
-    write_report(&back, dir)
+        .map_err(|e| RunWriteError {
+            reason: e.to_string(),
+            ..failed.clone()
+        })?;
+    let mut summary_md = false;
+    write_report_noting_summary(&back, dir, &mut summary_md).map_err(|reason| RunWriteError {
+        summary_md,
+        reason,
+        ..failed
+    })
 }
 
 #[cfg(test)]
