@@ -769,22 +769,30 @@ pub fn merge(runs: &[PathBuf], out: &Path) -> Result<()> {
         .with_context(|| format!("writing the merged run into {}", out.display()))?;
     let machines: std::collections::BTreeSet<&str> =
         merged.rows.iter().map(|r| r.machine.as_str()).collect();
+    // Configurations of shards not given are in no input: the count then is a lower bound.
+    let missing = if shard_problems(&merged).is_empty() {
+        format!("{} missing", merged.missing.len())
+    } else {
+        format!(
+            "{} missing listed (more in the shards not given)",
+            merged.missing.len()
+        )
+    };
     out!(
-        "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {} missing; {} plots and report.html",
+        "{}: {} runs merged, {} configurations measured on {} machine(s), {} failed, {missing}; {} plots and report.html",
         out.display(),
         merged.merged_from.len(),
         merged.rows.len(),
         machines.len(),
         merged.failures.len(),
-        merged.missing.len(),
         plots.len()
     );
     incomplete_merge(&merged)
 }
 
-/// The error of a merged run that is not the whole suite: an input was interrupted or
-/// killed, configurations failed or are missing, or shards of the suite were not given.
-fn incomplete_merge(merged: &Results) -> Result<()> {
+/// What is wrong with the shards a merged run holds: shards of different counts, or shards
+/// of the suite not given (empty for unsharded runs and complete sets).
+fn shard_problems(merged: &Results) -> Vec<String> {
     let mut problems = Vec::new();
     let mut shard_counts = std::collections::BTreeMap::<u64, Vec<u64>>::new();
     for m in &merged.merged_from {
@@ -814,6 +822,13 @@ fn incomplete_merge(merged: &Results) -> Result<()> {
             ));
         }
     }
+    problems
+}
+
+/// The error of a merged run that is not the whole suite: an input was interrupted or
+/// killed, configurations failed or are missing, or shards of the suite were not given.
+fn incomplete_merge(merged: &Results) -> Result<()> {
+    let mut problems = shard_problems(merged);
     if merged.interrupted {
         problems.push("an input run was interrupted or killed".into());
     }

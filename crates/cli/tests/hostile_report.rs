@@ -208,6 +208,12 @@ fn merge_fails_on_missing_shards_and_incomplete_runs() {
     );
     assert!(!o.status.success(), "merging shard 1 of 2 alone succeeded");
     assert!(stderr(&o).contains("2/2 not given"), "{}", stderr(&o));
+    // The count of missing configurations cannot include the absent shard's: said so.
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("missing listed (more in the shards not given)"),
+        "{stdout}"
+    );
     // The merged folder is still written, and says what is missing.
     assert!(out.join("summary.md").exists());
 
