@@ -50,7 +50,7 @@ pub const MAX_LIGHT_CONES: usize = 4;
 /// Tangent of the half angle beyond which [`Emitter::cones_from`] splits a squarish light
 /// into four cones: one cone's penumbra estimate degrades as it widens (the stability
 /// study's `shadow_light_size` and `shadow_sphere_light` families measure it).
-pub const CONE_SPLIT_TAN: f32 = 0.25;
+pub const CONE_SPLIT_TAN: f32 = 0.15;
 
 /// A cone from a shading point towards (part of) a light.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
