@@ -22,6 +22,7 @@ macro_rules! out {
 mod assets;
 mod bench;
 mod exr_aov;
+mod stability;
 mod view;
 
 #[derive(Parser)]
@@ -287,7 +288,7 @@ fn main() {
             anchor,
         } => bench::findings(&runs, &anchor, &out, force),
         Command::Compare { a, b } => bench::compare(&a, &b),
-        Command::Stability(args) => bench::stability(args),
+        Command::Stability(args) => stability::stability(args),
         Command::View(args) => view::view(args),
     };
     if let Err(e) = result {
