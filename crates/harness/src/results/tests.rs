@@ -6,7 +6,10 @@ use super::*;
 fn dates() {
     assert_eq!(utc_strings(0).0, "1970-01-01T00:00:00Z");
     assert_eq!(utc_strings(951_782_400).0, "2000-02-29T00:00:00Z");
-    assert_eq!(utc_strings(1_700_000_000).1, "20231114T221320Z");
+    // The run stamp is the ISO time without its separators.
+    let (iso, stamp) = utc_strings(1_700_000_000);
+    assert_eq!(iso, "2023-11-14T22:13:20Z");
+    assert_eq!(stamp, iso.replace(['-', ':'], ""));
 }
 
 #[test]
