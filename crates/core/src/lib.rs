@@ -12,6 +12,7 @@ pub mod camera;
 mod clock;
 pub mod compare;
 pub mod emitter;
+pub mod frame;
 pub mod framebuffer;
 pub mod geometry;
 pub mod image_io;
@@ -28,6 +29,7 @@ pub use background::{
 };
 pub use camera::{PrimarySamples, Tile};
 pub use compare::{Accuracy, compare};
+pub use frame::{FAR_RATIO, FarFrame, FrameEntry};
 pub use framebuffer::{Framebuffer, NO_HIT_DEPTH};
 pub use geometry::*;
 pub use integrator::{
