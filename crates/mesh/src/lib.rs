@@ -39,10 +39,10 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use glam::{Affine3A, DVec3, Vec3, Vec3A};
+use glam::{Affine3A, DAffine3, DVec3, Vec3, Vec3A};
 use marchmesh_core::{
-    Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, RenderSpace, Termination,
-    TraceResult,
+    FarFrame, FrameEntry, Geometry, GeometryReport, Hit, NoHit, OcclusionResult, PrimarySamples,
+    Ray, RayWork, RenderSpace, Termination, TraceResult,
 };
 use marchmesh_meshio::MeshLoadError;
 use marchmesh_scene::{MaterialId, Scene};
@@ -117,12 +117,27 @@ pub enum MeshError {
     InvalidOption(String),
 }
 
-/// One placement of a BLAS: the render-to-local transform and the fallback material.
+/// One placement of a BLAS: the render-to-local transform, the fallback material and, for a
+/// placement far from the camera, its frame.
 #[derive(Debug, Clone, Copy)]
 struct Instance {
     to_local: Affine3A,
     blas: u32,
     material: MaterialId,
+    /// Index of its [`FarInstance`], or [`NEAR`] for an instance rays enter in f32.
+    far: u32,
+}
+
+/// [`Instance::far`] of an instance near the camera (rays enter it through `to_local`).
+const NEAR: u32 = u32::MAX;
+
+/// A placement far from the camera: rays enter its BLAS's frame through f64
+/// ([`FarFrame::enter`], then `to_local` in f64), so its triangles are intersected near the
+/// frame's origin in f32 however far the placement is from the camera.
+#[derive(Debug, Clone, Copy)]
+struct FarInstance {
+    frame: FarFrame,
+    to_local: DAffine3,
 }
 
 /// Where a closest hit was found.
@@ -150,6 +165,7 @@ pub struct MeshGeometry {
     interleave: bool,
     blases: Vec<Blas>,
     instances: Vec<Instance>,
+    far_instances: Vec<FarInstance>,
     tlas: Option<Tree>,
     max_distance: f32,
     report: GeometryReport,
@@ -212,6 +228,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         flat_material,
         blases,
         instances,
+        far_instances,
         tlas,
         ..
     } = built;
@@ -234,6 +251,7 @@ pub fn build(scene: &Scene, options: &MeshOptions) -> Result<MeshGeometry, MeshE
         interleave,
         blases,
         instances,
+        far_instances,
         tlas,
         max_distance: scene.render.max_distance as f32,
         report,
@@ -326,6 +344,20 @@ impl MeshGeometry {
             r.tmin,
             r.tmax,
         )
+    }
+
+    /// The ray `r` (direction `dir` in f64: the exact camera direction of a primary ray, else
+    /// `r`'s) in the frame of far instance `fi`, started where it enters the instance's
+    /// bounding sphere, with that start's render-space ray parameter; `None` when it misses
+    /// the sphere within its interval. Its parameter is render-space length from the start.
+    fn far_local_ray(fi: &FarInstance, r: &ObRay, dir: DVec3) -> Option<(ObRay, FrameEntry)> {
+        let e = fi.frame.enter(Vec3::from(r.origin), dir, r.tmin, r.tmax)?;
+        let origin = fi.to_local.transform_point3(e.start).as_vec3();
+        let direction = fi.to_local.transform_vector3(dir).as_vec3();
+        Some((
+            ObRay::new(origin.into(), direction.into(), e.t_min, e.t_max),
+            e,
+        ))
     }
 }
 
@@ -454,6 +486,96 @@ impl MeshGeometry {
     }
 }
 
+impl MeshGeometry {
+    /// The closest hit of `ray`; far instances are entered along `exact_dir` when given (the
+    /// exact camera direction `ray.dir` was rounded from), else along `ray.dir`.
+    #[inline]
+    fn closest_with(&self, ray: &Ray, exact_dir: Option<DVec3>) -> TraceResult {
+        let mut work = RayWork::default();
+        let mut r = self.ob_ray(ray);
+        if r.tmax.is_nan() || r.tmax < r.tmin {
+            return TraceResult::not_found(NoHit::Miss, work);
+        }
+        let mut best: Option<(HitSource, BlasHit)> = None;
+        // The local ray of the last far instance hit (its hit's `t` is measured in it).
+        let mut far_local: Option<ObRay> = None;
+        if let Some(flat) = &self.flat
+            && let Some(h) = flat.closest(&mut r, &mut work)
+        {
+            best = Some((HitSource::Flat, h));
+        }
+        if let Some(tlas) = &self.tlas {
+            let mut inner = RayWork::default();
+            let prims = tlas.primitive_indices();
+            tlas.traverse(&mut r, &mut work, |r, slot| {
+                let Some(&i) = prims.get(slot as usize) else {
+                    return true;
+                };
+                let inst = &self.instances[i as usize];
+                let blas = &self.blases[inst.blas as usize];
+                if inst.far == NEAR {
+                    let mut local = Self::local_ray(inst, r);
+                    if let Some(h) = blas.closest(&mut local, &mut inner) {
+                        r.tmax = h.t;
+                        best = Some((HitSource::Instance(i), h));
+                    }
+                } else if let Some((mut local, e)) = Self::far_local_ray(
+                    &self.far_instances[inst.far as usize],
+                    r,
+                    exact_dir.unwrap_or_else(|| Vec3::from(r.direction).as_dvec3()),
+                ) && let Some(h) = blas.closest(&mut local, &mut inner)
+                {
+                    let t = e.render_t(h.t);
+                    if t <= r.tmax {
+                        r.tmax = t;
+                        best = Some((HitSource::Instance(i), h));
+                        far_local = Some(local);
+                    }
+                }
+                true
+            });
+            work.node_visits += inner.node_visits;
+            work.primitive_tests += inner.primitive_tests;
+        }
+        let Some((source, hit)) = best else {
+            return TraceResult::not_found(NoHit::Miss, work);
+        };
+        let t = r.tmax;
+        let (normal, material) = match source {
+            HitSource::Flat => match &self.flat {
+                Some(flat) => (
+                    flat.normal(&r, &hit),
+                    flat.material(&hit).unwrap_or(self.flat_materials_default),
+                ),
+                None => (Vec3::Z, 0),
+            },
+            HitSource::Instance(i) => {
+                let inst = &self.instances[i as usize];
+                let blas = &self.blases[inst.blas as usize];
+                let local = match far_local {
+                    Some(local) if inst.far != NEAR => local,
+                    _ => Self::local_ray(inst, &r),
+                };
+                let n_local = Vec3A::from(blas.normal(&local, &hit));
+                let n = inst.to_local.matrix3.transpose() * n_local;
+                (
+                    Vec3::from(n).try_normalize().unwrap_or(Vec3::Z),
+                    blas.material(&hit).unwrap_or(inst.material),
+                )
+            }
+        };
+        TraceResult::found(
+            Hit {
+                t,
+                position: ray.origin + ray.dir * t,
+                normal,
+                material,
+            },
+            work,
+        )
+    }
+}
+
 impl Geometry for MeshGeometry {
     /// 64 columns: the same packets (8 consecutive pixels of a tile row start at multiples
     /// of 8 either way) with an eighth of the integrator's fixed cost per tile. Measured: `docs/decisions/0013`.
@@ -484,68 +606,27 @@ impl Geometry for MeshGeometry {
     }
 
     fn closest_hit(&self, ray: &Ray) -> TraceResult {
-        let mut work = RayWork::default();
-        let mut r = self.ob_ray(ray);
-        if r.tmax.is_nan() || r.tmax < r.tmin {
-            return TraceResult::not_found(NoHit::Miss, work);
+        self.closest_with(ray, None)
+    }
+
+    /// With far instances, primary rays enter them along their exact f64 directions.
+    fn closest_hits_primary(
+        &self,
+        rays: &[Ray],
+        samples: PrimarySamples<'_>,
+        out: &mut [TraceResult],
+    ) {
+        if self.far_instances.is_empty() {
+            return self.closest_hits(rays, out);
         }
-        let mut best: Option<(HitSource, BlasHit)> = None;
-        if let Some(flat) = &self.flat
-            && let Some(h) = flat.closest(&mut r, &mut work)
-        {
-            best = Some((HitSource::Flat, h));
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "closest_hits_primary: rays and out differ in length"
+        );
+        for (i, (r, o)) in rays.iter().zip(out.iter_mut()).enumerate() {
+            *o = self.closest_with(r, Some(samples.direction(i)));
         }
-        if let Some(tlas) = &self.tlas {
-            let mut inner = RayWork::default();
-            let prims = tlas.primitive_indices();
-            tlas.traverse(&mut r, &mut work, |r, slot| {
-                let Some(&i) = prims.get(slot as usize) else {
-                    return true;
-                };
-                let inst = &self.instances[i as usize];
-                let mut local = Self::local_ray(inst, r);
-                if let Some(h) = self.blases[inst.blas as usize].closest(&mut local, &mut inner) {
-                    r.tmax = h.t;
-                    best = Some((HitSource::Instance(i), h));
-                }
-                true
-            });
-            work.node_visits += inner.node_visits;
-            work.primitive_tests += inner.primitive_tests;
-        }
-        let Some((source, hit)) = best else {
-            return TraceResult::not_found(NoHit::Miss, work);
-        };
-        let t = r.tmax;
-        let (normal, material) = match source {
-            HitSource::Flat => match &self.flat {
-                Some(flat) => (
-                    flat.normal(&r, &hit),
-                    flat.material(&hit).unwrap_or(self.flat_materials_default),
-                ),
-                None => (Vec3::Z, 0),
-            },
-            HitSource::Instance(i) => {
-                let inst = &self.instances[i as usize];
-                let blas = &self.blases[inst.blas as usize];
-                let local = Self::local_ray(inst, &r);
-                let n_local = Vec3A::from(blas.normal(&local, &hit));
-                let n = inst.to_local.matrix3.transpose() * n_local;
-                (
-                    Vec3::from(n).try_normalize().unwrap_or(Vec3::Z),
-                    blas.material(&hit).unwrap_or(inst.material),
-                )
-            }
-        };
-        TraceResult::found(
-            Hit {
-                t,
-                position: ray.origin + ray.dir * t,
-                normal,
-                material,
-            },
-            work,
-        )
     }
 
     fn occluded(&self, ray: &Ray) -> OcclusionResult {
@@ -564,8 +645,19 @@ impl Geometry for MeshGeometry {
                         return true;
                     };
                     let inst = &self.instances[i as usize];
-                    let mut local = Self::local_ray(inst, r);
-                    if self.blases[inst.blas as usize].any(&mut local, &mut inner) {
+                    let local = if inst.far == NEAR {
+                        Some(Self::local_ray(inst, r))
+                    } else {
+                        Self::far_local_ray(
+                            &self.far_instances[inst.far as usize],
+                            r,
+                            Vec3::from(r.direction).as_dvec3(),
+                        )
+                        .map(|(local, _)| local)
+                    };
+                    if let Some(mut local) = local
+                        && self.blases[inst.blas as usize].any(&mut local, &mut inner)
+                    {
                         occluded = true;
                         return false;
                     }

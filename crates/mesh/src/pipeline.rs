@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use glam::{DAffine3, DVec3};
-use marchmesh_core::GeometryReport;
+use marchmesh_core::{FarFrame, GeometryReport};
 use marchmesh_meshio::{TriangleMesh, load_mesh};
 use marchmesh_scene::{MaterialId, Node, NodeKind, Scene, Shape};
 
@@ -21,7 +21,8 @@ use crate::build::{self, Placement, ShapeKey};
 use crate::flat::{AsAffine3A, FlatBuilder, SourceMesh, positions_bounds, render_box};
 use crate::tessellate::{self, Detail, LocalMesh, ScreenBudget};
 use crate::{
-    Extraction, Instance, MAX_SURFACE_RESOLUTION, MeshError, MeshOptions, Tessellation, extract,
+    Extraction, FarInstance, Instance, MAX_SURFACE_RESOLUTION, MeshError, MeshOptions, NEAR,
+    Tessellation, extract,
 };
 
 /// Phase 1: every mesh file of the scene loaded once, with notes on skipped triangles.
@@ -101,6 +102,8 @@ pub(crate) struct Assembled {
     pub(crate) flat_triangles: usize,
     pub(crate) blases: Vec<Blas>,
     pub(crate) instances: Vec<Instance>,
+    /// The frames of the instances far from the camera ([`Instance::far`] indexes them).
+    pub(crate) far_instances: Vec<FarInstance>,
     pub(crate) tlas: Option<Tree>,
 }
 
@@ -398,6 +401,7 @@ impl ShapeInputs<'_> {
         let mut flat = FlatBuilder::default();
         let mut blases: Vec<Blas> = Vec::new();
         let mut instances: Vec<Instance> = Vec::new();
+        let mut far_instances: Vec<FarInstance> = Vec::new();
         let mut instance_boxes: Vec<obvhs::aabb::Aabb> = Vec::new();
         for ((key, placements), local) in groups.iter().zip(local_meshes) {
             let source: SourceMesh = match (key, local) {
@@ -408,7 +412,22 @@ impl ShapeInputs<'_> {
                 (_, Some(l)) => SourceMesh::Local(l),
                 _ => continue,
             };
-            if options.instancing() && placements.len() > 1 {
+            // A placement far from the camera is an instance with a frame of its own (its
+            // rays enter it through f64), whatever the instancing option: flattened into
+            // render space its vertices would be rounded to the f32 grid out there.
+            // Equal keys are equal shapes: one local box serves the group.
+            let local_bounds = placements
+                .first()
+                .and_then(|p| build::local_bounds(p.node, self.mesh_bounds));
+            let frames: Vec<Option<FarFrame>> = placements
+                .iter()
+                .map(|p| {
+                    let (lo, hi) = build::transform_bounds(&p.to_render, local_bounds?);
+                    FarFrame::of_box(lo, hi)
+                })
+                .collect();
+            let any_far = frames.iter().any(Option::is_some);
+            if (options.instancing() && placements.len() > 1) || any_far {
                 let input = source.blas_input();
                 if input.triangles.is_empty() {
                     continue;
@@ -416,12 +435,24 @@ impl ShapeInputs<'_> {
                 let local_box = positions_bounds(&input.positions);
                 let blas_index = blases.len() as u32;
                 blases.push(Blas::build(input, options.bvh(), params));
-                for p in placements {
+                for (p, frame) in placements.iter().zip(&frames) {
                     instance_boxes.push(render_box(&p.to_render, local_box));
+                    let to_local = p.to_render.inverse();
+                    let far = match frame {
+                        Some(frame) => {
+                            far_instances.push(FarInstance {
+                                frame: *frame,
+                                to_local,
+                            });
+                            far_instances.len() as u32 - 1
+                        }
+                        None => NEAR,
+                    };
                     instances.push(Instance {
-                        to_local: p.to_render.inverse().as_affine3a_checked(),
+                        to_local: to_local.as_affine3a_checked(),
                         blas: blas_index,
                         material: p.material,
+                        far,
                     });
                 }
             } else {
@@ -464,6 +495,7 @@ impl ShapeInputs<'_> {
             flat_triangles,
             blases,
             instances,
+            far_instances,
             tlas,
         }
     }
@@ -485,12 +517,14 @@ pub(crate) fn describe(
         flat_triangles,
         blases,
         instances,
+        far_instances,
         tlas,
         ..
     } = built;
     let flat_triangles = *flat_triangles;
     let blas_triangles: usize = blases.iter().map(|b| b.triangle_count).sum();
-    let instance_bytes = (instances.len() * size_of::<Instance>()) as u64;
+    let instance_bytes = (instances.len() * size_of::<Instance>()
+        + far_instances.len() * size_of::<FarInstance>()) as u64;
     let memory = flat_blas.as_ref().map_or(0, Blas::memory_bytes)
         + blases.iter().map(Blas::memory_bytes).sum::<u64>()
         + instance_bytes
@@ -507,6 +541,7 @@ pub(crate) fn describe(
         ("blas_count".into(), blases.len() as f64),
         ("blas_triangles".into(), blas_triangles as f64),
         ("instances".into(), instances.len() as f64),
+        ("far_instances".into(), far_instances.len() as f64),
         ("repeat_cells".into(), walk.repeat_cells as f64),
         ("instanced_triangles".into(), rendered_triangles as f64),
         (
@@ -526,6 +561,13 @@ pub(crate) fn describe(
         options.build_quality(),
         if options.instancing() { "on" } else { "off" }
     ));
+    if !far_instances.is_empty() {
+        report.notes.push(format!(
+            "{} placement(s) farther than {} radii from the camera traced as instances in frames of their own (rays enter them in f64)",
+            far_instances.len(),
+            marchmesh_core::FAR_RATIO
+        ));
+    }
     let fell_back = flat_blas
         .iter()
         .chain(blases.iter())
