@@ -36,10 +36,10 @@ mod settings;
 
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::{DAffine3, DVec3, Vec3};
 use marchmesh_core::{
-    Cone, Geometry, GeometryReport, Hit, NoHit, OcclusionResult, Ray, RayWork, Shortcuts,
-    SurfacePoint, Termination, TraceResult, Visibility,
+    Cone, FarFrame, FrameEntry, Geometry, GeometryReport, Hit, NoHit, OcclusionResult,
+    PrimarySamples, Ray, RayWork, Shortcuts, SurfacePoint, Termination, TraceResult, Visibility,
 };
 use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, MeshGrid, RayCone, Restricted, V3};
 use marchmesh_scene::{MaterialId, Scene};
@@ -187,6 +187,14 @@ pub struct SdfGeometry {
     ao_taps: u32,
     /// Per-object fields for rays starting inside a solid (only when the camera is inside).
     inside: Option<Inside>,
+    /// Top-level objects far from the camera, each traced in a frame of its own (rays
+    /// enter it through f64, [`FarFrame::enter`]); empty for most scenes.
+    far: Vec<FarPart>,
+    /// Whether `field` holds any object (false when every object is far).
+    near: bool,
+    /// The path length from the camera to this part's frame (0 in render space), added to a
+    /// ray's for its normal step.
+    path_base: f32,
     report: GeometryReport,
 }
 
@@ -257,16 +265,93 @@ pub fn check_options(opts: &SdfOptions) -> Result<(), SdfError> {
 /// Compiles `scene` for sphere tracing. Errors name the offending node, mesh file or option.
 pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> {
     check_options(opts)?;
-    let (eps_abs, eps_cone) = match opts.hit_epsilon() {
-        HitEpsilon::Absolute(e) => (e, 0.0),
-        HitEpsilon::PixelCone(k) => (0.0, k * scene.camera.pixel_angle()),
-    };
     let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
     check(max_distance > 0.0, "max_distance", "must be > 0")?;
     check_bake_memory(scene, opts)?;
     let t0 = Instant::now();
     let field_opts = field_options(opts);
-    let field = Field::compile_scene(scene, &field_opts)?;
+    let frames = far_frames(scene);
+    if frames.iter().all(Option::is_none) {
+        let field = Field::compile_scene(scene, &field_opts)?;
+        return build_part(scene, opts, field, None, t0);
+    }
+    // Far objects each get a field compiled in a frame centred on their bounding sphere;
+    // the rest stay in the render-space field.
+    let cam = scene.camera.position;
+    let mut near = scene.clone();
+    near.objects = scene
+        .objects
+        .iter()
+        .zip(&frames)
+        .filter(|(_, f)| f.is_none())
+        .map(|(o, _)| o.clone())
+        .collect();
+    let mut far = Vec::new();
+    for (object, frame) in scene.objects.iter().zip(&frames) {
+        let Some(frame) = *frame else { continue };
+        let to_frame = DAffine3::from_translation(-(cam + frame.centre()));
+        let field = Field::compile_node(object, to_frame, &field_opts)?;
+        far.push(FarPart {
+            frame,
+            part: build_part(scene, opts, field, Some(frame), Instant::now())?,
+        });
+    }
+    let field = Field::compile_scene(&near, &field_opts)?;
+    let mut geometry = build_part(&near, opts, field, None, t0)?;
+    geometry.near = !near.objects.is_empty();
+    // The one-query shortcuts read the render-space field only: shadows and occlusion of
+    // far objects need their rays.
+    geometry.shortcuts = Shortcuts::default();
+    geometry.report.memory_bytes += far.iter().map(|f| f.part.report.memory_bytes).sum::<u64>();
+    geometry.report.notes.push(format!(
+        "{} top-level object(s) farther than {} radii from the camera traced in frames of their own (rays advanced to their bounding spheres in f64)",
+        far.len(),
+        marchmesh_core::FAR_RATIO
+    ));
+    geometry
+        .report
+        .counters
+        .push(("far_objects".into(), far.len() as f64));
+    geometry.far = far;
+    Ok(geometry)
+}
+
+/// The frame of each top-level object of `scene` (in order) that lies far from the camera
+/// ([`FarFrame::of_box`] on its render-space bounds); `None` for the others, and for objects
+/// whose bounds are unknown before baking (mesh files) or infinite.
+fn far_frames(scene: &Scene) -> Vec<Option<FarFrame>> {
+    let cam = scene.camera.position;
+    scene
+        .objects
+        .iter()
+        .map(|o| {
+            let (lo, hi) = o.bounds_in_parent(&|_| None)?.finite()?;
+            FarFrame::of_box(lo - cam, hi - cam)
+        })
+        .collect()
+}
+
+/// One traced part built from its compiled `field`: the render-space field of `scene`'s
+/// objects (`frame` `None`), or a far object's field in the frame centred on `frame`, whose
+/// hit epsilon and normal step count the path from the camera to the frame. Errors: the
+/// per-object fields of a camera inside a solid could not be compiled.
+fn build_part(
+    scene: &Scene,
+    opts: &SdfOptions,
+    field: Field,
+    frame: Option<FarFrame>,
+    t0: Instant,
+) -> Result<SdfGeometry, SdfError> {
+    let (eps_abs, eps_cone) = match opts.hit_epsilon() {
+        HitEpsilon::Absolute(e) => (e, 0.0),
+        HitEpsilon::PixelCone(k) => (0.0, k * scene.camera.pixel_angle()),
+    };
+    // In a far frame a ray's start lies about the frame's distance (less its radius) along
+    // its path from the camera: the cone epsilon there is a constant part of the epsilon.
+    let path_base = frame.map_or(0.0, |f| (f.distance() - f.radius()).max(0.0));
+    let eps_abs = eps_abs + eps_cone * path_base;
+    let max_distance = opts.max_distance.unwrap_or(scene.render.max_distance);
+    let field_opts = field_options(opts);
     let mut field = if opts.bounds {
         field
     } else {
@@ -275,7 +360,11 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
         field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
     }
-    let inside = Inside::build(scene, &field, &field_opts)?;
+    let inside = match frame {
+        None => Inside::build(scene, &field, &field_opts)?,
+        // The camera is never inside a far object.
+        Some(_) => None,
+    };
     let total_ms = t0.elapsed().as_secs_f64() * 1e3;
     let bounds = field.bounds().map(|(lo, hi)| {
         // Pad by a relative margin so f32 rounding never clips a surface.
@@ -300,7 +389,7 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
             "camera inside a solid: rays starting inside one trace the nearest of the {} top-level surfaces (min_k of each distance oriented by the side of it the ray starts on), one field per object",
             inside.len()
         ));
-    } else if field.distance_f64(DVec3::ZERO) < 0.0 {
+    } else if frame.is_none() && field.distance_f64(DVec3::ZERO) < 0.0 {
         notes.push(format!(
             "camera inside a solid of more than {} top-level objects: rays starting inside see the union's boundary, not surfaces inside other solids",
             inside::MAX_INSIDE_OBJECTS
@@ -344,12 +433,25 @@ pub fn build(scene: &Scene, opts: &SdfOptions) -> Result<SdfGeometry, SdfError> 
         ao_taps: opts.ao_taps,
         inside,
         field,
+        far: Vec::new(),
+        near: true,
+        path_base: path_base as f32,
         report,
     })
 }
 
+/// A top-level object far from the camera, traced in its own frame.
+#[derive(Debug)]
+struct FarPart {
+    /// Its bounding sphere (render space), whose centre is the frame's origin.
+    frame: FarFrame,
+    /// Its field in that frame, traced by the render-space tracer's code.
+    part: SdfGeometry,
+}
+
 impl SdfGeometry {
-    /// The compiled field (render space).
+    /// The compiled render-space field (without the far objects, which have fields of their
+    /// own).
     pub fn field(&self) -> &Field {
         &self.field
     }
@@ -516,7 +618,7 @@ impl SdfGeometry {
     /// The hit point of a march ended by a hit and its normal step.
     fn hit_point(&self, m: &March) -> (Vec3, f32) {
         let p = m.point();
-        let h = (self.normal_step * m.path_length())
+        let h = (self.normal_step * (self.path_base + m.path_length()))
             .max(p.length() * 1e-6)
             .max(1e-30);
         (p, h)
@@ -887,8 +989,9 @@ impl SdfGeometry {
     }
 }
 
-impl Geometry for SdfGeometry {
-    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+impl SdfGeometry {
+    /// [`Geometry::closest_hit`] through `field` alone.
+    fn near_closest_hit(&self, ray: &Ray) -> TraceResult {
         if let Some(inside) = self.inside_of(ray) {
             return self.closest_from_inside(inside, ray);
         }
@@ -901,7 +1004,8 @@ impl Geometry for SdfGeometry {
         }
     }
 
-    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+    /// [`Geometry::occluded`] through `field` alone.
+    fn near_occluded(&self, ray: &Ray) -> OcclusionResult {
         if let Some(inside) = self.inside_of(ray) {
             return match March::new(ray, &self.params, false) {
                 Err(t) => OcclusionResult {
@@ -928,7 +1032,8 @@ impl Geometry for SdfGeometry {
         }
     }
 
-    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+    /// [`Geometry::closest_hits`] through `field` alone.
+    fn near_closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
         assert_eq!(
             rays.len(),
             out.len(),
@@ -936,7 +1041,7 @@ impl Geometry for SdfGeometry {
         );
         if !self.lockstep || self.inside.is_some() {
             for (r, o) in rays.iter().zip(out.iter_mut()) {
-                *o = self.closest_hit(r);
+                *o = self.near_closest_hit(r);
             }
             return;
         }
@@ -979,7 +1084,8 @@ impl Geometry for SdfGeometry {
         });
     }
 
-    fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
+    /// [`Geometry::occluded_many`] through `field` alone.
+    fn near_occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
         assert_eq!(
             rays.len(),
             out.len(),
@@ -987,7 +1093,7 @@ impl Geometry for SdfGeometry {
         );
         if !self.lockstep || self.inside.is_some() {
             for (r, o) in rays.iter().zip(out.iter_mut()) {
-                *o = self.occluded(r);
+                *o = self.near_occluded(r);
             }
             return;
         }
@@ -1004,6 +1110,200 @@ impl Geometry for SdfGeometry {
                 },
             };
         });
+    }
+
+    /// The closest hits of `rays` through the render-space field and every far part: each
+    /// far part traces the rays entering its bounding sphere before the best hit so far,
+    /// started there in its frame ([`FarFrame::enter`]; primary rays along their exact f64
+    /// directions from `samples`), its hits' distances and points reassembled in f64.
+    fn closest_hits_far(
+        &self,
+        rays: &[Ray],
+        samples: Option<PrimarySamples<'_>>,
+        out: &mut [TraceResult],
+    ) {
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "closest_hits: rays and out differ in length"
+        );
+        if self.near {
+            self.near_closest_hits(rays, out);
+        } else {
+            out.fill(TraceResult::not_found(NoHit::Miss, RayWork::default()));
+        }
+        let mut local: Vec<Ray> = Vec::new();
+        let mut entries: Vec<(usize, FrameEntry)> = Vec::new();
+        let mut local_out: Vec<TraceResult> = Vec::new();
+        for far in &self.far {
+            local.clear();
+            entries.clear();
+            for (i, ray) in rays.iter().enumerate() {
+                let t_max = out[i]
+                    .hit()
+                    .map_or(ray.t_max, |h| h.t)
+                    .min(self.params.max_distance);
+                let dir = samples.map_or_else(|| ray.dir.as_dvec3(), |s| s.direction(i));
+                if let Some(e) = far.frame.enter(ray.origin, dir, ray.t_min, t_max) {
+                    local.push(e.local_ray(far.frame.centre(), ray.dir));
+                    entries.push((i, e));
+                }
+            }
+            if local.is_empty() {
+                continue;
+            }
+            local_out.clear();
+            local_out.resize(
+                local.len(),
+                TraceResult::not_found(NoHit::Miss, RayWork::default()),
+            );
+            far.part.near_closest_hits(&local, &mut local_out);
+            for (&(i, e), r) in entries.iter().zip(&local_out) {
+                out[i] = merge_far_hit(out[i], *r, &e, far.frame.centre());
+            }
+        }
+    }
+
+    /// [`Geometry::occluded_many`] through the render-space field and every far part (the
+    /// rays not yet occluded, entering each part's bounding sphere).
+    fn occluded_far(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
+        assert_eq!(
+            rays.len(),
+            out.len(),
+            "occluded_many: rays and out differ in length"
+        );
+        if self.near {
+            self.near_occluded_many(rays, out);
+        } else {
+            out.fill(OcclusionResult {
+                occluded: false,
+                termination: Termination::Miss,
+                work: RayWork::default(),
+            });
+        }
+        let mut local: Vec<Ray> = Vec::new();
+        let mut index: Vec<usize> = Vec::new();
+        let mut local_out: Vec<OcclusionResult> = Vec::new();
+        for far in &self.far {
+            local.clear();
+            index.clear();
+            for (i, ray) in rays.iter().enumerate() {
+                if out[i].occluded {
+                    continue;
+                }
+                let t_max = ray.t_max.min(self.params.max_distance);
+                if let Some(e) = far
+                    .frame
+                    .enter(ray.origin, ray.dir.as_dvec3(), ray.t_min, t_max)
+                {
+                    local.push(e.local_ray(far.frame.centre(), ray.dir));
+                    index.push(i);
+                }
+            }
+            if local.is_empty() {
+                continue;
+            }
+            local_out.clear();
+            local_out.resize(local.len(), OcclusionResult::default());
+            far.part.near_occluded_many(&local, &mut local_out);
+            for (&i, r) in index.iter().zip(&local_out) {
+                let o = &mut out[i];
+                o.work.steps += r.work.steps;
+                if r.occluded {
+                    o.occluded = true;
+                    o.termination = Termination::Hit;
+                } else if r.termination == Termination::MaxSteps {
+                    o.termination = Termination::MaxSteps;
+                }
+            }
+        }
+    }
+}
+
+/// `best` (render space) and `local`, the result of the same ray traced in a far frame
+/// centred on `centre` from `entry`, merged: the nearer hit (its distance and point
+/// reassembled in f64), else step exhaustion if either ran out; work added.
+fn merge_far_hit(
+    best: TraceResult,
+    local: TraceResult,
+    entry: &FrameEntry,
+    centre: DVec3,
+) -> TraceResult {
+    let work = RayWork {
+        steps: best.work.steps + local.work.steps,
+        ..best.work
+    };
+    match (best.hit(), local.hit()) {
+        (best_hit, Some(h)) => {
+            let t = entry.render_t(h.t);
+            match best_hit {
+                Some(b) if b.t < t => TraceResult::found(b, work),
+                _ => TraceResult::found(
+                    Hit {
+                        t,
+                        position: (centre + h.position.as_dvec3()).as_vec3(),
+                        ..h
+                    },
+                    work,
+                ),
+            }
+        }
+        (Some(b), None) => TraceResult::found(b, work),
+        (None, None) => {
+            let why = if local.termination() == Termination::MaxSteps {
+                NoHit::MaxSteps
+            } else {
+                NoHit::try_from(best.termination()).unwrap_or(NoHit::Miss)
+            };
+            TraceResult::not_found(why, work)
+        }
+    }
+}
+
+impl Geometry for SdfGeometry {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        if self.far.is_empty() {
+            return self.near_closest_hit(ray);
+        }
+        let mut out = [TraceResult::default()];
+        self.closest_hits_far(std::slice::from_ref(ray), None, &mut out);
+        out[0]
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        if self.far.is_empty() {
+            return self.near_occluded(ray);
+        }
+        let mut out = [OcclusionResult::default()];
+        self.occluded_far(std::slice::from_ref(ray), &mut out);
+        out[0]
+    }
+
+    fn closest_hits(&self, rays: &[Ray], out: &mut [TraceResult]) {
+        if self.far.is_empty() {
+            return self.near_closest_hits(rays, out);
+        }
+        self.closest_hits_far(rays, None, out);
+    }
+
+    /// With far objects, primary rays enter their frames along their exact f64 directions.
+    fn closest_hits_primary(
+        &self,
+        rays: &[Ray],
+        samples: PrimarySamples<'_>,
+        out: &mut [TraceResult],
+    ) {
+        if self.far.is_empty() {
+            return self.near_closest_hits(rays, out);
+        }
+        self.closest_hits_far(rays, Some(samples), out);
+    }
+
+    fn occluded_many(&self, rays: &[Ray], out: &mut [OcclusionResult]) {
+        if self.far.is_empty() {
+            return self.near_occluded_many(rays, out);
+        }
+        self.occluded_far(rays, out);
     }
 
     fn report(&self) -> GeometryReport {
