@@ -17,7 +17,11 @@
 //!   them (tessellations, meshes with normals), geometric normals otherwise.
 //!
 //! All data is in render space (world minus camera position, in f64 before converting to
-//! f32), as the [`marchmesh_core::Geometry`] contract requires.
+//! f32), as the [`marchmesh_core::Geometry`] contract requires, except placements far from
+//! the camera ([`marchmesh_core::FarFrame::of_box`]): those are instances in their own frame
+//! whatever the instancing option, which rays enter through f64 (advanced to the placement's
+//! bounding sphere, primary rays along their exact camera directions), so their triangles
+//! are not rounded to the f32 grid out there.
 
 mod blas;
 mod budget;

@@ -439,3 +439,24 @@ fn depth_error_against_the_analytic_sphere_falls_as_the_screen_budget_shrinks() 
         previous = worst;
     }
 }
+
+/// A sphere 1e6 units from the camera (and 1e7 off-axis) is a far instance traced in its own
+/// frame: no cracks inside its silhouette, its silhouette and depth within the chord budget,
+/// its normals the tessellation's (in render space its vertices sat on a 0.06-unit grid).
+#[test]
+fn far_spheres_are_hit_like_the_analytic_sphere() {
+    for (distance, off_axis) in [(1e6, false), (1e6, true), (1e7, true)] {
+        let s = far_sphere_scene(distance, off_axis);
+        let g = build(
+            &s,
+            &MeshOptions {
+                tess_chord: Some(1e-3),
+                ..MeshOptions::default()
+            },
+        )
+        .expect("build");
+        assert_eq!(g.instance_count(), 1, "the far sphere is an instance");
+        let checked = check_far_sphere(&s, &g, 0.01, 2.0);
+        assert!(checked > 500, "{distance}: only {checked} hits checked");
+    }
+}

@@ -1,6 +1,11 @@
 //! The SDF backend of marchmesh: the scene compiled into a distance field
 //! ([`marchmesh_field::Field`], render space, f32) and sphere traced.
 //!
+//! * Top-level objects far from the camera ([`marchmesh_core::FarFrame::of_box`]) are
+//!   compiled into fields of their own, centred on them: a ray is advanced to the object's
+//!   bounding sphere in f64, marched there in f32 by the same tracer, and its hit reassembled
+//!   in f64, so the object is not sampled on the f32 grid out there (0.06 units at 1e6).
+//!
 //! * Hit test in two stages (see `march/`): a sample closer than the cone epsilon
 //!   ([`HitEpsilon::PixelCone`], a twentieth of the pixel footprint by default) does not end
 //!   the ray; the tracer then decides hit or near miss with secant predictions of the

@@ -167,3 +167,83 @@ pub fn left_deep_smooth_union(levels: usize) -> String {
     json.push_str("]}");
     json
 }
+
+/// A unit sphere at the world origin seen from `distance` units, along -z or (`off_axis`)
+/// along the (1, 1, -1) diagonal, with a field of view 3.2 units tall at the sphere: the
+/// scenes of the stability study's `distance` families, 64 pixels square.
+pub fn far_sphere_scene(distance: f64, off_axis: bool) -> Scene {
+    let vfov = 2.0 * (1.6f64 / distance).atan().to_degrees();
+    let c = distance / 3f64.sqrt();
+    let position = if off_axis {
+        [c, c, -c]
+    } else {
+        [0.0, 0.0, -distance]
+    };
+    scene(&format!(
+        r#"{{"camera": {{"position": [{}, {}, {}], "look_at": [0, 0, 0], "vfov_deg": {vfov}, "width": 64, "height": 64}},
+            "objects": [{{"shape": {{"sphere": {{"radius": 1}}}}}}],
+            "render": {{"max_distance": {}}}}}"#,
+        position[0],
+        position[1],
+        position[2],
+        2.0 * distance + 10.0
+    ))
+}
+
+/// Checks `geometry`'s closest hits of a 48 x 48 fan of camera rays of `scene` (a
+/// [`far_sphere_scene`]) against the unit sphere in f64, along each f32 ray as traced: a ray
+/// passing more than `band` inside the silhouette must hit, one passing more than `band`
+/// outside must miss, and where the ray passes within 0.9 of the centre the hit distance
+/// must be within `band` (plus 4 f32 ulps) of the truth and the normal within
+/// `max_normal_deg` degrees. Returns the number of hits checked; panics naming the first
+/// disagreement.
+pub fn check_far_sphere(
+    scene: &Scene,
+    geometry: &dyn Geometry,
+    band: f64,
+    max_normal_deg: f64,
+) -> usize {
+    let centre = -scene.camera.position;
+    let mut checked = 0;
+    for ray in camera_rays(scene, 48) {
+        let dir = ray.dir.as_dvec3();
+        let tc = centre.dot(dir);
+        let off = dir * tc - centre;
+        let q = off.length();
+        let r = geometry.closest_hit(&ray);
+        if q > 1.0 + band {
+            assert!(
+                r.hit().is_none(),
+                "ray {dir} passing {q} from the centre hit"
+            );
+            continue;
+        }
+        if q >= 1.0 - band {
+            continue;
+        }
+        let Some(h) = r.hit() else {
+            panic!("ray {dir} passing {q} from the centre missed: {r:?}");
+        };
+        if q < 0.9 {
+            let t = tc - (1.0 - q * q).sqrt();
+            let slack = band + 4.0 * f64::from(f32::EPSILON) * t;
+            assert!(
+                (f64::from(h.t) - t).abs() <= slack,
+                "ray {dir}: t {} vs {t}",
+                h.t
+            );
+            let n = (dir * t - centre).normalize();
+            let angle = n
+                .dot(h.normal.as_dvec3().normalize())
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees();
+            assert!(
+                angle <= max_normal_deg,
+                "ray {dir}: normal off by {angle} degrees"
+            );
+            checked += 1;
+        }
+    }
+    checked
+}
