@@ -206,9 +206,13 @@ pub fn check_far_sphere(
     let centre = -scene.camera.position;
     let mut checked = 0;
     for ray in camera_rays(scene, 48) {
+        // The f32 direction is unit only to 2^-24, which over 1e7 units is half a unit: the
+        // geometry along the unit direction, the ray parameter along the direction as given.
         let dir = ray.dir.as_dvec3();
-        let tc = centre.dot(dir);
-        let off = dir * tc - centre;
+        let len = dir.length();
+        let unit = dir / len;
+        let tc = centre.dot(unit);
+        let off = unit * tc - centre;
         let q = off.length();
         let r = geometry.closest_hit(&ray);
         if q > 1.0 + band {
@@ -225,14 +229,15 @@ pub fn check_far_sphere(
             panic!("ray {dir} passing {q} from the centre missed: {r:?}");
         };
         if q < 0.9 {
-            let t = tc - (1.0 - q * q).sqrt();
+            let t_unit = tc - (1.0 - q * q).sqrt();
+            let t = t_unit / len;
             let slack = band + 4.0 * f64::from(f32::EPSILON) * t;
             assert!(
                 (f64::from(h.t) - t).abs() <= slack,
                 "ray {dir}: t {} vs {t}",
                 h.t
             );
-            let n = (dir * t - centre).normalize();
+            let n = (unit * t_unit - centre).normalize();
             let angle = n
                 .dot(h.normal.as_dvec3().normalize())
                 .clamp(-1.0, 1.0)
