@@ -202,6 +202,19 @@ pub struct FieldReport {
     pub notes: Vec<String>,
 }
 
+/// A field's program restricted to a ball ([`Field::restricted_to_ball`]).
+#[derive(Debug, Clone)]
+pub struct BallProgram {
+    p32: Program<f32>,
+}
+
+impl BallProgram {
+    /// Nodes of the restricted program.
+    pub fn node_count(&self) -> usize {
+        self.p32.instrs.len()
+    }
+}
+
 /// A compiled distance field (render space for [`Field::compile_scene`], the caller's frame
 /// for [`Field::compile_node`]).
 pub struct Field {
@@ -791,6 +804,51 @@ impl Field {
     /// Compile phases, counters and notes.
     pub fn report(&self) -> &FieldReport {
         &self.report
+    }
+
+    /// The program restricted to the ball of `radius` around `centre` ([`prune::prune`]),
+    /// for reading many points inside the ball through [`Field::ball_distance_x8`]: at every
+    /// point of the ball its value is within `max_error_rel` times the longest side of the
+    /// field's box of the whole program's (`0` without finite bounds: exact). Points outside
+    /// the ball get values that may be wrong. Costs one pass over the whole program.
+    pub fn restricted_to_ball(
+        &self,
+        centre: DVec3,
+        radius: f64,
+        max_error_rel: f64,
+    ) -> BallProgram {
+        let extent = self
+            .bounds
+            .map(|(lo, hi)| (hi - lo).max_element())
+            .filter(|e| e.is_finite())
+            .unwrap_or(0.0);
+        let max_error = (max_error_rel * extent).max(0.0);
+        let pruned = prune::prune(&self.p64, &self.grids, centre, radius, max_error);
+        BallProgram {
+            p32: pruned.program.cast::<f32>(),
+        }
+    }
+
+    /// Distances at eight points inside the ball `ball` was restricted to (per lane the
+    /// whole field's [`Field::distance`] within the error given to
+    /// [`Field::restricted_to_ball`]).
+    #[cfg_attr(not(debug_assertions), inline)]
+    pub fn ball_distance_x8(&self, ball: &BallProgram, p: [Vec3; 8]) -> [f32; 8] {
+        ball.p32
+            .eval::<F32x8, false>(V3::from_points(p), &self.grids)
+            .0
+            .0
+    }
+
+    /// The material every point of the field has when all its nodes carry one material (so
+    /// no evaluation is needed to know it), else `None`.
+    pub fn single_material(&self) -> Option<MaterialId> {
+        let first = self.p64.instrs.first()?.material;
+        self.p64
+            .instrs
+            .iter()
+            .all(|i| i.material == first)
+            .then_some(first)
     }
 
     /// The compiled f64 program (the whole one, never a pruned cell's).

@@ -367,3 +367,59 @@ fn the_octree_build_reads_at_most_its_work_budget() {
         assert!(stats.pruned_nodes <= Cells::max_work(nodes), "{stats:?}");
     }
 }
+
+/// A field restricted to a small ball ([`Field::restricted_to_ball`]) reads a handful of a
+/// large molecule's children and gives the whole field's f32 value at every point of the
+/// ball, within the error it was given (here exact: 0).
+#[test]
+fn a_ball_restriction_is_small_and_agrees_inside_the_ball() {
+    let whole = compile(&molecule(400, 11, 0.026));
+    let nodes = whole.node_count();
+    let probes = probes(8);
+    let mut smallest = usize::MAX;
+    for (i, &centre) in probes.iter().enumerate() {
+        let radius = 0.02 + 0.01 * (i % 3) as f64;
+        let ball = whole.restricted_to_ball(centre, radius, 0.0);
+        smallest = smallest.min(ball.node_count());
+        // Eight points inside the ball: on its axes, at its rim and at the centre.
+        let at = |j: usize| {
+            let dir = [
+                DVec3::X,
+                DVec3::Y,
+                DVec3::Z,
+                -DVec3::X,
+                -DVec3::Y,
+                -DVec3::Z,
+                DVec3::ONE.normalize(),
+                DVec3::ZERO,
+            ][j];
+            (centre + dir * radius * 0.999).as_vec3()
+        };
+        let points: [Vec3; 8] = std::array::from_fn(at);
+        let inside = whole.ball_distance_x8(&ball, points);
+        let expected = whole.distance_x8(points);
+        for j in 0..8 {
+            assert_eq!(
+                inside[j].to_bits(),
+                expected[j].to_bits(),
+                "{:?} in the ball at {centre}, radius {radius}",
+                points[j]
+            );
+        }
+    }
+    assert!(
+        smallest * 10 < nodes,
+        "the smallest restriction holds {smallest} of {nodes} nodes"
+    );
+}
+
+/// One material on every node is known without evaluating; two are not.
+#[test]
+fn a_single_material_is_known_without_evaluating() {
+    assert_eq!(compile(&molecule(20, 3, 0.026)).single_material(), Some(0));
+    let mut two = molecule(20, 3, 0.026);
+    if let NodeKind::Smooth { children, .. } = &mut two.kind {
+        children[5].material = 2;
+    }
+    assert_eq!(compile(&two).single_material(), None);
+}

@@ -213,20 +213,7 @@ impl Row {
 pub fn accuracy_columns() -> &'static [String] {
     static COLUMNS: std::sync::OnceLock<Vec<String>> = std::sync::OnceLock::new();
     COLUMNS.get_or_init(|| {
-        let cells = |row: &Row| -> Vec<String> {
-            let mut w = csv::Writer::from_writer(Vec::new());
-            let _ = w.serialize(row);
-            let bytes = w.into_inner().unwrap_or_default();
-            let text = String::from_utf8_lossy(&bytes);
-            let mut lines = text.lines();
-            let _header = lines.next();
-            lines
-                .next()
-                .unwrap_or("")
-                .split(',')
-                .map(str::to_string)
-                .collect()
-        };
+        let cells = |row: &Row| row_csv_lines(row).1;
         let empty = Row::default();
         let mut filled = Row::default();
         filled.set_accuracy(&Accuracy::default(), Some(1.0), Some(1.0));
@@ -743,16 +730,23 @@ impl Results {
 /// The CSV column names, in order.
 pub fn csv_header() -> Vec<String> {
     // Serialize an example row into a CSV header through the same path as the data.
+    row_csv_lines(&Row::default()).0
+}
+
+/// `row` serialized as CSV the way [`Results::write_csv`] writes it (without the formula
+/// escaping): its header's cells and its data line's cells. The cells of a line are split on
+/// commas, so only rows whose text cells hold no comma split correctly (the default and
+/// accuracy-only rows these helpers serialize do).
+fn row_csv_lines(row: &Row) -> (Vec<String>, Vec<String>) {
     let mut w = csv::Writer::from_writer(Vec::new());
-    let _ = w.serialize(Row::default());
+    let _ = w.serialize(row);
     let bytes = w.into_inner().unwrap_or_default();
     let text = String::from_utf8_lossy(&bytes);
-    text.lines()
-        .next()
-        .unwrap_or("")
-        .split(',')
-        .map(str::to_string)
-        .collect()
+    let mut lines = text
+        .lines()
+        .map(|l| l.split(',').map(str::to_string).collect::<Vec<_>>());
+    let header = lines.next().unwrap_or_default();
+    (header, lines.next().unwrap_or_default())
 }
 
 /// First characters that make a spreadsheet read a cell as a formula (`=`, `+`, `-`, `@`,

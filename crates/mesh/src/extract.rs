@@ -36,7 +36,7 @@ pub(crate) fn extract(
     resolution: u32,
     field_options: &FieldOptions,
 ) -> Result<LocalMesh, MeshError> {
-    let mut field =
+    let field =
         Field::compile_node(node, node.transform.inverse(), field_options).map_err(|e| {
             MeshError::Unsupported {
                 json_path: node.json_path.clone(),
@@ -50,23 +50,26 @@ pub(crate) fn extract(
             json_path: node.json_path.clone(),
             reason: "the CSG result is unbounded (e.g. a plane or an infinite repetition survives), so it has no finite surface to extract".into(),
         })?;
-    // Pruned per region: a sample reads only the children that matter near it, and a
-    // sample in a cell without surface reads that cell's far bound. A far cell's field is at
-    // least half its bounding radius, so at least a quarter of its longest edge; with that
-    // edge at least eight extraction cells long, no corner of an extraction cell the surface
-    // crosses (whose field is below a cell diagonal, sqrt(3) cells) reads a far bound: the
-    // mesh is the one the whole field gives.
-    if field.node_count() >= PRUNE_MIN_NODES {
-        let depth = (resolution.clamp(8, MAX_SURFACE_RESOLUTION) / 8)
-            .ilog2()
-            .min(6);
-        field.build_cells(depth, PRUNE_MAX_ERROR_REL);
-    }
-    // Eight samples of a block row at a time through the field's 8-lane f32 evaluation (the
-    // values the tracer reads; a pruned field answers a row from its cell in one pass).
-    Ok(extract_surface_x8(
-        |p| field.distance_x8(p.map(DVec3::as_vec3)),
-        |p| field.distance_material_f64(p).1,
+    // Pruned per block: each block of samples near the surface reads the program restricted
+    // to the block's ball (one pass over the program per block), so a sample reads only the
+    // children that matter near it, however many the field holds and however little an
+    // octree of cells over the whole box could prune (smooth folds prune only in regions
+    // about the blend radius across). Block centres, which decide which blocks are near,
+    // read the whole field.
+    let field = &field;
+    let prune = field.node_count() >= PRUNE_MIN_NODES;
+    let single_material = field.single_material();
+    let sdf = |p: [DVec3; 8]| field.distance_x8(p.map(DVec3::as_vec3));
+    Ok(extract_surface_blocks(
+        &sdf,
+        |centre, radius| {
+            let ball = prune.then(|| field.restricted_to_ball(centre, radius, PRUNE_MAX_ERROR_REL));
+            move |p: [DVec3; 8]| match &ball {
+                Some(b) => field.ball_distance_x8(b, p.map(DVec3::as_vec3)),
+                None => field.distance_x8(p.map(DVec3::as_vec3)),
+            }
+        },
+        |p| single_material.unwrap_or_else(|| field.distance_material_f64(p).1),
         bounds,
         resolution,
     ))
@@ -102,6 +105,26 @@ pub fn extract_surface_x8(
     bounds: (DVec3, DVec3),
     resolution: u32,
 ) -> LocalMesh {
+    extract_surface_blocks(
+        &distance_x8,
+        |_, _| &distance_x8,
+        material_at,
+        bounds,
+        resolution,
+    )
+}
+
+/// [`extract_surface_x8`] where the samples of each block near the surface are read through
+/// `block(centre, radius)`, an evaluator that must agree with `distance_x8` (within the
+/// field's f32 rounding) at every point within `radius` of `centre`: a field restricted to
+/// the block. `distance_x8` reads the blocks' centres.
+fn extract_surface_blocks<B: Fn([DVec3; 8]) -> [f32; 8]>(
+    distance_x8: &(impl Fn([DVec3; 8]) -> [f32; 8] + Sync),
+    block: impl Fn(DVec3, f64) -> B + Sync,
+    material_at: impl Fn(DVec3) -> MaterialId + Sync,
+    bounds: (DVec3, DVec3),
+    resolution: u32,
+) -> LocalMesh {
     let resolution = resolution.clamp(8, MAX_SURFACE_RESOLUTION);
     let (lo, hi) = bounds;
     let extent = (hi - lo).max(DVec3::splat(1e-300));
@@ -109,7 +132,7 @@ pub fn extract_surface_x8(
     let origin = lo - DVec3::splat(2.0 * cell);
     let dims = ((extent / cell).ceil().as_uvec3() + glam::UVec3::splat(5)).to_array();
     let shape = RuntimeShape::<u32, 3>::new(dims);
-    let sdf = sample_narrow_band(&distance_x8, origin, cell, dims);
+    let sdf = sample_narrow_band(distance_x8, &block, origin, cell, dims);
     let mut buffer = SurfaceNetsBuffer::default();
     surface_nets(&sdf, &shape, [0; 3], dims.map(|d| d - 1), &mut buffer);
 
@@ -177,8 +200,9 @@ const _: () = assert!(BAND_BLOCK == 8, "a block row is one 8-point query");
 /// from zero. Surface nets read values only at the corners of cells the surface crosses,
 /// whose values lie within a cell diagonal of zero, so no such corner is in a skipped
 /// block: the mesh is the one the fully sampled grid gives.
-fn sample_narrow_band(
+fn sample_narrow_band<B: Fn([DVec3; 8]) -> [f32; 8]>(
     distance_x8: &(impl Fn([DVec3; 8]) -> [f32; 8] + Sync),
+    block: &(impl Fn(DVec3, f64) -> B + Sync),
     origin: DVec3,
     cell: f64,
     dims: [u32; 3],
@@ -228,24 +252,31 @@ fn sample_narrow_band(
                         * cell;
                     let d = f64::from(centre_value);
                     let far = d.is_finite() && d.abs() > half_diagonal + 2.0 * 3f64.sqrt() * cell;
+                    // Every sample of the block lies within its half diagonal of the centre.
+                    let near_field = (!far).then(|| {
+                        block(
+                            origin + centre_index * cell,
+                            half_diagonal * (1.0 + 1e-9) + 1e-300,
+                        )
+                    });
                     for z in z0..z1 {
                         for y in y0..y1 {
                             let row = (z - z0) * slice + y * nx;
-                            if far {
+                            if let Some(near_field) = &near_field {
+                                // BAND_BLOCK is 8: one row of a block is one call.
+                                let values = near_field(std::array::from_fn(|i| {
+                                    point((x0 + i).min(x1 - 1), y, z)
+                                }));
+                                for x in x0..x1 {
+                                    out[row + x] = finite(values[x - x0]);
+                                }
+                            } else {
                                 for x in x0..x1 {
                                     let offset = (DVec3::new(x as f64, y as f64, z as f64)
                                         - centre_index)
                                         .length()
                                         * cell;
                                     out[row + x] = ((d.abs() - offset) as f32).copysign(d as f32);
-                                }
-                            } else {
-                                // BAND_BLOCK is 8: one row of a block is one call.
-                                let values = distance_x8(std::array::from_fn(|i| {
-                                    point((x0 + i).min(x1 - 1), y, z)
-                                }));
-                                for x in x0..x1 {
-                                    out[row + x] = finite(values[x - x0]);
                                 }
                             }
                         }
@@ -314,7 +345,8 @@ mod tests {
         let dims = [40u32, 40, 40];
         let cell = 0.05;
         let origin = DVec3::splat(-1.0);
-        let grid = sample_narrow_band(&|p: [DVec3; 8]| p.map(distance), origin, cell, dims);
+        let whole = |p: [DVec3; 8]| p.map(distance);
+        let grid = sample_narrow_band(&whole, &|_, _| whole, origin, cell, dims);
         for z in 0..40usize {
             for y in 0..40usize {
                 for x in 0..40usize {
@@ -326,5 +358,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// Sampling each near block through the field restricted to it gives the mesh the whole
+    /// field gives, vertex for vertex (a molecule of smooth-blended spheres, as in the
+    /// sculpted suite, whose restricted programs hold a few of its children).
+    #[test]
+    fn blocks_read_through_restricted_fields_mesh_like_the_whole_field() {
+        use glam::DAffine3;
+        use marchmesh_scene::{NodeKind, Shape, SmoothOp};
+        let leaf = |c: DVec3| Node {
+            transform: DAffine3::from_translation(c),
+            material: 0,
+            name: None,
+            json_path: "test".into(),
+            kind: NodeKind::Leaf(Shape::Sphere { radius: 0.032 }),
+        };
+        let mut c = DVec3::ZERO;
+        let children = (0..120u32)
+            .map(|i| {
+                let a = f64::from(i) * 2.4;
+                c += DVec3::new(a.cos(), (a * 0.7).sin(), (a * 1.3).cos()).normalize() * 0.04;
+                leaf(c)
+            })
+            .collect();
+        let node = Node {
+            transform: DAffine3::IDENTITY,
+            material: 0,
+            name: None,
+            json_path: "test".into(),
+            kind: NodeKind::Smooth {
+                op: SmoothOp::Union,
+                children,
+                blend_radius: 0.026,
+            },
+        };
+        let field = Field::compile_node(&node, DAffine3::IDENTITY, &FieldOptions::default())
+            .expect("compiles");
+        let field = &field;
+        let bounds = field.bounds().expect("bounded");
+        let whole = |p: [DVec3; 8]| field.distance_x8(p.map(DVec3::as_vec3));
+        let restricted_nodes = std::sync::atomic::AtomicUsize::new(usize::MAX);
+        let pruned = extract_surface_blocks(
+            &whole,
+            |centre, radius| {
+                let ball = field.restricted_to_ball(centre, radius, PRUNE_MAX_ERROR_REL);
+                restricted_nodes.fetch_min(ball.node_count(), std::sync::atomic::Ordering::Relaxed);
+                move |p: [DVec3; 8]| field.ball_distance_x8(&ball, p.map(DVec3::as_vec3))
+            },
+            |_| 0,
+            bounds,
+            96,
+        );
+        let plain = extract_surface_x8(whole, |_| 0, bounds, 96);
+        assert!(!plain.triangles.is_empty());
+        let smallest = restricted_nodes.into_inner();
+        assert!(smallest < field.node_count(), "{smallest} of {} nodes", field.node_count());
+        assert_eq!(pruned.positions.len(), plain.positions.len());
+        // The restricted fields are within 2^-24 of the box of the whole one: vertices move
+        // by far less than a thousandth of a cell, if at all.
+        let cell = (bounds.1 - bounds.0).max_element() / 96.0;
+        for (a, b) in pruned.positions.iter().zip(&plain.positions) {
+            assert!((*a - *b).length() < 1e-3 * cell, "{a} vs {b}");
+        }
+        assert_eq!(pruned.triangles, plain.triangles);
     }
 }

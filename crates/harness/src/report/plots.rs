@@ -131,6 +131,8 @@ pub(crate) fn scatter_by_backend(
             let mut chart = $chart;
             chart
                 .configure_mesh()
+                // No minor lines between the ticks: on a log axis they crowd into grey bands.
+                .light_line_style(TRANSPARENT)
                 .x_desc(x_desc)
                 .y_desc(y_desc)
                 .x_labels(100)
@@ -230,6 +232,8 @@ pub(crate) fn line_plot(
             let mut chart = $chart;
             chart
                 .configure_mesh()
+                // No minor lines between the ticks: on a log axis they crowd into grey bands.
+                .light_line_style(TRANSPARENT)
                 .x_desc(x_desc)
                 .y_desc(y_desc)
                 .x_labels(if log_x { 100 } else { 10 })
@@ -288,6 +292,88 @@ pub(crate) fn line_plot(
     publish_svg(path, &svg)
 }
 
+/// Font size of a point's quality label, pixels.
+const LABEL_FONT_PX: i32 = 11;
+
+/// Radius of the region around a point that labels keep clear of, pixels (the circle is 4).
+const POINT_CLEAR_PX: i32 = 5;
+
+/// One configuration's point on a time-vs-accuracy plot.
+struct Mark {
+    /// (time ms, PSNR dB) in chart coordinates.
+    at: (f64, f64),
+    /// The point in the drawing's pixels.
+    pixel: (i32, i32),
+    color: RGBColor,
+    on_front: bool,
+    label: String,
+}
+
+/// An estimate of `label`'s width in pixels at [`LABEL_FONT_PX`] (sans-serif averages a bit
+/// over half the font size per character; erring wide keeps labels apart).
+fn label_width_px(label: &str) -> i32 {
+    let chars = i32::try_from(label.chars().count()).unwrap_or(i32::MAX / 8);
+    chars.saturating_mul(LABEL_FONT_PX * 6 / 10) + 2
+}
+
+/// Offsets (from its point, pixels, to the label's top-left corner) for the labels of
+/// `points` (each a pixel position and its label's width), chosen greedily in order: the
+/// first of a ring of candidate positions around the point whose box overlaps no label
+/// placed before it and no point. Where every candidate overlaps, the one overlapping least
+/// is used, so a crowded plot still labels every point.
+fn place_labels(points: &[((i32, i32), i32)]) -> Vec<(i32, i32)> {
+    type Rect = (i32, i32, i32, i32); // x0, y0, x1, y1
+    fn overlap(a: Rect, b: Rect) -> i64 {
+        let w = i64::from(a.2.min(b.2)) - i64::from(a.0.max(b.0));
+        let h = i64::from(a.3.min(b.3)) - i64::from(a.1.max(b.1));
+        if w > 0 && h > 0 { w * h } else { 0 }
+    }
+    let h = LABEL_FONT_PX + 1;
+    let point_boxes: Vec<Rect> = points
+        .iter()
+        .map(|&((x, y), _)| {
+            (
+                x - POINT_CLEAR_PX,
+                y - POINT_CLEAR_PX,
+                x + POINT_CLEAR_PX,
+                y + POINT_CLEAR_PX,
+            )
+        })
+        .collect();
+    let mut placed: Vec<Rect> = Vec::with_capacity(points.len());
+    let mut offsets = Vec::with_capacity(points.len());
+    for &((x, y), w) in points {
+        let candidates = [
+            (6, -h),
+            (6, 1),
+            (-6 - w, -h),
+            (-6 - w, 1),
+            (-w / 2, -h - 6),
+            (-w / 2, 7),
+            (6, -2 * h),
+            (6, h + 1),
+            (-6 - w, -2 * h),
+            (-6 - w, h + 1),
+            (-w / 2, -2 * h - 6),
+            (-w / 2, h + 7),
+        ];
+        let cost = |&(dx, dy): &(i32, i32)| -> i64 {
+            let r = (x + dx, y + dy, x + dx + w, y + dy + h);
+            placed.iter().map(|&p| overlap(r, p)).sum::<i64>()
+                + point_boxes.iter().map(|&p| overlap(r, p)).sum::<i64>()
+        };
+        let best = candidates
+            .iter()
+            .find(|c| cost(c) == 0)
+            .or_else(|| candidates.iter().min_by_key(|c| cost(c)))
+            .copied()
+            .unwrap_or((6, -h));
+        placed.push((x + best.0, y + best.1, x + best.0 + w, y + best.1 + h));
+        offsets.push(best);
+    }
+    offsets
+}
+
 /// Render time (on the run's verdict `clock`, log axis, with each median's 95% CI as a bar)
 /// against PSNR for the rows of one scene: each backend's Pareto front (no faster row of the
 /// backend is at least as accurate) as a line through its points, dominated configurations as
@@ -323,6 +409,8 @@ pub(crate) fn time_vs_accuracy(
         .map_err(plot_err)?;
     chart
         .configure_mesh()
+        // No minor lines between the ticks: on a log axis they crowd into grey bands.
+        .light_line_style(TRANSPARENT)
         .x_desc(format!(
             "median render time, ms, {} clock (log); bars: 95% CI",
             clock.name()
@@ -334,6 +422,7 @@ pub(crate) fn time_vs_accuracy(
         .draw()
         .map_err(plot_err)?;
     let backends = crate::verdicts::backends(rows.iter().copied());
+    let mut marks: Vec<Mark> = Vec::new();
     for b in &backends {
         let c = color_of(b);
         let own: Vec<&crate::results::Row> =
@@ -361,29 +450,41 @@ pub(crate) fn time_vs_accuracy(
             .label(format!("{b}: Pareto front (hollow: dominated)"))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], c.stroke_width(2)));
         for (i, r) in own.iter().enumerate() {
-            let on_front = front.contains(&i);
-            let style = if on_front {
-                c.filled()
-            } else {
-                c.mix(0.35).stroke_width(1)
-            };
-            let text_color = if on_front {
-                BLACK.mix(0.9)
-            } else {
-                BLACK.mix(0.45)
-            };
-            chart
-                .draw_series(std::iter::once(
-                    EmptyElement::at(at(r))
-                        + Circle::new((0, 0), 4, style)
-                        + Text::new(
-                            r.quality.clone(),
-                            (6, -12),
-                            ("sans-serif", 11).into_font().color(&text_color),
-                        ),
-                ))
-                .map_err(plot_err)?;
+            marks.push(Mark {
+                at: at(r),
+                pixel: chart.backend_coord(&at(r)),
+                color: c,
+                on_front: front.contains(&i),
+                label: r.quality.clone(),
+            });
         }
+    }
+    // Labels placed after every point is known, front points first, so no label covers
+    // another label or a point where the plot has room for it.
+    marks.sort_by_key(|m| !m.on_front);
+    let offsets = place_labels(
+        &marks
+            .iter()
+            .map(|m| (m.pixel, label_width_px(&m.label)))
+            .collect::<Vec<_>>(),
+    );
+    for (m, offset) in marks.iter().zip(offsets) {
+        let (style, text_color) = if m.on_front {
+            (m.color.filled(), BLACK.mix(0.9))
+        } else {
+            (m.color.mix(0.35).stroke_width(1), BLACK.mix(0.45))
+        };
+        chart
+            .draw_series(std::iter::once(
+                EmptyElement::at(m.at)
+                    + Circle::new((0, 0), 4, style)
+                    + Text::new(
+                        m.label.clone(),
+                        offset,
+                        ("sans-serif", LABEL_FONT_PX).into_font().color(&text_color),
+                    ),
+            ))
+            .map_err(plot_err)?;
     }
     chart
         .configure_series_labels()
@@ -517,4 +618,69 @@ pub fn write_plots(res: &Results, dir: &Path) -> Result<Vec<String>, String> {
         written.push(name);
     }
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Rect = (i32, i32, i32, i32);
+
+    fn rects(points: &[((i32, i32), i32)], offsets: &[(i32, i32)]) -> Vec<Rect> {
+        let h = LABEL_FONT_PX + 1;
+        points
+            .iter()
+            .zip(offsets)
+            .map(|(&((x, y), w), &(dx, dy))| (x + dx, y + dy, x + dx + w, y + dy + h))
+            .collect()
+    }
+
+    fn overlaps(a: Rect, b: Rect) -> bool {
+        a.0 < b.2 && b.0 < a.2 && a.1 < b.3 && b.1 < a.3
+    }
+
+    #[test]
+    fn a_lone_point_is_labelled_above_right() {
+        let points = [((100, 100), label_width_px("default"))];
+        assert_eq!(place_labels(&points), vec![(6, -(LABEL_FONT_PX + 1))]);
+    }
+
+    #[test]
+    fn clustered_points_get_labels_that_cover_no_label_and_no_point() {
+        // Three configurations a few pixels apart, as sdf's default/fast/relax sit on one
+        // plot: with the same offset their labels would overprint.
+        let points: Vec<((i32, i32), i32)> = [
+            ("default", (300, 70)),
+            ("fast", (306, 70)),
+            ("relax", (312, 71)),
+        ]
+        .iter()
+        .map(|&(label, p)| (p, label_width_px(label)))
+        .collect();
+        let placed = rects(&points, &place_labels(&points));
+        for (i, a) in placed.iter().enumerate() {
+            for b in &placed[i + 1..] {
+                assert!(!overlaps(*a, *b), "labels {a:?} and {b:?} overlap");
+            }
+            for &((x, y), _) in &points {
+                let point = (
+                    x - POINT_CLEAR_PX,
+                    y - POINT_CLEAR_PX,
+                    x + POINT_CLEAR_PX,
+                    y + POINT_CLEAR_PX,
+                );
+                assert!(
+                    !overlaps(*a, point),
+                    "label {a:?} covers the point at ({x}, {y})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_crowd_larger_than_the_ring_still_labels_every_point() {
+        let points: Vec<((i32, i32), i32)> =
+            (0..40).map(|i| ((200 + i % 3, 200 + i % 2), 30)).collect();
+        assert_eq!(place_labels(&points).len(), points.len());
+    }
 }
