@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""Incoherent rays for the Embree anchor (issue 42): seeded ambient-occlusion and diffuse
+bounce rays from the primary hits of the anchor's camera rays, as a lighting workload traces
+them. Needs numpy only (scripts/anchor_embree.py uses it; scripts/test_anchor_incoherent.py
+tests it).
+
+Each hit of a camera ray (its distance and triangle, from Embree) becomes a surface point:
+p = o + t d computed in f64, the triangle's geometric normal (f64 cross product of its f32
+edges, turned to face the camera ray), and a ray origin offset along that normal by
+`offset * max(|p|, 1e-30)`, the integrator's rule for secondary rays (`ray_offset`, 1e-4 by
+default; render space puts the camera at the origin, so |p| is the distance from it). From
+each point, `per_hit` rays of each kind leave in cosine-weighted directions about the normal
+(Malley's method: a uniform point on the unit disk lifted onto the hemisphere):
+
+- "ao": ambient-occlusion rays, occlusion queries with a finite tmax (`ao_distance`);
+- "bounce": diffuse bounce rays, closest-hit queries with tmax = +inf.
+
+The rays keep the order of the pixels they come from (row-major), as a renderer's wavefront
+of one tile's hits would: neighbouring rays start close together and leave in unrelated
+directions. The same seed gives the same rays bit for bit (numpy's PCG64). Every ray is 7
+float32 values: origin (3), unit direction (3), tmax.
+"""
+
+import numpy as np
+
+# The integrator's default `render.ray_offset` (crates/scene/src/format.rs).
+RAY_OFFSET = 1e-4
+
+
+def orthonormal_basis(n):
+    """Two unit vectors (t, b) completing each unit row of `n` (k x 3, f64) to a right-handed
+    orthonormal frame (Duff et al. 2017, "Building an Orthonormal Basis, Revisited")."""
+    sign = np.where(n[:, 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (sign + n[:, 2])
+    b = n[:, 0] * n[:, 1] * a
+    t = np.stack([1.0 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
+    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
+    return t, bt
+
+
+def cosine_directions(n, u, v):
+    """Cosine-weighted unit directions about the unit normals `n` (k x 3, f64) from uniform
+    numbers `u`, `v` in [0, 1) (k each): radius sqrt(u) and angle 2 pi v on the unit disk,
+    lifted to height sqrt(1 - u). Returned in f64."""
+    r = np.sqrt(u)
+    phi = 2.0 * np.pi * v
+    x, y = r * np.cos(phi), r * np.sin(phi)
+    z = np.sqrt(np.maximum(0.0, 1.0 - u))
+    t, b = orthonormal_basis(n)
+    d = t * x[:, None] + b * y[:, None] + n * z[:, None]
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def surface_points(camera_rays, t_hit, prim, tris, offset=RAY_OFFSET):
+    """(origins, normals) of the camera rays' hits, in pixel order, f64: `camera_rays` is
+    n x 6 float32 (origin, direction), `t_hit` the hit distances (+inf on a miss), `prim` the
+    hit triangles' indices into `tris` (m x 3 x 3 float32). Normals are geometric, facing
+    the camera ray; origins are offset along them as the integrator offsets its rays."""
+    hit = np.isfinite(t_hit)
+    o = camera_rays[hit, :3].astype(np.float64)
+    d = camera_rays[hit, 3:].astype(np.float64)
+    p = o + d * t_hit[hit, None].astype(np.float64)
+    tri = tris[prim[hit].astype(np.int64)].astype(np.float64)
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    # A degenerate triangle (no normal) takes the reversed ray direction.
+    n = np.where(length > 0.0, n / np.where(length > 0.0, length, 1.0), -d)
+    n = np.where((np.sum(n * d, axis=1) > 0.0)[:, None], -n, n)
+    dist = np.maximum(np.linalg.norm(p, axis=1), 1e-30)
+    return p + n * (offset * dist)[:, None], n
+
+
+def incoherent_rays(camera_rays, t_hit, prim, tris, seed, ao_distance, per_hit=1,
+                    offset=RAY_OFFSET):
+    """{"ao": rays, "bounce": rays} (each k x 7 float32, k = hits x per_hit; a hit's rays are
+    consecutive) from the camera rays' hits (see `surface_points`), drawn from `seed`:
+    AO rays end at `ao_distance`, bounce rays at +inf."""
+    if per_hit < 1:
+        raise ValueError("per_hit must be at least 1")
+    if not ao_distance > 0.0:
+        raise ValueError("ao_distance must be positive")
+    origins, normals = surface_points(camera_rays, t_hit, prim, tris, offset)
+    origins = np.repeat(origins, per_hit, axis=0)
+    normals = np.repeat(normals, per_hit, axis=0)
+    rng = np.random.Generator(np.random.PCG64(seed))
+    out = {}
+    for kind, tmax in (("ao", float(ao_distance)), ("bounce", np.inf)):
+        u = rng.random(len(origins))
+        v = rng.random(len(origins))
+        rays = np.empty((len(origins), 7), dtype=np.float32)
+        rays[:, :3] = origins
+        rays[:, 3:6] = cosine_directions(normals, u, v)
+        rays[:, 6] = tmax
+        out[kind] = rays
+    return out
