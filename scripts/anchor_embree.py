@@ -36,7 +36,9 @@ Incoherent rays (issue 42; off with --no-incoherent): from the camera rays' prim
 (Embree's, with their triangles) scripts/anchor_incoherent.py draws seeded ambient-occlusion
 rays (cosine-weighted about the geometric normal, tmax = --ao-distance times the mesh's
 bounding-box diagonal), timed as occlusion queries, and diffuse bounce rays (cosine-weighted,
-unbounded), timed as closest-hit queries. The same arrays go to Embree (rtcOccluded1 /
+unbounded), timed as closest-hit queries, and area-light shadow rays (towards a seeded point
+on a square light above the mesh, tmax just short of it; only where the light is in front of
+the surface), timed as occlusion queries. The same arrays go to Embree (rtcOccluded1 /
 rtcIntersect1 per ray, and rtcOccluded8 / rtcIntersect8 on 8 consecutive rays) and to the
 mesh backend (`anchor_rays time-rays`: `Geometry::occluded_many` / `closest_hits`, the calls
 the integrators make for those rays, in batches of one tile's worth), in the same rounds,
@@ -239,7 +241,11 @@ PACKET_ORDERS = {
 
 
 # The incoherent ray kinds: name -> (query, timed as an occlusion query).
-INCOHERENT_KINDS = {"ao": ("occlusion", True), "bounce": ("closest hit", False)}
+INCOHERENT_KINDS = {
+    "ao": ("occlusion", True),
+    "bounce": ("closest hit", False),
+    "shadow": ("occlusion", True),
+}
 # Relative hit-distance difference beyond which two closest hits disagree.
 T_TOLERANCE = 1e-4
 # Largest share of disagreeing rays accepted before the anchor stops.
@@ -269,8 +275,9 @@ def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repea
     hi = tris.reshape(-1, 3).max(axis=0).astype(np.float64)
     diagonal = float(np.linalg.norm(hi - lo))
     ao_distance = options.ao_distance * diagonal
+    light = anchor_incoherent.light_above(lo, hi)
     sets = anchor_incoherent.incoherent_rays(
-        camera_rays, t_hit, prim, tris, options.seed, ao_distance, options.per_hit
+        camera_rays, t_hit, prim, tris, options.seed, ao_distance, options.per_hit, light=light
     )
     record = {
         "seed": options.seed,
@@ -279,6 +286,13 @@ def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repea
         "ray_offset": anchor_incoherent.RAY_OFFSET,
         "ao_distance": ao_distance,
         "ao_distance_over_bounds_diagonal": options.ao_distance,
+        "area_light": {
+            "corner": light[0].tolist(),
+            "edge_u": light[1].tolist(),
+            "edge_v": light[2].tolist(),
+            "placement": "a square of 0.25 bounding-box diagonals, centred over the box, "
+            "0.5 diagonals above its top (anchor_incoherent.light_above)",
+        },
         "hit_distance_tolerance_relative": T_TOLERANCE,
         "kinds": {},
     }
@@ -327,7 +341,10 @@ def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repea
         entry = {
             "query": query,
             "rays": len(rays),
-            "tmax": "inf" if not np.isfinite(rays[0, 6]) else float(rays[0, 6]),
+            "tmax": (
+                "per ray (just short of the light)" if kind == "shadow"
+                else "inf" if not np.isfinite(rays[0, 6]) else float(rays[0, 6])
+            ),
             "embree": {
                 "call": "rtcOccluded1" if occlusion else "rtcIntersect1",
                 "mrays_per_s_rounds": per["embree1"],
@@ -598,7 +615,9 @@ def main():
             "incoherent_protocol": None if a.no_incoherent else "per mesh: AO rays "
             "(occlusion queries, tmax = ao_distance) and diffuse bounce rays (closest hit, "
             "unbounded), cosine-weighted about the geometric normal of each camera ray's "
-            "Embree hit, origin offset by ray_offset x distance from the camera "
+            "Embree hit, and shadow rays towards a uniform point on area_light (occlusion, "
+            "tmax just short of it, none where the light is behind the surface), origin "
+            "offset by ray_offset x distance from the camera "
             "(scripts/anchor_incoherent.py); per round (order reversed on odd rounds): Embree "
             "rtcOccluded1/rtcIntersect1 per ray and rtcOccluded8/rtcIntersect8 on 8 "
             "consecutive rays in a C loop, and each marchmesh tracer in a fresh anchor_rays "

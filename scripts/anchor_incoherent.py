@@ -13,7 +13,11 @@ each point, `per_hit` rays of each kind leave in cosine-weighted directions abou
 (Malley's method: a uniform point on the unit disk lifted onto the hemisphere):
 
 - "ao": ambient-occlusion rays, occlusion queries with a finite tmax (`ao_distance`);
-- "bounce": diffuse bounce rays, closest-hit queries with tmax = +inf.
+- "bounce": diffuse bounce rays, closest-hit queries with tmax = +inf;
+- "shadow" (when a rectangular area light is given): one shadow ray per hit towards a uniform
+  point on the light, an occlusion query ending `offset * max(|p|, 1e-30)` short of it, as the
+  integrators trace area-light shadows (direction and distance from the hit point p; no ray
+  where the light lies behind the surface, so there are fewer shadow rays than hits).
 
 The rays keep the order of the pixels they come from (row-major), as a renderer's wavefront
 of one tile's hits would: neighbouring rays start close together and leave in unrelated
@@ -56,6 +60,12 @@ def surface_points(camera_rays, t_hit, prim, tris, offset=RAY_OFFSET):
     n x 6 float32 (origin, direction), `t_hit` the hit distances (+inf on a miss), `prim` the
     hit triangles' indices into `tris` (m x 3 x 3 float32). Normals are geometric, facing
     the camera ray; origins are offset along them as the integrator offsets its rays."""
+    origins, normals, _ = surface_frames(camera_rays, t_hit, prim, tris, offset)
+    return origins, normals
+
+
+def surface_frames(camera_rays, t_hit, prim, tris, offset=RAY_OFFSET):
+    """`surface_points` with the hit points themselves: (origins, normals, points)."""
     hit = np.isfinite(t_hit)
     o = camera_rays[hit, :3].astype(np.float64)
     d = camera_rays[hit, 3:].astype(np.float64)
@@ -67,21 +77,56 @@ def surface_points(camera_rays, t_hit, prim, tris, offset=RAY_OFFSET):
     n = np.where(length > 0.0, n / np.where(length > 0.0, length, 1.0), -d)
     n = np.where((np.sum(n * d, axis=1) > 0.0)[:, None], -n, n)
     dist = np.maximum(np.linalg.norm(p, axis=1), 1e-30)
-    return p + n * (offset * dist)[:, None], n
+    return p + n * (offset * dist)[:, None], n, p
+
+
+def light_above(lo, hi, size=0.25, height=0.5):
+    """A square area light above the box `lo`..`hi` (render space, +y up as the anchor's
+    camera frames the meshes): (corner, edge_u, edge_v) in f64, centred over the box at
+    `height` box diagonals above its top, each side `size` diagonals long."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    diagonal = float(np.linalg.norm(hi - lo))
+    centre = np.array([(lo[0] + hi[0]) / 2, hi[1] + height * diagonal, (lo[2] + hi[2]) / 2])
+    side = size * diagonal
+    u, v = np.array([side, 0.0, 0.0]), np.array([0.0, 0.0, side])
+    return centre - (u + v) / 2, u, v
+
+
+def shadow_rays(points, origins, normals, light, u, v, offset=RAY_OFFSET):
+    """Shadow rays (k x 7 float32) from `points` (with their offset `origins` and `normals`,
+    f64) towards the points `corner + u * edge_u + v * edge_v` of the rectangular `light`,
+    each ending `offset * max(|p|, 1e-30)` short of it; rays whose light point lies on or
+    behind the surface (n . d <= 0) are left out, as the integrators leave them out."""
+    corner, eu, ev = (np.asarray(x, dtype=np.float64) for x in light)
+    q = corner + u[:, None] * eu + v[:, None] * ev
+    to = q - points
+    dist = np.linalg.norm(to, axis=1)
+    d = to / dist[:, None]
+    keep = np.sum(d * normals, axis=1) > 0.0
+    tmax = dist - offset * np.maximum(np.linalg.norm(points, axis=1), 1e-30)
+    keep &= tmax > 0.0
+    rays = np.empty((int(keep.sum()), 7), dtype=np.float32)
+    rays[:, :3] = origins[keep]
+    rays[:, 3:6] = d[keep]
+    rays[:, 6] = tmax[keep]
+    return rays
 
 
 def incoherent_rays(camera_rays, t_hit, prim, tris, seed, ao_distance, per_hit=1,
-                    offset=RAY_OFFSET):
-    """{"ao": rays, "bounce": rays} (each k x 7 float32, k = hits x per_hit; a hit's rays are
-    consecutive) from the camera rays' hits (see `surface_points`), drawn from `seed`:
-    AO rays end at `ao_distance`, bounce rays at +inf."""
+                    offset=RAY_OFFSET, light=None):
+    """{"ao": rays, "bounce": rays[, "shadow": rays]} (each k x 7 float32, k = hits x per_hit
+    for AO and bounce rays; a hit's rays are consecutive) from the camera rays' hits (see
+    `surface_points`), drawn from `seed`: AO rays end at `ao_distance`, bounce rays at +inf,
+    and with a `light` (corner, edge_u, edge_v: see `light_above`) shadow rays towards it
+    (`shadow_rays`), drawn after the others so AO and bounce rays do not depend on it."""
     if per_hit < 1:
         raise ValueError("per_hit must be at least 1")
     if not ao_distance > 0.0:
         raise ValueError("ao_distance must be positive")
-    origins, normals = surface_points(camera_rays, t_hit, prim, tris, offset)
+    origins, normals, points = surface_frames(camera_rays, t_hit, prim, tris, offset)
     origins = np.repeat(origins, per_hit, axis=0)
     normals = np.repeat(normals, per_hit, axis=0)
+    points = np.repeat(points, per_hit, axis=0)
     rng = np.random.Generator(np.random.PCG64(seed))
     out = {}
     for kind, tmax in (("ao", float(ao_distance)), ("bounce", np.inf)):
@@ -92,4 +137,8 @@ def incoherent_rays(camera_rays, t_hit, prim, tris, seed, ao_distance, per_hit=1
         rays[:, 3:6] = cosine_directions(normals, u, v)
         rays[:, 6] = tmax
         out[kind] = rays
+    if light is not None:
+        u = rng.random(len(origins))
+        v = rng.random(len(origins))
+        out["shadow"] = shadow_rays(points, origins, normals, light, u, v, offset)
     return out

@@ -106,6 +106,41 @@ class IncoherentRays(unittest.TestCase):
         # AO and bounce directions are separate draws.
         self.assertNotEqual(a["ao"][:, 3:6].tobytes(), a["bounce"][:, 3:6].tobytes())
 
+    def test_shadow_rays_end_just_short_of_a_point_on_the_light(self):
+        rays, t, prim, tris = flat_scene()
+        # A light facing the plane's lit side (z < 5, where the camera is).
+        light = (np.array([-1.0, -1.0, 2.0]), np.array([2.0, 0.0, 0.0]),
+                 np.array([0.0, 2.0, 0.0]))
+        out = ai.incoherent_rays(rays, t, prim, tris, seed=5, ao_distance=1.0, light=light)
+        s = out["shadow"]
+        hits = int(np.isfinite(t).sum())
+        self.assertEqual(s.shape, (hits, 7))  # every hit sees the light in front of it
+        _, _, points = ai.surface_frames(rays, t, prim, tris)
+        end = points + s[:, 3:6].astype(np.float64) * (
+            s[:, 6:7] + ai.RAY_OFFSET * np.linalg.norm(points, axis=1, keepdims=True)
+        )
+        np.testing.assert_allclose(end[:, 2], 2.0, atol=1e-4)
+        self.assertTrue((np.abs(end[:, :2]) <= 1.0 + 1e-4).all())
+        # The light is drawn after the other kinds: AO and bounce rays are the same without it.
+        plain = ai.incoherent_rays(rays, t, prim, tris, seed=5, ao_distance=1.0)
+        for kind in ("ao", "bounce"):
+            self.assertEqual(plain[kind].tobytes(), out[kind].tobytes())
+        self.assertNotIn("shadow", plain)
+
+    def test_no_shadow_ray_leaves_towards_a_light_behind_the_surface(self):
+        rays, t, prim, tris = flat_scene()
+        behind = (np.array([-1.0, -1.0, 8.0]), np.array([2.0, 0.0, 0.0]),
+                  np.array([0.0, 2.0, 0.0]))
+        out = ai.incoherent_rays(rays, t, prim, tris, seed=5, ao_distance=1.0, light=behind)
+        self.assertEqual(len(out["shadow"]), 0)
+
+    def test_the_light_sits_centred_above_the_box(self):
+        corner, u, v = ai.light_above([0, 0, 0], [2, 1, 2], size=0.5, height=1.0)
+        diag = 3.0
+        centre = corner + (u + v) / 2
+        np.testing.assert_allclose(centre, [1.0, 1.0 + diag, 1.0])
+        np.testing.assert_allclose([np.linalg.norm(u), np.linalg.norm(v)], [1.5, 1.5])
+
     def test_bad_arguments_are_refused(self):
         rays, t, prim, tris = flat_scene()
         with self.assertRaises(ValueError):
