@@ -45,7 +45,9 @@ the integrators make for those rays, in batches of one tile's worth), in the sam
 the order reversed on odd rounds. Both sides' answers are compared once per mesh: occlusion
 booleans, hit or miss, and hit distances within a relative 1e-4; the disagreements are
 printed and recorded, and more than 0.1% of the rays disagreeing stops the script. The JSON
-keeps every camera-ray field and adds an "incoherent" object per mesh.
+keeps every camera-ray field and adds an "incoherent" object per mesh. --in-box also anchors
+each mesh inside an open box (anchor_incoherent.boxed_obj), a Cornell-box-like room where
+bounce rays meet walls; its record names the mesh it encloses ("in_box_of").
 """
 
 import argparse
@@ -233,6 +235,13 @@ def load_average():
     return " ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
+def repo_path(path):
+    """`path` relative to the repository when inside it, else absolute (e.g. the full
+    dragon)."""
+    rel = os.path.relpath(os.path.abspath(path), ROOT)
+    return os.path.abspath(path) if rel.startswith("..") else rel
+
+
 # Embree's packet variants (--embree-packets): name -> ray order of the 500x500 image.
 PACKET_ORDERS = {
     "embree8-rows": lambda side: np.arange(side * side),
@@ -266,16 +275,19 @@ def disagreements(ours, theirs, occlusion):
 
 
 def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repeats, options,
-                      workdir):
+                    workdir, boxed=False):
     """Times Embree and the mesh backend's `tracers` on the incoherent rays drawn from the
     camera rays' hits on `scene` (see anchor_incoherent.py) in `rounds` interleaved rounds,
-    the order reversed on odd rounds; returns the mesh's "incoherent" record."""
+    the order reversed on odd rounds; returns the mesh's "incoherent" record. `boxed`: the
+    mesh is a boxed_obj room, whose area light hangs under the ceiling."""
     t_hit, prim = loop.primary_hits(scene, camera_rays)
     lo = tris.reshape(-1, 3).min(axis=0).astype(np.float64)
     hi = tris.reshape(-1, 3).max(axis=0).astype(np.float64)
     diagonal = float(np.linalg.norm(hi - lo))
     ao_distance = options.ao_distance * diagonal
-    light = anchor_incoherent.light_above(lo, hi)
+    # Over a lone mesh; under the ceiling of a boxed one (the ceiling would shadow it all).
+    light_height = -0.005 if boxed else 0.5
+    light = anchor_incoherent.light_above(lo, hi, height=light_height)
     sets = anchor_incoherent.incoherent_rays(
         camera_rays, t_hit, prim, tris, options.seed, ao_distance, options.per_hit, light=light
     )
@@ -291,7 +303,8 @@ def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repea
             "edge_u": light[1].tolist(),
             "edge_v": light[2].tolist(),
             "placement": "a square of 0.25 bounding-box diagonals, centred over the box, "
-            "0.5 diagonals above its top (anchor_incoherent.light_above)",
+            f"{light_height} diagonals above its top, emitting downwards "
+            "(anchor_incoherent.light_above)",
         },
         "hit_distance_tolerance_relative": T_TOLERANCE,
         "kinds": {},
@@ -403,7 +416,7 @@ def print_incoherent(record):
 
 
 def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=False,
-                incoherent=None):
+                incoherent=None, boxed=False):
     """Times Embree (through `loop`, an EmbreeLoop) and each marchmesh tracer on MESH's camera
     rays in `rounds` interleaved rounds, then (unless `incoherent`, the parsed options, is
     None) on the incoherent rays; prints the tables and returns the mesh's record."""
@@ -462,7 +475,7 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=Fal
             with tempfile.TemporaryDirectory() as d:
                 inc = time_incoherent(
                     mesh, tris, rays, scene, loop, incoherent.incoherent_bvh.split(","), rounds,
-                    repeats, incoherent, d,
+                    repeats, incoherent, d, boxed,
                 )
     finally:
         loop.release(scene)
@@ -471,12 +484,7 @@ def anchor_mesh(mesh, kinds, rounds, repeats, loop, quality, robust, packets=Fal
     print(f"{'tracer':<14} {'Mrays/s':>8} {'x Embree':>9}")
     print(f"{'embree':<14} {emb:>8.2f} {1.0:>9.3f}")
     record = {
-        # Relative to the repository when inside it, else absolute (e.g. the full dragon).
-        "mesh": (
-            rel
-            if not (rel := os.path.relpath(os.path.abspath(mesh), ROOT)).startswith("..")
-            else os.path.abspath(mesh)
-        ),
+        "mesh": repo_path(mesh),
         "triangles": len(tris),
         "rays": len(rays),
         "embree": {"mrays_per_s_rounds": per["embree"], "mrays_per_s_median": emb},
@@ -551,6 +559,13 @@ def main():
         help="marchmesh tracers for the incoherent rays (bvh2, cwbvh, wide; @PRESET as for "
         "--bvh): each traces them through the backend's batch calls, as renders do",
     )
+    ap.add_argument(
+        "--in-box",
+        action="store_true",
+        help="also anchor each mesh inside an open box (floor, ceiling, back and side walls, "
+        "open towards the camera: anchor_incoherent.boxed_obj), where bounce rays meet walls; OBJ "
+        "meshes only",
+    )
     ap.add_argument("--seed", type=int, default=42, help="seed of the incoherent rays")
     ap.add_argument(
         "--per-hit",
@@ -565,6 +580,8 @@ def main():
         help="the AO rays' tmax as a fraction of the mesh's bounding-box diagonal",
     )
     a = ap.parse_args()
+    if a.in_box and any(not m.lower().endswith(".obj") for m in a.mesh):
+        ap.error("--in-box: OBJ meshes only")
     if a.per_hit < 1 or not a.ao_distance > 0:
         ap.error("--per-hit must be at least 1 and --ao-distance positive")
     if a.rounds < 1 or a.repeats < 1:
@@ -577,13 +594,23 @@ def main():
     load_start = load_average()
     with tempfile.TemporaryDirectory() as workdir:
         loop = EmbreeLoop(workdir)
-        meshes = [
-            anchor_mesh(
+        subjects = [(m, None) for m in a.mesh]
+        if a.in_box:
+            for k, m in enumerate(a.mesh):
+                boxed = os.path.join(workdir, f"{k}-{os.path.basename(m)}")
+                anchor_incoherent.boxed_obj(m, boxed)
+                subjects.append((boxed, m))
+        meshes = []
+        for m, box_of in subjects:
+            record = anchor_mesh(
                 m, kinds, a.rounds, a.repeats, loop, a.embree_quality, a.embree_robust,
-                a.embree_packets, None if a.no_incoherent else a,
+                a.embree_packets, None if a.no_incoherent else a, box_of is not None,
             )
-            for m in a.mesh
-        ]
+            if box_of is not None:
+                # Named after the mesh it encloses (the file itself is temporary).
+                record["mesh"] = f"{repo_path(box_of)} in an open box"
+                record["in_box_of"] = repo_path(box_of)
+            meshes.append(record)
     load_end = load_average()
     print("load average:", load_end)
     if a.json:

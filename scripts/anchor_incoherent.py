@@ -19,6 +19,10 @@ each point, `per_hit` rays of each kind leave in cosine-weighted directions abou
   integrators trace area-light shadows (direction and distance from the hit point p; no ray
   where the light lies behind the surface, so there are fewer shadow rays than hits).
 
+`boxed_obj` writes a mesh inside an open box (a Cornell-box-like room: floor, ceiling, back and
+side walls, the front open towards the anchor's camera), where bounce rays meet surroundings
+instead of leaving a lone mesh.
+
 The rays keep the order of the pixels they come from (row-major), as a renderer's wavefront
 of one tile's hits would: neighbouring rays start close together and leave in unrelated
 directions. The same seed gives the same rays bit for bit (numpy's PCG64). Every ray is 7
@@ -83,7 +87,9 @@ def surface_frames(camera_rays, t_hit, prim, tris, offset=RAY_OFFSET):
 def light_above(lo, hi, size=0.25, height=0.5):
     """A square area light above the box `lo`..`hi` (render space, +y up as the anchor's
     camera frames the meshes): (corner, edge_u, edge_v) in f64, centred over the box at
-    `height` box diagonals above its top, each side `size` diagonals long."""
+    `height` box diagonals above its top (below it when negative: under the ceiling of a
+    `boxed_obj` room), each side `size` diagonals long. It emits downwards (along
+    edge_u x edge_v)."""
     lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
     diagonal = float(np.linalg.norm(hi - lo))
     centre = np.array([(lo[0] + hi[0]) / 2, hi[1] + height * diagonal, (lo[2] + hi[2]) / 2])
@@ -96,13 +102,15 @@ def shadow_rays(points, origins, normals, light, u, v, offset=RAY_OFFSET):
     """Shadow rays (k x 7 float32) from `points` (with their offset `origins` and `normals`,
     f64) towards the points `corner + u * edge_u + v * edge_v` of the rectangular `light`,
     each ending `offset * max(|p|, 1e-30)` short of it; rays whose light point lies on or
-    behind the surface (n . d <= 0) are left out, as the integrators leave them out."""
+    behind the surface (n . d <= 0), and points behind the light (it emits along
+    edge_u x edge_v only), are left out, as the integrators leave them out."""
     corner, eu, ev = (np.asarray(x, dtype=np.float64) for x in light)
     q = corner + u[:, None] * eu + v[:, None] * ev
     to = q - points
     dist = np.linalg.norm(to, axis=1)
     d = to / dist[:, None]
     keep = np.sum(d * normals, axis=1) > 0.0
+    keep &= (points - corner) @ np.cross(eu, ev) > 0.0
     tmax = dist - offset * np.maximum(np.linalg.norm(points, axis=1), 1e-30)
     keep &= tmax > 0.0
     rays = np.empty((int(keep.sum()), 7), dtype=np.float32)
@@ -142,3 +150,40 @@ def incoherent_rays(camera_rays, t_hit, prim, tris, seed, ao_distance, per_hit=1
         v = rng.random(len(origins))
         out["shadow"] = shadow_rays(points, origins, normals, light, u, v, offset)
     return out
+
+
+def boxed_obj(src, dst, margin=0.15):
+    """Writes to `dst` the OBJ `src` with five walls of an open cube around it appended (two
+    triangles each, absolute indices after the file's vertices): a floor just below the mesh,
+    a ceiling, a back wall (+z) and two side walls; the front (-z, where the anchor's camera
+    stands) stays open. The cube's side is the mesh's largest extent times 1 + 2 `margin`,
+    centred on the mesh in x and z. Returns the number of triangles added (10)."""
+    with open(src) as f:
+        text = f.read()
+    verts = np.array(
+        [[float(x) for x in line.split()[1:4]] for line in text.splitlines()
+         if line.startswith("v ")],
+        dtype=np.float64,
+    )
+    if len(verts) == 0:
+        raise ValueError(f"{src}: no vertices")
+    lo, hi = verts.min(axis=0), verts.max(axis=0)
+    side = float((hi - lo).max()) * (1.0 + 2.0 * margin)
+    cx, cz = (lo[0] + hi[0]) / 2, (lo[2] + hi[2]) / 2
+    x0, x1 = cx - side / 2, cx + side / 2
+    z0, z1 = cz - side / 2, cz + side / 2
+    y0 = lo[1] - 1e-3 * side
+    y1 = y0 + side
+    corners = [[x, y, z] for x in (x0, x1) for y in (y0, y1) for z in (z0, z1)]
+    # Corner k: x = bit 2, y = bit 1, z = bit 0.
+    quads = [(0, 4, 5, 1), (2, 3, 7, 6), (1, 5, 7, 3), (0, 1, 3, 2), (4, 6, 7, 5)]
+    n = len(verts)
+    lines = [f"v {float(x)!r} {float(y)!r} {float(z)!r}" for x, y, z in corners]
+    for a, b, c, d in quads:
+        lines.append(f"f {n + a + 1} {n + b + 1} {n + c + 1}")
+        lines.append(f"f {n + a + 1} {n + c + 1} {n + d + 1}")
+    with open(dst, "w") as f:
+        f.write(text if text.endswith("\n") else text + "\n")
+        f.write("# an open box around the mesh (scripts/anchor_incoherent.py boxed_obj)\n")
+        f.write("\n".join(lines) + "\n")
+    return 2 * len(quads)

@@ -134,12 +134,47 @@ class IncoherentRays(unittest.TestCase):
         out = ai.incoherent_rays(rays, t, prim, tris, seed=5, ao_distance=1.0, light=behind)
         self.assertEqual(len(out["shadow"]), 0)
 
+    def test_no_shadow_ray_leaves_from_behind_the_light(self):
+        rays, t, prim, tris = flat_scene()
+        # The light between the camera and the plane, but emitting towards the camera (-z):
+        # the plane (z = 5) lies behind it.
+        away = (np.array([-1.0, -1.0, 2.0]), np.array([0.0, 2.0, 0.0]),
+                np.array([2.0, 0.0, 0.0]))
+        out = ai.incoherent_rays(rays, t, prim, tris, seed=5, ao_distance=1.0, light=away)
+        self.assertEqual(len(out["shadow"]), 0)
+
     def test_the_light_sits_centred_above_the_box(self):
         corner, u, v = ai.light_above([0, 0, 0], [2, 1, 2], size=0.5, height=1.0)
         diag = 3.0
         centre = corner + (u + v) / 2
         np.testing.assert_allclose(centre, [1.0, 1.0 + diag, 1.0])
         np.testing.assert_allclose([np.linalg.norm(u), np.linalg.norm(v)], [1.5, 1.5])
+        self.assertLess(np.cross(u, v)[1], 0.0)  # it emits downwards
+        corner, u, v = ai.light_above([0, 0, 0], [2, 1, 2], height=-0.01)
+        self.assertAlmostEqual((corner + (u + v) / 2)[1], 1.0 - 0.03)  # under the ceiling
+
+    def test_the_box_encloses_the_mesh_open_at_the_front(self):
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as d:
+            src, dst = os.path.join(d, "m.obj"), os.path.join(d, "b.obj")
+            with open(src, "w") as f:
+                f.write("v 0 0 0\nv 2 0 0\nv 0 1 0.5\nf 1 2 3\n")
+            self.assertEqual(ai.boxed_obj(src, dst, margin=0.25), 10)
+            with open(dst) as f:
+                lines = f.read().splitlines()
+        verts = np.array([[float(x) for x in ln.split()[1:]] for ln in lines if ln[:2] == "v "])
+        faces = [[int(x) for x in ln.split()[1:]] for ln in lines if ln[:2] == "f "]
+        self.assertEqual(faces[0], [1, 2, 3])  # the mesh's own face comes first, unchanged
+        self.assertEqual(len(verts), 3 + 8)
+        walls = np.array([verts[np.array(f) - 1] for f in faces[1:]])
+        lo, hi = walls.reshape(-1, 3).min(axis=0), walls.reshape(-1, 3).max(axis=0)
+        np.testing.assert_allclose(hi - lo, 3.0)  # largest extent 2, times 1.5
+        self.assertLess(lo[1], 0.0)  # the floor just below the mesh
+        np.testing.assert_allclose([(lo[0] + hi[0]) / 2, (lo[2] + hi[2]) / 2], [1.0, 0.25])
+        # No wall lies in the front plane z = lo.z: every triangle touching it spans z.
+        front = [w for w in walls if np.allclose(w[:, 2], lo[2])]
+        self.assertEqual(front, [])
 
     def test_bad_arguments_are_refused(self):
         rays, t, prim, tris = flat_scene()
