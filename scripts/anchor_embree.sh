@@ -2,7 +2,10 @@
 # The Embree anchor (issue 16): Embree 4's single-ray rtcIntersect1 (the embreex package) and
 # the mesh backend's tracers on the exact same camera rays of each committed mesh, interleaved,
 # 1 thread (scripts/anchor_embree.py does the timing; this wrapper picks the meshes, sets up
-# the Python environment and files the results).
+# the Python environment and files the results). Then incoherent rays drawn from those camera
+# rays' hits (issue 42: ambient-occlusion rays as occlusion queries, diffuse bounce rays as
+# closest-hit queries; scripts/anchor_incoherent.py) on Embree's rtcOccluded1 / rtcIntersect1
+# and 8-wide calls and the mesh backend's batch calls; --no-incoherent skips them.
 #
 #   scripts/anchor_embree.sh [--large] [extra anchor_embree.py flags, e.g. --rounds 5 --repeats 9]
 #

@@ -1,4 +1,5 @@
-/* Embree 4's single-ray rtcIntersect1 in a C loop, for scripts/anchor_embree.py.
+/* Embree 4's single-ray rtcIntersect1 in a C loop, for scripts/anchor_embree.py (and, for
+ * the incoherent rays, rtcOccluded1 and the 8-wide rtcIntersect8 / rtcOccluded8).
  *
  * The embreex wheel ships libembree4 but its EmbreeScene sets RTC_SCENE_FLAG_ROBUST by default
  * (embreex 4.x, `robust=True`), exposes no build quality, and its Python-called loop writes
@@ -75,6 +76,27 @@ struct __attribute__((aligned(32))) RayHit8 {
 };
 
 void rtcIntersect8(const int *valid, RTCScene scene, struct RayHit8 *rayhit, void *args);
+
+/* struct RTCRay of rtcore_ray.h (the ray part of RTCRayHit; rtcOccluded1 sets tfar to -inf
+ * when the ray is occluded). */
+struct __attribute__((aligned(16))) Ray {
+    float org_x, org_y, org_z, tnear;
+    float dir_x, dir_y, dir_z, time;
+    float tfar;
+    unsigned int mask, id, flags;
+};
+
+void rtcOccluded1(RTCScene scene, struct Ray *ray, void *args);
+
+/* struct RTCRay8 of rtcore_ray.h. */
+struct __attribute__((aligned(32))) Ray8 {
+    float org_x[8], org_y[8], org_z[8], tnear[8];
+    float dir_x[8], dir_y[8], dir_z[8], time[8];
+    float tfar[8];
+    unsigned int mask[8], id[8], flags[8];
+};
+
+void rtcOccluded8(const int *valid, RTCScene scene, struct Ray8 *ray, void *args);
 
 static double thread_seconds(void) {
     struct timespec ts;
@@ -198,6 +220,132 @@ long anchor_trace(RTCScene scene, const float *rays, size_t nray, int repeats, d
 long anchor_trace8(RTCScene scene, const float *rays, size_t nray, int repeats, double *rates,
                    float *t_out) {
     return timed(packet_pass, scene, rays, nray, repeats, rates, t_out);
+}
+
+/* The incoherent rays: 7 floats each (origin, direction, tfar), tnear 0. */
+
+/* rtcIntersect1 per ray up to its own tfar; t_out as single_pass. */
+static long intersect1_pass7(RTCScene scene, const float *rays, size_t nray, float *t_out) {
+    long found = 0;
+    for (size_t i = 0; i < nray; i++) {
+        const float *r = rays + 7 * i;
+        struct RayHit rh;
+        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
+        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
+        rh.tfar = r[6];
+        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
+        rtcIntersect1(scene, &rh, NULL);
+        int hit = rh.geom_id != INVALID_ID;
+        found += hit;
+        if (t_out) t_out[i] = hit ? rh.tfar : INFINITY;
+    }
+    return found;
+}
+
+/* rtcOccluded1 per ray; t_out[i] is 1 for an occluded ray, 0 otherwise; returns the number
+ * of occluded rays. */
+static long occluded1_pass7(RTCScene scene, const float *rays, size_t nray, float *t_out) {
+    long found = 0;
+    for (size_t i = 0; i < nray; i++) {
+        const float *r = rays + 7 * i;
+        struct Ray ray;
+        ray.org_x = r[0], ray.org_y = r[1], ray.org_z = r[2], ray.tnear = 0.0f;
+        ray.dir_x = r[3], ray.dir_y = r[4], ray.dir_z = r[5], ray.time = 0.0f;
+        ray.tfar = r[6];
+        ray.mask = INVALID_ID, ray.id = 0, ray.flags = 0;
+        rtcOccluded1(scene, &ray, NULL);
+        int occluded = ray.tfar < 0.0f;
+        found += occluded;
+        if (t_out) t_out[i] = occluded ? 1.0f : 0.0f;
+    }
+    return found;
+}
+
+/* intersect1_pass7 with rtcIntersect8 on rays 8k..8k+7 (a last partial packet masked). */
+static long intersect8_pass7(RTCScene scene, const float *rays, size_t nray, float *t_out) {
+    long found = 0;
+    for (size_t first = 0; first < nray; first += 8) {
+        struct RayHit8 rh;
+        int valid[8];
+        for (int k = 0; k < 8; k++) {
+            size_t i = first + (size_t)k;
+            const float *r = rays + 7 * (i < nray ? i : first);
+            valid[k] = i < nray ? -1 : 0;
+            rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
+            rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
+            rh.tfar[k] = r[6];
+            rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
+            rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
+        }
+        rtcIntersect8(valid, scene, &rh, NULL);
+        for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
+            int hit = rh.geom_id[k] != INVALID_ID;
+            found += hit;
+            if (t_out) t_out[first + (size_t)k] = hit ? rh.tfar[k] : INFINITY;
+        }
+    }
+    return found;
+}
+
+/* occluded1_pass7 with rtcOccluded8 on rays 8k..8k+7 (a last partial packet masked). */
+static long occluded8_pass7(RTCScene scene, const float *rays, size_t nray, float *t_out) {
+    long found = 0;
+    for (size_t first = 0; first < nray; first += 8) {
+        struct Ray8 ray;
+        int valid[8];
+        for (int k = 0; k < 8; k++) {
+            size_t i = first + (size_t)k;
+            const float *r = rays + 7 * (i < nray ? i : first);
+            valid[k] = i < nray ? -1 : 0;
+            ray.org_x[k] = r[0], ray.org_y[k] = r[1], ray.org_z[k] = r[2], ray.tnear[k] = 0.0f;
+            ray.dir_x[k] = r[3], ray.dir_y[k] = r[4], ray.dir_z[k] = r[5], ray.time[k] = 0.0f;
+            ray.tfar[k] = r[6];
+            ray.mask[k] = INVALID_ID, ray.id[k] = 0, ray.flags[k] = 0;
+        }
+        rtcOccluded8(valid, scene, &ray, NULL);
+        for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
+            int occluded = ray.tfar[k] < 0.0f;
+            found += occluded;
+            if (t_out) t_out[first + (size_t)k] = occluded ? 1.0f : 0.0f;
+        }
+    }
+    return found;
+}
+
+/* Rays of 7 floats (origin, direction, tfar) with `query` 0 rtcIntersect1, 1 rtcOccluded1,
+ * 2 rtcIntersect8, 3 rtcOccluded8 (8 consecutive rays a packet): see `timed`. t_out holds
+ * hit distances (+inf on a miss) for the intersections, 1 or 0 (occluded or not) for the
+ * occlusion queries; returns the number of hits or occluded rays, -1 for an unknown query. */
+long anchor_trace_rays(RTCScene scene, const float *rays, size_t nray, int query, int repeats,
+                       double *rates, float *t_out) {
+    static long (*const passes[4])(RTCScene, const float *, size_t, float *) = {
+        intersect1_pass7, occluded1_pass7, intersect8_pass7, occluded8_pass7};
+    if (query < 0 || query > 3) return -1;
+    return timed(passes[query], scene, rays, nray, repeats, rates, t_out);
+}
+
+/* anchor_trace's single pass with each hit's triangle: t_out as single_pass, prim_out the
+ * hit triangle's index (0xffffffff on a miss). Untimed: the incoherent rays start at these
+ * hits. */
+long anchor_primary_hits(RTCScene scene, const float *rays, size_t nray, float *t_out,
+                         unsigned int *prim_out) {
+    long found = 0;
+    for (size_t i = 0; i < nray; i++) {
+        const float *r = rays + 6 * i;
+        struct RayHit rh;
+        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
+        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
+        rh.tfar = INFINITY;
+        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
+        rtcIntersect1(scene, &rh, NULL);
+        int hit = rh.geom_id != INVALID_ID;
+        found += hit;
+        t_out[i] = hit ? rh.tfar : INFINITY;
+        prim_out[i] = hit ? rh.prim_id : INVALID_ID;
+    }
+    return found;
 }
 
 /* Releases a scene from anchor_build (and with it its device). */

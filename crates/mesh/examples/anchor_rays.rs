@@ -14,6 +14,18 @@
 //! to the same there)) and prints
 //! one Mrays/s figure per timed repeat (CPU time of the tracing thread) after one warm-up (`raw` is obvhs' own Bvh2
 //! traversal with no marchmesh code in the loop).
+//!
+//! `anchor_rays time-rays MESH BVH QUERY RAYS_FILE REPEATS OUT_FILE [PRESET]`: times the mesh
+//! backend on given rays, the incoherent rays of the anchor (ambient-occlusion and bounce
+//! rays, `scripts/anchor_incoherent.py`). `RAYS_FILE` holds 7 little-endian f32 per ray
+//! (origin, direction, tmax; tmin 0) in render space; `QUERY` is `occluded`
+//! (`Geometry::occluded_many`, the call the integrators make for shadow and AO rays) or
+//! `closest` (`Geometry::closest_hits`, their call for bounce and reflection rays), handed
+//! over in batches of one tile's worth of rays ([`BATCH`]); `BVH` is `wide` (the default
+//! layout, built as renders build it), `bvh2` or `cwbvh`. Prints one `Mrays/s count` line per
+//! timed repeat after one warm-up (count: rays that hit or are occluded) and writes each
+//! ray's answer of the last repeat to `OUT_FILE` as little-endian f32: the hit distance
+//! (+inf on a miss), or 1 / 0 for occluded / not.
 
 #[path = "../benches/support/mod.rs"]
 mod support;
@@ -21,8 +33,8 @@ mod support;
 use std::io::Write;
 use std::time::Instant;
 
-use glam::Vec3A;
-use marchmesh_core::{Geometry, TraceResult};
+use glam::{Vec3, Vec3A};
+use marchmesh_core::{Geometry, OcclusionResult, Ray, TraceResult};
 use marchmesh_mesh::{BvhKind, MeshOptions, build};
 use obvhs::triangle::Triangle;
 use support::*;
@@ -102,14 +114,147 @@ fn tiled<T: Copy>(rays: &[T], side: usize, tw: usize, th: usize) -> Vec<T> {
     out
 }
 
+/// Rays per batch query in `time-rays`: one tile's worth of camera rays, the size of the
+/// wavefronts the integrator hands over.
+const BATCH: usize = marchmesh_core::integrator::TILE_RAYS as usize;
+
+/// The build preset by its option name (`build=...`, through the same serde names); the
+/// renders' default when `None`.
+fn preset(name: Option<&String>) -> Res<marchmesh_mesh::BuildQuality> {
+    let Some(name) = name else {
+        return Ok(MeshOptions::default().build_quality());
+    };
+    use serde::{Deserialize, de::value::StrDeserializer};
+    let de = StrDeserializer::<serde::de::value::Error>::new(name);
+    Ok(marchmesh_mesh::BuildQuality::deserialize(de)
+        .map_err(|e| format!("unknown preset `{name}`: {e}"))?)
+}
+
+/// Rays of 7 little-endian f32 each (origin, direction, tmax), tmin 0.
+fn read_rays(path: &str) -> Res<Vec<Ray>> {
+    let bytes = std::fs::read(path)?;
+    if bytes.is_empty() || !bytes.len().is_multiple_of(28) {
+        return Err(format!(
+            "{path}: {} bytes, not a positive multiple of 7 f32",
+            bytes.len()
+        )
+        .into());
+    }
+    let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+    Ok(bytes
+        .chunks_exact(28)
+        .map(|r| {
+            let v: [f32; 7] = std::array::from_fn(|k| f(&r[4 * k..]));
+            Ray {
+                origin: Vec3::new(v[0], v[1], v[2]),
+                dir: Vec3::new(v[3], v[4], v[5]),
+                t_min: 0.0,
+                t_max: v[6],
+            }
+        })
+        .collect())
+}
+
+/// `time-rays`: see the module documentation.
+fn time_rays(scene: &marchmesh_scene::Scene, args: &[String], usage: &str) -> Res<()> {
+    let arg = |k: usize| args.get(k).map(String::as_str).ok_or(usage);
+    let kind = match arg(3)? {
+        "wide" => BvhKind::Wide,
+        "bvh2" => BvhKind::Bvh2,
+        "cwbvh" => BvhKind::CwBvh,
+        other => {
+            return Err(format!("unknown bvh `{other}` (time-rays: wide, bvh2, cwbvh)").into());
+        }
+    };
+    let occlusion = match arg(4)? {
+        "occluded" => true,
+        "closest" => false,
+        other => return Err(format!("unknown query `{other}` (occluded, closest)").into()),
+    };
+    let rays = read_rays(arg(5)?)?;
+    let repeats: usize = arg(6)?.parse()?;
+    let out_path = arg(7)?;
+    let g = build(
+        scene,
+        &MeshOptions {
+            bvh: Some(kind),
+            build: Some(preset(args.get(8))?),
+            ..MeshOptions::default()
+        },
+    )?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut hits = vec![TraceResult::default(); rays.len()];
+    let mut occluded = vec![OcclusionResult::default(); rays.len()];
+    let start = Instant::now();
+    // One pass over the rays in batches, timed on the pool's thread: Mrays/s.
+    let mut pass = || {
+        pool.install(|| {
+            let t0 = thread_seconds(start);
+            if occlusion {
+                for (r, o) in rays.chunks(BATCH).zip(occluded.chunks_mut(BATCH)) {
+                    g.occluded_many(r, o);
+                }
+            } else {
+                for (r, o) in rays.chunks(BATCH).zip(hits.chunks_mut(BATCH)) {
+                    g.closest_hits(r, o);
+                }
+            }
+            rays.len() as f64 / (thread_seconds(start) - t0).max(1e-12) / 1e6
+        })
+    };
+    pass();
+    let mut rates = Vec::with_capacity(repeats);
+    for _ in 0..repeats {
+        rates.push(pass());
+    }
+    let (answers, work): (Vec<f32>, Vec<_>) = if occlusion {
+        occluded
+            .iter()
+            .map(|o| (if o.occluded { 1.0 } else { 0.0 }, o.work))
+            .unzip()
+    } else {
+        hits.iter()
+            .map(|o| (o.hit().map_or(f32::INFINITY, |h| h.t), o.work))
+            .unzip()
+    };
+    let count = if occlusion {
+        occluded.iter().filter(|o| o.occluded).count()
+    } else {
+        hits.iter().filter(|o| o.hit().is_some()).count()
+    };
+    let per_ray = |f: fn(&marchmesh_core::RayWork) -> u32| {
+        work.iter().map(|w| f64::from(f(w))).sum::<f64>() / rays.len() as f64
+    };
+    eprintln!(
+        "{} {} rays: {count} {}; per ray {:.2} node visits, {:.2} triangle tests",
+        rays.len(),
+        if occlusion {
+            "occlusion"
+        } else {
+            "closest-hit"
+        },
+        if occlusion { "occluded" } else { "hit" },
+        per_ray(|w| w.node_visits),
+        per_ray(|w| w.primitive_tests),
+    );
+    write_f32(out_path.into(), answers.into_iter())?;
+    for r in rates {
+        println!("{r:.4} {count}");
+    }
+    Ok(())
+}
+
 fn main() -> Res<()> {
     let args: Vec<String> = std::env::args().collect();
-    let usage =
-        "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS [PRESET]";
+    let usage = "usage: anchor_rays export MESH OUT_DIR | anchor_rays time MESH BVH REPEATS \
+                 [PRESET] | anchor_rays time-rays MESH BVH QUERY RAYS_FILE REPEATS OUT_FILE [PRESET]";
     let (Some(mode), Some(mesh)) = (args.get(1), args.get(2)) else {
         return Err(usage.into());
     };
     let (scene, tris) = framed(mesh)?;
+    if mode == "time-rays" {
+        return time_rays(&scene, &args, usage);
+    }
     let rays = primary_rays(&scene);
     match mode.as_str() {
         "export" => {
@@ -139,16 +284,7 @@ fn main() -> Res<()> {
                 "wide" | "wide1" | "wide4x2" | "wide8" | "wide8x8" => BvhKind::Wide,
                 other => return Err(format!("unknown bvh `{other}`").into()),
             };
-            // The preset by its option name (`build=...`), through the same serde names.
-            let build_quality = match args.get(5) {
-                None => MeshOptions::default().build_quality(),
-                Some(name) => {
-                    use serde::{Deserialize, de::value::StrDeserializer};
-                    let de = StrDeserializer::<serde::de::value::Error>::new(name);
-                    marchmesh_mesh::BuildQuality::deserialize(de)
-                        .map_err(|e| format!("unknown preset `{name}`: {e}"))?
-                }
-            };
+            let build_quality = preset(args.get(5))?;
             let g = build(
                 &scene,
                 &MeshOptions {
