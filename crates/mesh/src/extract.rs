@@ -413,7 +413,11 @@ mod tests {
         let plain = extract_surface_x8(whole, |_| 0, bounds, 96);
         assert!(!plain.triangles.is_empty());
         let smallest = restricted_nodes.into_inner();
-        assert!(smallest < field.node_count(), "{smallest} of {} nodes", field.node_count());
+        assert!(
+            smallest < field.node_count(),
+            "{smallest} of {} nodes",
+            field.node_count()
+        );
         assert_eq!(pruned.positions.len(), plain.positions.len());
         // The restricted fields are within 2^-24 of the box of the whole one: vertices move
         // by far less than a thousandth of a cell, if at all.
