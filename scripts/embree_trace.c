@@ -147,6 +147,19 @@ RTCScene anchor_build(const float *tris, size_t ntri, int quality, int flags, in
     return scene;
 }
 
+/* The ray fields of one ray (struct Ray or struct RayHit) from `r`: origin r[0..3], direction
+ * r[3..6], tnear 0, tfar `tf`, every ray mask bit set. */
+#define SET_RAY1(x, r, tf)                                                                    \
+    ((x).org_x = (r)[0], (x).org_y = (r)[1], (x).org_z = (r)[2], (x).tnear = 0.0f,           \
+     (x).dir_x = (r)[3], (x).dir_y = (r)[4], (x).dir_z = (r)[5], (x).time = 0.0f,            \
+     (x).tfar = (tf), (x).mask = INVALID_ID, (x).id = 0, (x).flags = 0)
+
+/* SET_RAY1 for lane `k` of a packet (struct Ray8 or struct RayHit8). */
+#define SET_RAY8(x, k, r, tf)                                                                 \
+    ((x).org_x[k] = (r)[0], (x).org_y[k] = (r)[1], (x).org_z[k] = (r)[2], (x).tnear[k] = 0.0f, \
+     (x).dir_x[k] = (r)[3], (x).dir_y[k] = (r)[4], (x).dir_z[k] = (r)[5], (x).time[k] = 0.0f,  \
+     (x).tfar[k] = (tf), (x).mask[k] = INVALID_ID, (x).id[k] = 0, (x).flags[k] = 0)
+
 /* One pass of rtcIntersect1 calls over `nray` rays (6 floats each: origin, direction;
  * tnear 0, tfar +inf); writes each hit distance into t_out (+inf on a miss) unless it is
  * NULL; returns the number of rays that hit. */
@@ -155,10 +168,7 @@ static long single_pass(RTCScene scene, const float *rays, size_t nray, float *t
     for (size_t i = 0; i < nray; i++) {
         const float *r = rays + 6 * i;
         struct RayHit rh;
-        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
-        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
-        rh.tfar = INFINITY;
-        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        SET_RAY1(rh, r, INFINITY);
         rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
         rtcIntersect1(scene, &rh, NULL);
         int hit = rh.geom_id != INVALID_ID;
@@ -179,10 +189,7 @@ static long packet_pass(RTCScene scene, const float *rays, size_t nray, float *t
             size_t i = first + (size_t)k;
             const float *r = rays + 6 * (i < nray ? i : first);
             valid[k] = i < nray ? -1 : 0;
-            rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
-            rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
-            rh.tfar[k] = INFINITY;
-            rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
+            SET_RAY8(rh, k, r, INFINITY);
             rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
         }
         rtcIntersect8(valid, scene, &rh, NULL);
@@ -230,10 +237,7 @@ static long intersect1_pass7(RTCScene scene, const float *rays, size_t nray, flo
     for (size_t i = 0; i < nray; i++) {
         const float *r = rays + 7 * i;
         struct RayHit rh;
-        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
-        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
-        rh.tfar = r[6];
-        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        SET_RAY1(rh, r, r[6]);
         rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
         rtcIntersect1(scene, &rh, NULL);
         int hit = rh.geom_id != INVALID_ID;
@@ -250,10 +254,7 @@ static long occluded1_pass7(RTCScene scene, const float *rays, size_t nray, floa
     for (size_t i = 0; i < nray; i++) {
         const float *r = rays + 7 * i;
         struct Ray ray;
-        ray.org_x = r[0], ray.org_y = r[1], ray.org_z = r[2], ray.tnear = 0.0f;
-        ray.dir_x = r[3], ray.dir_y = r[4], ray.dir_z = r[5], ray.time = 0.0f;
-        ray.tfar = r[6];
-        ray.mask = INVALID_ID, ray.id = 0, ray.flags = 0;
+        SET_RAY1(ray, r, r[6]);
         rtcOccluded1(scene, &ray, NULL);
         int occluded = ray.tfar < 0.0f;
         found += occluded;
@@ -272,10 +273,7 @@ static long intersect8_pass7(RTCScene scene, const float *rays, size_t nray, flo
             size_t i = first + (size_t)k;
             const float *r = rays + 7 * (i < nray ? i : first);
             valid[k] = i < nray ? -1 : 0;
-            rh.org_x[k] = r[0], rh.org_y[k] = r[1], rh.org_z[k] = r[2], rh.tnear[k] = 0.0f;
-            rh.dir_x[k] = r[3], rh.dir_y[k] = r[4], rh.dir_z[k] = r[5], rh.time[k] = 0.0f;
-            rh.tfar[k] = r[6];
-            rh.mask[k] = INVALID_ID, rh.id[k] = 0, rh.flags[k] = 0;
+            SET_RAY8(rh, k, r, r[6]);
             rh.geom_id[k] = INVALID_ID, rh.inst_id[0][k] = INVALID_ID;
         }
         rtcIntersect8(valid, scene, &rh, NULL);
@@ -298,10 +296,7 @@ static long occluded8_pass7(RTCScene scene, const float *rays, size_t nray, floa
             size_t i = first + (size_t)k;
             const float *r = rays + 7 * (i < nray ? i : first);
             valid[k] = i < nray ? -1 : 0;
-            ray.org_x[k] = r[0], ray.org_y[k] = r[1], ray.org_z[k] = r[2], ray.tnear[k] = 0.0f;
-            ray.dir_x[k] = r[3], ray.dir_y[k] = r[4], ray.dir_z[k] = r[5], ray.time[k] = 0.0f;
-            ray.tfar[k] = r[6];
-            ray.mask[k] = INVALID_ID, ray.id[k] = 0, ray.flags[k] = 0;
+            SET_RAY8(ray, k, r, r[6]);
         }
         rtcOccluded8(valid, scene, &ray, NULL);
         for (int k = 0; k < 8 && first + (size_t)k < nray; k++) {
@@ -334,10 +329,7 @@ long anchor_primary_hits(RTCScene scene, const float *rays, size_t nray, float *
     for (size_t i = 0; i < nray; i++) {
         const float *r = rays + 6 * i;
         struct RayHit rh;
-        rh.org_x = r[0], rh.org_y = r[1], rh.org_z = r[2], rh.tnear = 0.0f;
-        rh.dir_x = r[3], rh.dir_y = r[4], rh.dir_z = r[5], rh.time = 0.0f;
-        rh.tfar = INFINITY;
-        rh.mask = INVALID_ID, rh.id = 0, rh.flags = 0;
+        SET_RAY1(rh, r, INFINITY);
         rh.geom_id = INVALID_ID, rh.inst_id[0] = INVALID_ID;
         rtcIntersect1(scene, &rh, NULL);
         int hit = rh.geom_id != INVALID_ID;
