@@ -7,7 +7,10 @@
 //! whether both variants agree on every ray's hit or miss.
 //!
 //! `cargo run --release -p marchmesh-field --example prune_cost -- SCENE.json... [--side N]
-//! [--rounds R] [--depth D] [--exact]` (`--exact`: prune without cutting smooth folds)
+//! [--rounds R] [--depth D] [--exact] [--error-rel E] [--probe]` (`--exact`: prune without
+//! cutting smooth folds; `--error-rel`: the cut's error relative to the field's box, default
+//! 2^-24; `--probe`: also print how many nodes a ball around hit points keeps, by radius and
+//! error: what finer cells could reach)
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -24,7 +27,10 @@ fn thread_ns(start: Instant) -> u128 {
 }
 
 struct Trace {
+    /// Steps of all traces run.
     steps: u64,
+    /// Steps of one trace of every ray.
+    steps_once: u64,
     hits: Vec<bool>,
     ns: u128,
 }
@@ -33,6 +39,7 @@ struct Trace {
 fn trace(field: &Field, rays: &[Vec3], t_max: f32) -> Trace {
     let start = Instant::now();
     let mut total = trace_once(field, rays, t_max);
+    total.steps_once = total.steps;
     while start.elapsed().as_secs_f64() < 0.3 {
         let more = trace_once(field, rays, t_max);
         total.steps += more.steps;
@@ -65,6 +72,7 @@ fn trace_once(field: &Field, rays: &[Vec3], t_max: f32) -> Trace {
     }
     Trace {
         steps,
+        steps_once: steps,
         hits,
         ns: thread_ns(start) - t0,
     }
@@ -79,6 +87,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (mut scenes, mut side, mut rounds, mut depth) = (Vec::new(), 128u32, 3usize, 6u32);
     // The sdf backend's default (`marchmesh_sdf::PRUNE_MAX_ERROR_REL`); `--exact` for 0.
     let mut max_error_rel = 1.0 / 16_777_216.0;
+    let mut probe = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut num = || -> Result<u32, Box<dyn std::error::Error>> {
@@ -89,6 +98,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--rounds" => rounds = num()? as usize,
             "--depth" => depth = num()?,
             "--exact" => max_error_rel = 0.0,
+            "--probe" => probe = true,
+            "--error-rel" => {
+                max_error_rel = args.next().ok_or("missing value")?.parse()?;
+            }
             _ => scenes.push(PathBuf::from(a)),
         }
     }
@@ -125,18 +138,67 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             last_p = Some(p);
         }
         let (w, p) = (last_w.ok_or("no rounds")?, last_p.ok_or("no rounds")?);
+        if probe {
+            // Kept nodes of balls around hit points, by radius and error.
+            let prog = whole.program_f64();
+            let index = marchmesh_field::prune::PruneIndex::build(prog);
+            let hits: Vec<glam::DVec3> = rays
+                .iter()
+                .filter_map(|&d| {
+                    let mut t = 0.0f32;
+                    for _ in 0..1000 {
+                        let v = whole.distance(d * t);
+                        if v < 1e-4 * t.max(1.0) {
+                            return Some((d * t).as_dvec3());
+                        }
+                        t += v;
+                        if t > t_max {
+                            return None;
+                        }
+                    }
+                    None
+                })
+                .step_by(4)
+                .take(200)
+                .collect();
+            for r in [0.04, 0.02, 0.01, 0.005, 0.001, 0.0] {
+                for err in [0.0, 1e-7, 1e-5, 1e-3] {
+                    let (mut sum, mut max, mut work) = (0usize, 0usize, 0usize);
+                    for &h in &hits {
+                        let pr =
+                            marchmesh_field::prune::prune_indexed(prog, &index, &[], h, r, err);
+                        sum += pr.program.instrs.len();
+                        max = max.max(pr.program.instrs.len());
+                        work += pr.work;
+                    }
+                    println!(
+                        "  r {r}: err {err}: mean kept {:.1}, max {max}, mean work {:.0} over {} hit points",
+                        sum as f64 / hits.len().max(1) as f64,
+                        work as f64 / hits.len().max(1) as f64,
+                        hits.len()
+                    );
+                }
+            }
+        }
         let agree = w.hits.iter().zip(&p.hits).filter(|(a, b)| a == b).count();
         println!(
-            "{}: nodes {}, cells (program, far, largest program) {:?} built in {:.0} ms; whole {:.1} ns/step ({} steps, {} hits); pruned {:.1} ns/step ({} steps, {} hits); hit/miss agree on {}/{} rays",
+            "{}: nodes {}, cells (program, far, largest program, whole, subset, subset children) {:?} built in {:.0} ms; whole {:.1} ns/step ({} steps a trace, {} hits); pruned {:.1} ns/step ({} steps a trace, {} hits); hit/miss agree on {}/{} rays",
             path.display(),
             whole.node_count(),
-            stats.map(|s| (s.program_cells, s.far_cells, s.max_program_nodes)),
+            stats.map(|s| (
+                s.program_cells,
+                s.far_cells,
+                s.max_program_nodes,
+                s.whole_cells,
+                s.subset_cells,
+                s.subset_children
+            )),
             build_ms,
             median(cw),
-            w.steps,
+            w.steps_once,
             w.hits.iter().filter(|h| **h).count(),
             median(cp),
-            p.steps,
+            p.steps_once,
             p.hits.iter().filter(|h| **h).count(),
             agree,
             rays.len()

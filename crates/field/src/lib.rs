@@ -228,6 +228,9 @@ pub struct Field {
     /// The program pruned per octree cell ([`prune`]), when built: what the point queries
     /// evaluate.
     cells: Option<prune::Cells>,
+    /// Child trees of the program's large composites, built on first use by
+    /// [`Field::build_cells`] or [`Field::restricted_to_ball`].
+    prune_index: std::sync::OnceLock<prune::PruneIndex>,
     report: FieldReport,
 }
 
@@ -494,6 +497,7 @@ impl Field {
             grids: meshes.grids,
             bounds,
             cells: None,
+            prune_index: std::sync::OnceLock::new(),
             report: FieldReport {
                 phases_ms: phases,
                 counters,
@@ -532,20 +536,30 @@ impl Field {
     /// the cell's program (within `max_error_rel` times the box's longest side of the whole
     /// program's value; bit for bit with `0`: see [`prune::prune`]) or the far
     /// bound (a safe bound of the distance to any surface with the field's sign, at least half
-    /// the cell's radius: never mistaken for a hit). An octree over its node budget
-    /// ([`prune::Cells::max_nodes`]) is retried one level shallower. Does nothing and returns
+    /// the cell's radius: never mistaken for a hit). The octree is refined while its work
+    /// budget lasts ([`prune::Cells::build`]). Does nothing and returns
     /// `None` when the field is unbounded, has mesh grids or was built
     /// [`Field::without_bounds`].
     pub fn build_cells(&mut self, depth: u32, max_error_rel: f64) -> Option<prune::CellStats> {
         let (lo, hi) = self.bounds?;
         let max_error = max_error_rel * (hi - lo).max_element();
         let t0 = Instant::now();
-        // Over its node budget an octree is retried one level shallower.
-        let cells = (1..=depth.min(8)).rev().find_map(|depth| {
-            // Half a finest cell of margin around the surfaces' box.
-            let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
-            prune::Cells::build(&self.p64, &self.grids, (lo, hi), pad, depth, max_error)
-        })?;
+        let index = self.prune_index();
+        if depth == 0 {
+            return None;
+        }
+        let depth = depth.min(8);
+        // Half a finest cell of margin around the surfaces' box.
+        let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
+        let cells = prune::Cells::build(
+            &self.p64,
+            index,
+            &self.grids,
+            (lo, hi),
+            pad,
+            depth,
+            max_error,
+        )?;
         let stats = cells.stats();
         self.report
             .phases_ms
@@ -561,6 +575,7 @@ impl Field {
                 "prune_max_cell_nodes".into(),
                 stats.max_program_nodes as f64,
             ),
+            ("prune_whole_cells".into(), stats.whole_cells as f64),
         ]);
         self.cells = Some(cells);
         Some(stats)
@@ -593,21 +608,14 @@ impl Field {
         }
     }
 
-    /// The f64 program to evaluate at `p`: its cell's when pruned, else the whole one.
-    #[inline]
-    fn p64_at(&self, p: DVec3) -> &Program<f64> {
-        self.cells
-            .as_ref()
-            .and_then(|c| c.program_f64(p))
-            .unwrap_or(&self.p64)
-    }
-
     /// Signed distance bound at `p` in f64 (same formulas as [`Field::distance`]; the whole
     /// program's value in far cells).
     #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_f64(&self, p: DVec3) -> f64 {
-        self.eval::<f64, false>(self.p64_at(p), V3::new(p.x, p.y, p.z))
-            .0
+        match &self.cells {
+            Some(c) => c.eval_f64::<false>(p, &self.p64, &self.grids).0,
+            None => self.eval::<f64, false>(&self.p64, V3::new(p.x, p.y, p.z)).0,
+        }
     }
 
     /// A bound of the distance to the surfaces at `p` in f64 for marching: in the far cells of
@@ -635,7 +643,10 @@ impl Field {
     /// Distance and material in f64.
     #[cfg_attr(not(debug_assertions), inline)]
     pub fn distance_material_f64(&self, p: DVec3) -> (f64, MaterialId) {
-        self.eval::<f64, true>(self.p64_at(p), V3::new(p.x, p.y, p.z))
+        match &self.cells {
+            Some(c) => c.eval_f64::<true>(p, &self.p64, &self.grids),
+            None => self.eval::<f64, true>(&self.p64, V3::new(p.x, p.y, p.z)),
+        }
     }
 
     /// The distance at `p` (as [`Field::distance`]) and a safe step along `dir` from local
@@ -647,12 +658,10 @@ impl Field {
     pub fn segment_step(&self, p: Vec3, dir: Vec3, len: f32) -> (f32, f32) {
         // A segment inside one program cell reads the cell's program (the same values
         // along it); any other the whole program.
-        let prog = self
-            .cells
-            .as_ref()
-            .and_then(|c| c.program_f32_holding(p, p + dir * len))
-            .unwrap_or(&self.p32);
-        self.segment_in(prog, p, dir, len)
+        match &self.cells {
+            Some(c) => c.segment_f32(p, dir, len, &self.p32, &self.grids),
+            None => self.segment_in(&self.p32, p, dir, len),
+        }
     }
 
     /// [`Field::segment_step`] in f64 (same formulas).
@@ -810,7 +819,8 @@ impl Field {
     /// for reading many points inside the ball through [`Field::ball_distance_x8`]: at every
     /// point of the ball its value is within `max_error_rel` times the longest side of the
     /// field's box of the whole program's (`0` without finite bounds: exact). Points outside
-    /// the ball get values that may be wrong. Costs one pass over the whole program.
+    /// the ball get values that may be wrong. Costs a pass over the children near the ball
+    /// ([`prune::prune_indexed`]).
     pub fn restricted_to_ball(
         &self,
         centre: DVec3,
@@ -823,7 +833,14 @@ impl Field {
             .filter(|e| e.is_finite())
             .unwrap_or(0.0);
         let max_error = (max_error_rel * extent).max(0.0);
-        let pruned = prune::prune(&self.p64, &self.grids, centre, radius, max_error);
+        let pruned = prune::prune_indexed(
+            &self.p64,
+            self.prune_index(),
+            &self.grids,
+            centre,
+            radius,
+            max_error,
+        );
         BallProgram {
             p32: pruned.program.cast::<f32>(),
         }
@@ -849,6 +866,12 @@ impl Field {
             .iter()
             .all(|i| i.material == first)
             .then_some(first)
+    }
+
+    /// The child trees the pruner reads ([`prune::PruneIndex`]), built on first use.
+    fn prune_index(&self) -> &prune::PruneIndex {
+        self.prune_index
+            .get_or_init(|| prune::PruneIndex::build(&self.p64))
     }
 
     /// The compiled f64 program (the whole one, never a pruned cell's).

@@ -302,6 +302,82 @@ impl<S: Scalar> Program<S> {
         self.child::<T, M>(0, p, Ctx::Plain, grids)
     }
 
+    /// Whether the root is a smooth union, so [`Program::eval_root_subset`] applies.
+    pub fn root_is_smooth_union(&self) -> bool {
+        self.instrs.first().is_some_and(|n| {
+            matches!(
+                n.op,
+                Op::Smooth {
+                    op: SmoothOp::Union,
+                    ..
+                }
+            )
+        })
+    }
+
+    /// [`Program::eval`] of the program whose root (a smooth union: see
+    /// [`Program::root_is_smooth_union`]) keeps only its children `kids` (their node
+    /// indices, in fold order, at least one), each whole: bit for bit what that restricted
+    /// program evaluates to, without copying it (a region's pruned cell stores 4 bytes a
+    /// child). Another root is evaluated whole.
+    #[inline]
+    pub fn eval_root_subset<T: Lane<S = S>, const M: bool>(
+        &self,
+        kids: &[u32],
+        p: V3<T>,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
+        let Some(ins) = self.instrs.first() else {
+            return (T::c(BIG), T::mat_splat(0));
+        };
+        if kids.is_empty() || !self.root_is_smooth_union() {
+            return self.eval::<T, M>(p, grids);
+        }
+        if !ins.has_bound {
+            return self.root_subset_node::<T, M>(kids, p, grids);
+        }
+        // As `child` reads a bounded node.
+        let zero = T::c(0.0);
+        let l = shapes::box_distance(p, V3::splat3(ins.lo), V3::splat3(ins.hi));
+        let tau = T::splat(ins.tau);
+        let outside = T::lt(zero, l);
+        let skip = T::and(outside, T::le(tau, l));
+        let mat = T::mat_splat(ins.material);
+        if T::all(skip) {
+            return (l, mat);
+        }
+        let (c, m) = self.root_subset_node::<T, M>(kids, p, grids);
+        let cc = c.min(tau);
+        let g = T::select(outside, l.max(cc), cc);
+        (T::select(skip, l, g), msel::<T, M>(skip, mat, m))
+    }
+
+    /// The root smooth union over `kids` without its bound (as `node` folds it).
+    #[inline(always)]
+    pub(crate) fn root_subset_node<T: Lane<S = S>, const M: bool>(
+        &self,
+        kids: &[u32],
+        p: V3<T>,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
+        let ins = &self.instrs[0];
+        let Op::Smooth { k, inv_k, .. } = &ins.op else {
+            return self.node::<T, M>(0, p, None, grids);
+        };
+        let q = ins.to_local.apply(p);
+        let k = T::splat(*k);
+        let inv_k = T::splat(*inv_k);
+        let (mut best, mut bm) = self.child::<T, M>(kids[0] as usize, q, Ctx::Plain, grids);
+        for &j in &kids[1..] {
+            // A child at least k above the running value leaves it unchanged.
+            let (d, m) = self.child::<T, M>(j as usize, q, Ctx::Below(best + k), grids);
+            let take = T::lt(d, best);
+            best = shapes::smin(best, d, k, inv_k);
+            bm = msel::<T, M>(take, m, bm);
+        }
+        (best * T::splat(ins.dscale), bm)
+    }
+
     /// The value node `i` contributes to its parent at `p` (its parent's frame), bound logic
     /// included: what the pruner ([`crate::prune`]) brackets over a region.
     pub(crate) fn node_value(&self, i: usize, p: V3<S>, grids: &[Box<dyn GridSampler>]) -> S

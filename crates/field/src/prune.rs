@@ -24,19 +24,27 @@
 //! Intervals carry a slack for f32 rounding, so the f32 program pruned from the f64 one
 //! drops only children that are exact no-ops in f32 as well.
 //!
-//! [`Cells`] applies this over an octree of the field's box: each cell prunes its parent
-//! cell's program further (fidget prunes its tapes per image region the same way with
-//! interval arithmetic, Keeter 2020), and a cell where the whole field is provably positive
-//! by a margin holds no program at all but answers a safe bound.
+//! [`Cells`] applies this over an octree of the field's box: each cell restricts the whole
+//! program to itself (fidget prunes its tapes per image region the same way with interval
+//! arithmetic, Keeter 2020), reading the children of large composites through a
+//! [`PruneIndex`] so that a cell's cost follows the children near it rather than their
+//! count, and a cell where the whole field is provably positive by a margin holds no program
+//! at all but answers a safe bound.
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 
-use crate::lane::{F32x8, V3};
+use crate::lane::V3;
 use marchmesh_scene::SmoothOp;
 
-use crate::leaf::Leaf;
 use crate::program::{Affine, GridSampler, Instr, Op, Program};
 use crate::shapes;
+
+mod cells;
+mod index;
+
+pub use cells::{Cell, CellStats, Cells};
+pub use index::PruneIndex;
+use index::{ChildTree, TreeNode};
 
 /// Deepest composite nesting the pruner descends into; deeper subtrees are kept whole (so a
 /// deep tree costs bounded recursion and time per cell).
@@ -45,28 +53,59 @@ const MAX_PRUNE_DEPTH: usize = 24;
 /// Relative slack of every interval (f32 rounding of the values and of the coordinates).
 const SLACK_REL: f64 = 2e-5;
 
+/// Rounds of the fold walk that read the unread runs its kept fold would start before,
+/// before every run is read.
+const OPEN_ROUNDS: usize = 3;
+
 /// A program restricted to a ball, and the interval of its value there.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Pruned {
     /// The restricted program: within the `max_error` given to [`prune`] of the whole
     /// program at every point of the ball (equal to it for `0`).
     pub program: Program<f64>,
-    /// Lower bound of the value over the ball (`-inf` when unknown).
+    /// Lower bound of the whole program's value over the ball (`-inf` when unknown).
     pub lo: f64,
-    /// Upper bound of the value over the ball (`+inf` when unknown).
+    /// Upper bound of the whole program's value over the ball (`+inf` when unknown).
     pub hi: f64,
     /// Index in the whole program of each node of [`Pruned::program`]: equal lists mean
     /// equal programs (cells share them).
     pub source: Vec<u32>,
+    /// Work of the restriction: child intervals evaluated plus child-tree nodes visited.
+    pub work: usize,
 }
 
 /// `prog` restricted to the ball of radius `radius` around `centre` (in the frame the program
 /// is evaluated in), within `max_error` inside the ball: `0` keeps the whole program's value
 /// bit for bit, a positive `max_error` lets smooth unions drop the start of their fold where
-/// it changes the value by less than that (see `Pruner::smooth_union_keep`). Never fails
-/// (an empty program stays empty).
+/// it changes the value by less than that (see `FoldChain::cut_start`). Reads every child
+/// of every node it keeps; [`prune_indexed`] reads only the children near the ball. Never
+/// fails (an empty program stays empty).
 pub fn prune(
     prog: &Program<f64>,
+    grids: &[Box<dyn GridSampler>],
+    centre: DVec3,
+    radius: f64,
+    max_error: f64,
+) -> Pruned {
+    prune_indexed(
+        prog,
+        &PruneIndex::meshes_only(prog),
+        grids,
+        centre,
+        radius,
+        max_error,
+    )
+}
+
+/// [`prune`] reading the children of large composites through `index` (built by
+/// [`PruneIndex::build`] from `prog`): the same rules, applied to the children a child tree
+/// cannot rule out, so its cost follows the children near the ball rather than their
+/// count. The result may keep a few more nodes than [`prune`]'s (a run skipped at the start
+/// of a smooth fold is bounded more loosely than its children would be), never fewer
+/// than its rules need: values are as [`prune`] states.
+pub fn prune_indexed(
+    prog: &Program<f64>,
+    index: &PruneIndex,
     grids: &[Box<dyn GridSampler>],
     centre: DVec3,
     radius: f64,
@@ -78,39 +117,158 @@ pub fn prune(
             lo: f64::INFINITY,
             hi: f64::INFINITY,
             source: Vec::new(),
+            work: 0,
         };
     }
+    // Errors of nested cuts add along a path of at most MAX_PRUNE_DEPTH + 1 nodes.
+    let (cut_error, max_error) = if max_error.is_finite() && max_error > 0.0 {
+        (max_error / (MAX_PRUNE_DEPTH + 1) as f64, max_error)
+    } else {
+        (0.0, 0.0)
+    };
     let mut p = Pruner {
         prog,
+        index,
         grids,
         out: Vec::with_capacity(prog.instrs.len().min(1024)),
         source: Vec::with_capacity(prog.instrs.len().min(1024)),
-        // Errors of nested cuts add along a path of at most MAX_PRUNE_DEPTH + 1 nodes.
-        cut_error: if max_error.is_finite() && max_error > 0.0 {
-            max_error / (MAX_PRUNE_DEPTH + 1) as f64
-        } else {
-            0.0
-        },
+        cut_error,
+        max_error,
+        work: 0,
+        scratch: std::collections::HashMap::new(),
+        known: std::collections::HashMap::new(),
     };
     let c = V3::new(centre.x, centre.y, centre.z);
-    let (lo, hi) = p.interval(0, c, radius);
+    // The root's interval from the restricted program (within `max_error` of the whole's,
+    // bit for bit at 0), so a large program is not evaluated whole.
     p.emit(0, c, radius, 0);
+    let program = Program { instrs: p.out };
+    let (lo, hi) = if index.has_mesh(prog, 0) {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    } else {
+        bracket(program.node_value(0, c, grids), c, radius, max_error)
+    };
     Pruned {
-        program: Program { instrs: p.out },
+        program,
         lo,
         hi,
         source: p.source,
+        work: p.work,
     }
+}
+
+/// The children a restricted program keeps when it is `prog`'s root, a smooth union, with
+/// some of its children each copied whole (`source`: the restricted nodes' indices in
+/// `prog`), else `None`.
+fn root_subset(prog: &Program<f64>, source: &[u32]) -> Option<Box<[u32]>> {
+    if source.len() < 2 || source[0] != 0 || !prog.root_is_smooth_union() {
+        return None;
+    }
+    let root_end = prog.instrs[0].end;
+    let mut kids = Vec::new();
+    let mut at = 1;
+    while at < source.len() {
+        let j = source[at];
+        let end = prog.instrs.get(j as usize)?.end;
+        let len = (end - j) as usize;
+        if j == 0 || end > root_end || !source.get(at..at + len)?.iter().copied().eq(j..end) {
+            return None;
+        }
+        kids.push(j);
+        at += len;
+    }
+    Some(kids.into_boxed_slice())
+}
+
+/// What the child tree of `prog`'s root (an indexed union or smooth union) says of the ball
+/// without restricting the program to it, for an octree cell: a lower bound of the whole
+/// program's value over the ball (from the children's boxes: `-inf` when unknown), whether
+/// restricting would plainly keep more than `cap` children (their boxes come near), and the
+/// work spent. `None` when the root has no child tree.
+fn survey_root(
+    prog: &Program<f64>,
+    index: &PruneIndex,
+    grids: &[Box<dyn GridSampler>],
+    centre: DVec3,
+    radius: f64,
+    cap: usize,
+) -> Option<(f64, bool, usize)> {
+    let root = prog.instrs.first()?;
+    let tree = index.trees.get(&0)?;
+    let slack = match root.op {
+        Op::Union => 0.0,
+        Op::Smooth {
+            op: SmoothOp::Union,
+            k,
+            ..
+        } => k,
+        _ => return None,
+    };
+    let mut p = Pruner {
+        prog,
+        index,
+        grids,
+        out: Vec::new(),
+        source: Vec::new(),
+        cut_error: 0.0,
+        max_error: 0.0,
+        work: 0,
+        scratch: std::collections::HashMap::new(),
+        known: std::collections::HashMap::new(),
+    };
+    let c = V3::new(centre.x, centre.y, centre.z);
+    let q = root.to_local.apply(c);
+    let rq = radius * stretch(&root.to_local);
+    // Every child is at least the nearest run's box bound; a fold of values lies less than
+    // `k` below their minimum (`marchmesh_scene::bounds::smooth_fold_deficit`).
+    let nearest = p.least_lower(tree, q, rq);
+    let mut lower = root.dscale * (nearest - slack);
+    if root.has_bound {
+        // The parent reads `max(L, min(c, tau))` (`min(c, tau)` inside the box).
+        lower = lower.min(root.tau);
+        let d = shapes::box_distance(c, V3::splat3(root.lo), V3::splat3(root.hi)) - radius;
+        if d > 0.0 {
+            lower = lower.max(d);
+        }
+    }
+    if !lower.is_finite() {
+        lower = f64::NEG_INFINITY;
+    }
+    let scale = c.x.abs().max(c.y.abs()).max(c.z.abs()) + radius;
+    lower -= SLACK_REL * (1.0 + lower.abs().min(1e300) + scale);
+    let crowded = p.crowded(tree, q, rq, slack + 2.0 * rq, cap);
+    Some((lower, crowded, p.work))
+}
+
+/// The interval `v +- (r + slack + err)` of a 1-Lipschitz value `v` at the centre `q` of a
+/// ball of radius `r` (unknown when `v` is not finite).
+fn bracket(v: f64, q: V3<f64>, r: f64, err: f64) -> (f64, f64) {
+    if !v.is_finite() {
+        return (f64::NEG_INFINITY, f64::INFINITY);
+    }
+    let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + r;
+    let slack = SLACK_REL * (1.0 + v.abs() + scale) + err;
+    (v - r - slack, v + r + slack)
 }
 
 struct Pruner<'a> {
     prog: &'a Program<f64>,
+    index: &'a PruneIndex,
     grids: &'a [Box<dyn GridSampler>],
     out: Vec<Instr<f64>>,
     /// Index in `prog` of each node of `out`.
     source: Vec<u32>,
     /// Largest change of one smooth union's value its prefix cut may make (0: exact).
     cut_error: f64,
+    /// Largest change of any node's value by the restriction (0: exact).
+    max_error: f64,
+    /// Child intervals evaluated and tree nodes visited.
+    work: usize,
+    /// Indexed composites already restricted to find their interval (node, its restricted
+    /// nodes with `end` relative to 0, their sources), emitted from here when kept.
+    scratch: std::collections::HashMap<usize, (Vec<Instr<f64>>, Vec<u32>)>,
+    /// Intervals already read (a node is read under one ball per restriction).
+    known: std::collections::HashMap<usize, (f64, f64)>,
 }
 
 /// An upper bound of the stretch of `a`'s linear part (its Frobenius norm; 1 for none).
@@ -119,29 +277,175 @@ fn stretch(a: &Affine<f64>) -> f64 {
         .map_or(1.0, |m| m.iter().map(|v| v * v).sum::<f64>().sqrt())
 }
 
+/// One step of a smooth union's fold as the pruner keeps it: a child (`node` its index in
+/// the program) or a skipped run of a child tree (`run` its tree node), with its value's
+/// interval and the prefix's interval before it.
+#[derive(Debug, Clone, Copy)]
+struct Link {
+    node: usize,
+    run: Option<u32>,
+    hi: f64,
+    plo: f64,
+}
+
+/// The kept steps of a smooth union's fold `f_j = smin(f_{j-1}, a_j)`, built child by child
+/// (and run by run) in fold order.
+///
+/// Exact rules: a child with `a_j >= P.hi + k` (`P` the prefix's interval, folded by
+/// interval arithmetic: `smin` is non-decreasing in both arguments) leaves the fold
+/// unchanged and is dropped; a child with `a_j <= P.lo - k` replaces it (`smin = a_j`), so
+/// every step before it is dropped. A run of children each at least `lb` is folded as
+/// `P -> [min(P.lo, lb) - k, P.hi]`: a fold of any values lies less than `k` below their
+/// minimum (`marchmesh_scene::bounds::smooth_fold_deficit`) and `smin` never exceeds its
+/// first argument.
+struct FoldChain {
+    k: f64,
+    inv_k: f64,
+    links: Vec<Link>,
+    fold: Option<(f64, f64)>,
+}
+
+impl FoldChain {
+    fn new(k: f64, inv_k: f64) -> FoldChain {
+        FoldChain {
+            k,
+            inv_k,
+            links: Vec::new(),
+            fold: None,
+        }
+    }
+
+    /// Whether every child whose value is at least `lo` is a no-op here.
+    fn skips(&self, lo: f64) -> bool {
+        self.fold.is_some_and(|(_, phi)| lo >= phi + self.k)
+    }
+
+    fn child(&mut self, node: usize, lo: f64, hi: f64) {
+        let (k, inv_k) = (self.k, self.inv_k);
+        match self.fold {
+            None => {
+                self.links.push(Link {
+                    node,
+                    run: None,
+                    hi,
+                    plo: f64::INFINITY,
+                });
+                self.fold = Some((lo, hi));
+            }
+            Some((plo, phi)) => {
+                if lo >= phi + k {
+                    // smin(f, a_j) = f exactly: a no-op.
+                    return;
+                }
+                if plo >= hi + k {
+                    // smin(f, a_j) = a_j exactly: the prefix no longer matters.
+                    self.links.clear();
+                    self.links.push(Link {
+                        node,
+                        run: None,
+                        hi,
+                        plo: f64::INFINITY,
+                    });
+                    self.fold = Some((lo, hi));
+                    return;
+                }
+                self.links.push(Link {
+                    node,
+                    run: None,
+                    hi,
+                    plo,
+                });
+                self.fold = Some((
+                    shapes::smin(plo, lo, k, inv_k),
+                    shapes::smin(phi, hi, k, inv_k),
+                ));
+            }
+        }
+    }
+
+    /// A run of children each at least `lb` over the ball, not read.
+    fn run(&mut self, run: u32, lb: f64) {
+        let (plo, phi) = self.fold.unwrap_or((f64::INFINITY, f64::INFINITY));
+        self.links.push(Link {
+            node: 0,
+            run: Some(run),
+            hi: f64::INFINITY,
+            plo,
+        });
+        self.fold = Some((plo.min(lb) - self.k, phi));
+    }
+
+    /// Where the kept fold may start within `cut_error` (0: exact).
+    ///
+    /// Starting the fold at child `c` instead (dropping the steps before it) changes `f_c`
+    /// by at most `k h^2 / 4` where the child lies below the prefix over the whole ball
+    /// (`h = max(k - (P.lo - a.hi), 0) / k`), and a change of the prefix reaches the result
+    /// through `d smin(x, a) / dx`, which is `h / 2 <= 1/2` where the child is below `x` and
+    /// at most 1 anywhere (so later steps never amplify it, and a dropped no-op child
+    /// passes it unchanged). The latest `c` whose change, times the product of the later
+    /// steps' derivative bounds, is within the budget is taken: in an approach chain (each
+    /// child nearer than the running blend) the prefix's influence halves at least with
+    /// every step, so a few dozen children remain instead of the whole chain. A run is
+    /// never a start (its children are not known).
+    fn cut_start(&self, cut_error: f64) -> usize {
+        let (k, inv_k) = (self.k, self.inv_k);
+        if cut_error > 0.0 && self.links.len() > 1 {
+            // `after`: the product of the derivative bounds of the steps after `c`.
+            let mut after = 1.0f64;
+            for c in (1..self.links.len()).rev() {
+                let Link { hi, plo, run, .. } = self.links[c];
+                let below = run.is_none() && plo >= hi;
+                let h = ((k - (plo - hi)) * inv_k).clamp(0.0, 1.0);
+                if below && 0.25 * k * h * h * after <= cut_error {
+                    return c;
+                }
+                after *= if below { 0.5 * h } else { 1.0 };
+            }
+        }
+        0
+    }
+}
+
 impl Pruner<'_> {
     fn end(&self, i: usize) -> usize {
         self.prog.instrs[i].end as usize
     }
 
     fn has_mesh(&self, i: usize) -> bool {
-        self.prog.instrs[i..self.end(i)]
-            .iter()
-            .any(|n| matches!(n.op, Op::Leaf(Leaf::Mesh { .. })))
+        self.index.has_mesh(self.prog, i)
     }
 
-    /// Node `i`'s value over the ball `(q, r)` in its parent's frame.
-    fn interval(&self, i: usize, q: V3<f64>, r: f64) -> (f64, f64) {
+    /// Node `i`'s value over the ball `(q, r)` in its parent's frame. An indexed composite
+    /// is restricted to the ball first (kept for [`Pruner::emit`]) and its restriction
+    /// evaluated, so a large subtree is not evaluated whole.
+    fn interval(&mut self, i: usize, q: V3<f64>, r: f64, depth: usize) -> (f64, f64) {
+        if let Some(&known) = self.known.get(&i) {
+            return known;
+        }
+        let v = self.interval_uncached(i, q, r, depth);
+        self.known.insert(i, v);
+        v
+    }
+
+    fn interval_uncached(&mut self, i: usize, q: V3<f64>, r: f64, depth: usize) -> (f64, f64) {
+        self.work += 1;
         if self.has_mesh(i) {
             return (f64::NEG_INFINITY, f64::INFINITY);
         }
-        let v = self.prog.node_value(i, q, self.grids);
-        if !v.is_finite() {
-            return (f64::NEG_INFINITY, f64::INFINITY);
+        if depth < MAX_PRUNE_DEPTH && self.index.trees.contains_key(&(i as u32)) {
+            let base = self.out.len();
+            self.emit(i, q, r, depth);
+            let mut instrs: Vec<Instr<f64>> = self.out.drain(base..).collect();
+            let source: Vec<u32> = self.source.drain(base..).collect();
+            for n in &mut instrs {
+                n.end -= base as u32;
+            }
+            let sub = Program { instrs };
+            let v = sub.node_value(0, q, self.grids);
+            self.scratch.insert(i, (sub.instrs, source));
+            return bracket(v, q, r, self.max_error);
         }
-        let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + r;
-        let slack = SLACK_REL * (1.0 + v.abs() + scale);
-        (v - r - slack, v + r + slack)
+        bracket(self.prog.node_value(i, q, self.grids), q, r, 0.0)
     }
 
     /// Copies node `i`'s whole subtree.
@@ -156,98 +460,309 @@ impl Pruner<'_> {
         self.source.extend(i as u32..end as u32);
     }
 
-    /// The children of a smooth union (a left fold `f_j = smin(f_{j-1}, a_j)`) to keep, from
-    /// each child's interval `(index, lo, hi)` over the ball.
-    ///
-    /// Exact rules: a child with `a_j >= P.hi + k` (`P` the prefix's interval, folded by
-    /// interval arithmetic: `smin` is non-decreasing in both arguments) leaves the fold
-    /// unchanged and is dropped; a child with `a_j <= P.lo - k` replaces it (`smin = a_j`), so
-    /// every child before it is dropped.
-    ///
-    /// Cut within `self.cut_error`: starting the fold at child `c` instead (dropping the
-    /// children before it) changes `f_c` by at most `k h^2 / 4` where the child lies below the
-    /// prefix over the whole ball (`h = max(k - (P.lo - a.hi), 0) / k`), and a change of the
-    /// prefix reaches the result through `d smin(x, a) / dx`, which is `h / 2 <= 1/2` where
-    /// the child is below `x` and at most 1 anywhere (so later steps never amplify it, and
-    /// a dropped no-op child passes it unchanged). The latest `c` whose change, times the
-    /// product of the later steps' derivative bounds, is within the budget is taken: in an
-    /// approach chain (each child nearer than the running blend) the prefix's influence
-    /// halves at least with every step, so a few dozen children remain instead of the whole
-    /// chain.
-    fn smooth_union_keep(&self, kids: &[(usize, f64, f64)], k: f64, inv_k: f64) -> Vec<usize> {
-        // Kept children with the prefix interval before each.
-        let mut chain: Vec<(usize, f64, f64, f64, f64)> = Vec::new();
-        let mut fold: Option<(f64, f64)> = None;
-        for &(j, lo, hi) in kids {
-            match fold {
-                None => {
-                    chain.push((j, lo, hi, f64::INFINITY, f64::INFINITY));
-                    fold = Some((lo, hi));
-                }
-                Some((plo, phi)) => {
-                    if lo >= phi + k {
-                        // smin(f, a_j) = f exactly: a no-op.
-                        continue;
-                    }
-                    if plo >= hi + k {
-                        // smin(f, a_j) = a_j exactly: the prefix no longer matters.
-                        chain.clear();
-                        chain.push((j, lo, hi, f64::INFINITY, f64::INFINITY));
-                        fold = Some((lo, hi));
-                        continue;
-                    }
-                    chain.push((j, lo, hi, plo, phi));
-                    fold = Some((
-                        shapes::smin(plo, lo, k, inv_k),
-                        shapes::smin(phi, hi, k, inv_k),
-                    ));
-                }
-            }
+    /// Lower bound of every child of `run` over the ball `(q, r)` (the composite's frame),
+    /// from the run's box: `-inf` when a child is unbounded or the ball meets the box.
+    fn run_lower(&mut self, run: &TreeNode, q: V3<f64>, r: f64) -> f64 {
+        self.work += 1;
+        if !run.bounded {
+            return f64::NEG_INFINITY;
         }
-        let mut start = 0;
-        if self.cut_error > 0.0 && chain.len() > 1 {
-            // `after`: the product of the derivative bounds of the steps after `c`.
-            let mut after = 1.0f64;
-            for c in (1..chain.len()).rev() {
-                let (_, _, hi, plo, _) = chain[c];
-                let below = plo >= hi;
-                let h = ((k - (plo - hi)) * inv_k).clamp(0.0, 1.0);
-                if below && 0.25 * k * h * h * after <= self.cut_error {
-                    start = c;
-                    break;
-                }
-                after *= if below { 0.5 * h } else { 1.0 };
+        let d = {
+            let p = [q.x, q.y, q.z];
+            let mut s = 0.0f64;
+            for a in 0..3 {
+                let e = (run.lo[a] - p[a]).max(p[a] - run.hi[a]).max(0.0);
+                s += e * e;
             }
-        }
-        chain[start..].iter().map(|c| c.0).collect()
+            s.sqrt()
+        };
+        let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + r;
+        let lb = d - r - SLACK_REL * (1.0 + d + scale);
+        if lb > 0.0 { lb } else { f64::NEG_INFINITY }
     }
 
-    /// Emits node `i` (kept) restricted to the ball `(c, r)` in its parent's frame.
-    fn emit(&mut self, i: usize, c: V3<f64>, r: f64, depth: usize) {
-        let ins = &self.prog.instrs[i];
-        let composite = matches!(
-            ins.op,
-            Op::Union | Op::Intersection | Op::Subtraction | Op::Smooth { .. }
-        );
-        if !composite || depth >= MAX_PRUNE_DEPTH || self.has_mesh(i) {
-            self.copy(i);
+    /// The least upper bound over the ball of any child of `tree`, reading only the runs
+    /// that could hold a smaller one (nearer run first).
+    fn least_upper(
+        &mut self,
+        tree: &ChildTree,
+        at: u32,
+        q: V3<f64>,
+        r: f64,
+        depth: usize,
+        best: &mut f64,
+    ) {
+        let run = &tree.nodes[at as usize];
+        if self.run_lower(run, q, r) >= *best {
             return;
         }
-        let q = ins.to_local.apply(c);
-        let rq = r * stretch(&ins.to_local);
+        match run.sub {
+            None => {
+                for &j in &tree.kids[run.start as usize..run.end as usize] {
+                    let (_, hi) = self.interval(j as usize, q, r, depth);
+                    *best = best.min(hi);
+                }
+            }
+            Some([a, b]) => {
+                let la = self.run_lower(&tree.nodes[a as usize], q, r);
+                let lb = self.run_lower(&tree.nodes[b as usize], q, r);
+                let order = if lb < la { [b, a] } else { [a, b] };
+                for s in order {
+                    self.least_upper(tree, s, q, r, depth, best);
+                }
+            }
+        }
+    }
+
+    /// The children of `tree` (positions `from..`) whose lower bound is at most `thr`, with
+    /// their intervals, in stored order.
+    #[allow(clippy::too_many_arguments)]
+    fn children_below(
+        &mut self,
+        tree: &ChildTree,
+        at: u32,
+        from: u32,
+        q: V3<f64>,
+        r: f64,
+        depth: usize,
+        thr: f64,
+        out: &mut Vec<(usize, f64, f64)>,
+    ) {
+        let run = &tree.nodes[at as usize];
+        if run.end <= from || self.run_lower(run, q, r) > thr {
+            return;
+        }
+        match run.sub {
+            None => {
+                for &j in &tree.kids[run.start.max(from) as usize..run.end as usize] {
+                    let (lo, hi) = self.interval(j as usize, q, r, depth);
+                    if lo <= thr {
+                        out.push((j as usize, lo, hi));
+                    }
+                }
+            }
+            Some([a, b]) => {
+                self.children_below(tree, a, from, q, r, depth, thr, out);
+                self.children_below(tree, b, from, q, r, depth, thr, out);
+            }
+        }
+    }
+
+    /// The least box lower bound over the ball of any run of `tree` down to its leaves
+    /// (`-inf` when a run is unbounded or the ball meets a leaf run's box).
+    fn least_lower(&mut self, tree: &ChildTree, q: V3<f64>, r: f64) -> f64 {
+        // Best first: a heap of runs by their bound.
+        let mut heap = std::collections::BinaryHeap::new();
+        let key =
+            |v: f64| std::cmp::Reverse(v.to_bits() ^ if v < 0.0 { u64::MAX } else { 1 << 63 });
+        let root = self.run_lower(&tree.nodes[0], q, r);
+        heap.push((key(root), root.to_bits(), 0u32));
+        while let Some((_, bits, at)) = heap.pop() {
+            let lb = f64::from_bits(bits);
+            match tree.nodes[at as usize].sub {
+                None => return lb,
+                Some(sub) => {
+                    for s in sub {
+                        let l = self.run_lower(&tree.nodes[s as usize], q, r);
+                        heap.push((key(l), l.to_bits(), s));
+                    }
+                }
+            }
+        }
+        f64::NEG_INFINITY
+    }
+
+    /// Whether more than `cap` children of `tree` have a box lower bound below the least
+    /// child upper bound plus `slack` over the ball (reading at most about `cap` children
+    /// past the nearest).
+    fn crowded(&mut self, tree: &ChildTree, q: V3<f64>, r: f64, slack: f64, cap: usize) -> bool {
+        // Children whose boxes the ball meets first: a large cell is crowded by them alone,
+        // found without evaluating a child.
+        if self.count_below(tree, q, r, f64::NEG_INFINITY, cap) > cap {
+            return true;
+        }
+        let mut least = f64::INFINITY;
+        self.least_upper(tree, 0, q, r, 1, &mut least);
+        self.count_below(tree, q, r, least + slack, cap) > cap
+    }
+
+    /// How many children of `tree` lie in runs whose box lower bound is at most `thr`
+    /// (counted up to just past `cap`).
+    fn count_below(&mut self, tree: &ChildTree, q: V3<f64>, r: f64, thr: f64, cap: usize) -> usize {
+        let mut count = 0usize;
+        let mut stack = vec![0u32];
+        while let Some(at) = stack.pop() {
+            let run = &tree.nodes[at as usize];
+            if self.run_lower(run, q, r) > thr {
+                continue;
+            }
+            match run.sub {
+                None => {
+                    count += (run.end - run.start) as usize;
+                    if count > cap {
+                        return count;
+                    }
+                }
+                Some([a, b]) => stack.extend([a, b]),
+            }
+        }
+        count
+    }
+
+    /// Walks `tree` in fold order into `chain`: runs the fold proves no-ops are skipped,
+    /// runs at least `far` away are folded unread unless `open` (then read whole).
+    #[allow(clippy::too_many_arguments)]
+    fn fold_walk(
+        &mut self,
+        tree: &ChildTree,
+        at: u32,
+        q: V3<f64>,
+        r: f64,
+        depth: usize,
+        far: f64,
+        open: &[bool],
+        chain: &mut FoldChain,
+    ) {
+        let run = &tree.nodes[at as usize];
+        let lb = self.run_lower(run, q, r);
+        if chain.skips(lb) {
+            return;
+        }
+        let whole = open[at as usize];
+        if !whole && lb >= far {
+            chain.run(at, lb);
+            return;
+        }
+        match run.sub {
+            None => {
+                for &j in &tree.kids[run.start as usize..run.end as usize] {
+                    let j = j as usize;
+                    let (lo, hi) = self.interval(j, q, r, depth);
+                    chain.child(j, lo, hi);
+                }
+            }
+            Some([a, b]) => {
+                if whole {
+                    self.fold_walk_whole(tree, a, q, r, depth, chain);
+                    self.fold_walk_whole(tree, b, q, r, depth, chain);
+                } else {
+                    self.fold_walk(tree, a, q, r, depth, far, open, chain);
+                    self.fold_walk(tree, b, q, r, depth, far, open, chain);
+                }
+            }
+        }
+    }
+
+    /// [`Pruner::fold_walk`] below a run read whole (only no-op runs skipped).
+    fn fold_walk_whole(
+        &mut self,
+        tree: &ChildTree,
+        at: u32,
+        q: V3<f64>,
+        r: f64,
+        depth: usize,
+        chain: &mut FoldChain,
+    ) {
+        let run = &tree.nodes[at as usize];
+        if chain.skips(self.run_lower(run, q, r)) {
+            return;
+        }
+        match run.sub {
+            None => {
+                for &j in &tree.kids[run.start as usize..run.end as usize] {
+                    let j = j as usize;
+                    let (lo, hi) = self.interval(j, q, r, depth);
+                    chain.child(j, lo, hi);
+                }
+            }
+            Some([a, b]) => {
+                self.fold_walk_whole(tree, a, q, r, depth, chain);
+                self.fold_walk_whole(tree, b, q, r, depth, chain);
+            }
+        }
+    }
+
+    /// The children of the indexed smooth union `tree` to keep over the ball: the fold walk
+    /// with runs farther than the nearest child's upper bound plus `4k + 2r` left unread,
+    /// repeated while the kept fold would start before an unread run, which is then read
+    /// whole (a level at a time costs more rounds than it saves on sculpted molecules).
+    /// Child intervals are read once (kept across rounds).
+    #[allow(clippy::too_many_arguments)]
+    fn smooth_union_keep_indexed(
+        &mut self,
+        tree: &ChildTree,
+        q: V3<f64>,
+        r: f64,
+        depth: usize,
+        k: f64,
+        inv_k: f64,
+    ) -> Vec<usize> {
+        let mut nearest = f64::INFINITY;
+        self.least_upper(tree, 0, q, r, depth, &mut nearest);
+        let far = nearest + 4.0 * k + 2.0 * r;
+        let mut open = vec![false; tree.nodes.len()];
+        for round in 0..=OPEN_ROUNDS {
+            if round == OPEN_ROUNDS {
+                open.fill(true);
+            }
+            let mut chain = FoldChain::new(k, inv_k);
+            self.fold_walk(tree, 0, q, r, depth, far, &open, &mut chain);
+            let kept = &chain.links[chain.cut_start(self.cut_error)..];
+            let mut unread = false;
+            for l in kept {
+                if let Some(run) = l.run {
+                    open[run as usize] = true;
+                    unread = true;
+                }
+            }
+            if !unread {
+                return kept.iter().map(|l| l.node).collect();
+            }
+        }
+        unreachable!("the round with every run open reads every child")
+    }
+
+    /// The children of node `i` (composite, `ins`) to keep over the ball `(q, rq)` in its
+    /// frame: through its child tree when it has one, else from every child's interval.
+    fn keep(&mut self, i: usize, q: V3<f64>, rq: f64, depth: usize) -> Vec<usize> {
+        let index = self.index;
+        let prog = self.prog;
+        let ins = &prog.instrs[i];
+        if let Some(tree) = index.trees.get(&(i as u32)) {
+            match &ins.op {
+                Op::Union => {
+                    let mut least = f64::INFINITY;
+                    self.least_upper(tree, 0, q, rq, depth, &mut least);
+                    let mut kids = Vec::new();
+                    self.children_below(tree, 0, 0, q, rq, depth, least, &mut kids);
+                    return kids.into_iter().map(|c| c.0).collect();
+                }
+                Op::Subtraction => {
+                    let first = tree.kids[0] as usize;
+                    let (first_lo, _) = self.interval(first, q, rq, depth);
+                    let mut kids = Vec::new();
+                    self.children_below(tree, 0, 1, q, rq, depth, -first_lo, &mut kids);
+                    return std::iter::once(first)
+                        .chain(kids.into_iter().map(|c| c.0))
+                        .collect();
+                }
+                Op::Smooth {
+                    op: SmoothOp::Union,
+                    k,
+                    inv_k,
+                } => return self.smooth_union_keep_indexed(tree, q, rq, depth, *k, *inv_k),
+                _ => {}
+            }
+        }
         let end = ins.end as usize;
-        if end == i + 1 {
-            self.copy(i);
-            return;
-        }
         let mut kids = Vec::new();
         let mut j = i + 1;
         while j < end {
-            let (lo, hi) = self.interval(j, q, rq);
+            let (lo, hi) = self.interval(j, q, rq, depth);
             kids.push((j, lo, hi));
             j = self.end(j);
         }
-        let keep: Vec<usize> = match &ins.op {
+        match &ins.op {
             Op::Union => {
                 let min_hi = kids.iter().map(|k| k.2).fold(f64::INFINITY, f64::min);
                 kids.iter().filter(|k| k.1 <= min_hi).map(|k| k.0).collect()
@@ -266,7 +781,16 @@ impl Pruner<'_> {
                 op: SmoothOp::Union,
                 k,
                 inv_k,
-            } => self.smooth_union_keep(&kids, *k, *inv_k),
+            } => {
+                let mut chain = FoldChain::new(*k, *inv_k);
+                for &(j, lo, hi) in &kids {
+                    chain.child(j, lo, hi);
+                }
+                chain.links[chain.cut_start(self.cut_error)..]
+                    .iter()
+                    .map(|l| l.node)
+                    .collect()
+            }
             // A smooth maximum fold `f_j = smax(f_{j-1}, b_j)` (`b_j` the child, negated for a
             // subtraction): a child at least `k` below the prefix's lower bound leaves it
             // unchanged (`h` is exactly 0) and is dropped; nothing else is (the prefix interval
@@ -291,452 +815,45 @@ impl Pruner<'_> {
                 }
                 kept
             }
-            _ => unreachable!("composite checked above"),
-        };
+            _ => unreachable!("keep is called on composites"),
+        }
+    }
+
+    /// Emits node `i` (kept) restricted to the ball `(c, r)` in its parent's frame.
+    fn emit(&mut self, i: usize, c: V3<f64>, r: f64, depth: usize) {
+        if let Some((instrs, source)) = self.scratch.remove(&i) {
+            let base = self.out.len() as u32;
+            self.out.extend(instrs.into_iter().map(|mut n| {
+                n.end += base;
+                n
+            }));
+            self.source.extend(source);
+            return;
+        }
+        let ins = &self.prog.instrs[i];
+        let composite = matches!(
+            ins.op,
+            Op::Union | Op::Intersection | Op::Subtraction | Op::Smooth { .. }
+        );
+        if !composite || depth >= MAX_PRUNE_DEPTH || self.has_mesh(i) {
+            self.copy(i);
+            return;
+        }
+        let q = ins.to_local.apply(c);
+        let rq = r * stretch(&ins.to_local);
+        let end = ins.end as usize;
+        if end == i + 1 {
+            self.copy(i);
+            return;
+        }
+        let keep = self.keep(i, q, rq, depth + 1);
         let start = self.out.len();
-        self.out.push(ins.clone());
+        self.out.push(self.prog.instrs[i].clone());
         self.source.push(i as u32);
         for j in keep {
             self.emit(j, q, rq, depth + 1);
         }
         self.out[start].end = self.out.len() as u32;
-    }
-}
-
-/// What a cell of [`Cells`] answers.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Cell {
-    /// No surface in the cell: the whole field is at least `bound > 0` (or at most
-    /// `bound < 0`) in the box `[lo, hi]`, so the distance to any surface from a point `p` of
-    /// the box is at least `|bound|` plus `p`'s distance to the box's boundary (a path to a
-    /// surface leaves the box through a point where `|field| >= |bound|`); the cell answers
-    /// that, with the field's sign.
-    Far {
-        /// Bound of the field over the box nearest to zero (its sign is the field's there).
-        bound: f32,
-        /// Box lower corner.
-        lo: [f32; 3],
-        /// Box upper corner.
-        hi: [f32; 3],
-    },
-    /// The program restricted to the cell (exact there).
-    Program {
-        /// f32 program (the tracer's).
-        p32: Program<f32>,
-        /// f64 program.
-        p64: Program<f64>,
-    },
-}
-
-/// An octree of cells over a box, each holding the field's program pruned to it or a far
-/// bound, looked up through a dense index at the finest level.
-#[derive(Debug, Clone)]
-pub struct Cells {
-    lo: [f32; 3],
-    hi: [f32; 3],
-    /// Finest cells per axis.
-    res: u32,
-    inv_size: [f32; 3],
-    /// Cell id per finest cell, x fastest.
-    index: Vec<u32>,
-    cells: Vec<Cell>,
-    /// Lower bound of the field on the box's boundary (and thus of the distance to any
-    /// surface from outside the box, added to the distance to the box).
-    pad: f32,
-    stats: CellStats,
-    /// While building: the cell holding each distinct program, by its nodes' indices in the
-    /// whole program (neighbouring cells often keep the same children; they share one).
-    by_source: std::collections::HashMap<Vec<u32>, u32>,
-    /// While building: how many more program nodes the pruner may read
-    /// ([`Cells::max_work`]).
-    work_left: usize,
-}
-
-/// Counts of a [`Cells`] build, for reports.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct CellStats {
-    /// Cells holding a program.
-    pub program_cells: usize,
-    /// Cells answering a far bound.
-    pub far_cells: usize,
-    /// Program nodes over all program cells.
-    pub program_nodes: usize,
-    /// Largest program of any cell (nodes).
-    pub max_program_nodes: usize,
-    /// Program cells that share the program of an earlier cell (counted in
-    /// `program_cells`, not in `program_nodes`).
-    pub shared_cells: usize,
-    /// Program nodes the pruner read over the build (its work: each octree node prunes its
-    /// parent's program).
-    pub pruned_nodes: usize,
-}
-
-/// Cells with at most this many nodes are not subdivided further.
-const LEAF_NODES: usize = 12;
-
-/// The far test: a cell is far when the field's bound nearest to zero over it is at least
-/// this fraction of its bounding radius away from zero (so far values stay well above any
-/// hit epsilon; the paper's empty cells are those where `|d| > 2R` at the centre).
-const FAR_FRACTION: f64 = 0.5;
-
-impl Cells {
-    /// Builds the octree over `bounds` (a box holding every surface of the field; the octree
-    /// covers it grown by `pad`, which must be positive) down to `2^depth` finest cells per
-    /// axis (`depth` at most 8). `None` when the box is not finite, the program holds a
-    /// mesh grid (grids are not Lipschitz bounds, see the module docs), the cells'
-    /// programs would hold more than [`Cells::max_nodes`] nodes in all, or the pruner would
-    /// read more than [`Cells::max_work`] program nodes (the build stops there: memory and
-    /// time stay bounded; a deep chain whose cells keep most of it reads the whole program
-    /// once per octree node). Every cell's program is within `max_error` of the
-    /// whole program in the cell (each level of the octree prunes within its share), and far
-    /// bounds are lowered by it: `0` keeps values bit for bit.
-    pub fn build(
-        prog: &Program<f64>,
-        grids: &[Box<dyn GridSampler>],
-        bounds: (DVec3, DVec3),
-        pad: f64,
-        depth: u32,
-        max_error: f64,
-    ) -> Option<Cells> {
-        let depth = depth.min(8);
-        let max_error = if max_error.is_finite() {
-            max_error.max(0.0)
-        } else {
-            0.0
-        };
-        if !(bounds.0.is_finite() && bounds.1.is_finite() && pad > 0.0)
-            || prog
-                .instrs
-                .iter()
-                .any(|n| matches!(n.op, Op::Leaf(Leaf::Mesh { .. })))
-        {
-            return None;
-        }
-        let lo = bounds.0 - DVec3::splat(pad);
-        let hi = bounds.1 + DVec3::splat(pad);
-        let res = 1u32 << depth;
-        let size = (hi - lo) / f64::from(res);
-        let mut cells = Cells {
-            lo: lo.as_vec3().to_array(),
-            hi: hi.as_vec3().to_array(),
-            res,
-            inv_size: (1.0 / size).as_vec3().to_array(),
-            index: vec![0; (res as usize).pow(3)],
-            cells: Vec::new(),
-            pad: pad as f32,
-            stats: CellStats::default(),
-            by_source: std::collections::HashMap::new(),
-            work_left: Self::max_work(prog.instrs.len()),
-        };
-        let budget = Self::max_nodes(prog.instrs.len());
-        let whole: Vec<u32> = (0..prog.instrs.len() as u32).collect();
-        let level_error = max_error / f64::from(depth + 1);
-        let built = cells.build_cell(
-            prog,
-            &whole,
-            grids,
-            (lo, hi),
-            [0; 3],
-            res,
-            budget,
-            (level_error, max_error),
-        );
-        cells.by_source = std::collections::HashMap::new();
-        built.then_some(cells)
-    }
-
-    /// The most program nodes all cells of a program of `nodes` nodes may hold together:
-    /// eight times the program, at least 2^18.
-    pub fn max_nodes(nodes: usize) -> usize {
-        nodes.saturating_mul(8).max(1 << 18)
-    }
-
-    /// The most program nodes the pruner may read building the octree of a program of
-    /// `nodes` nodes: 2^22 (about a second of pruning), or 16 times the program when that is
-    /// more. A build over it stops ([`Cells::build`] returns `None`).
-    pub fn max_work(nodes: usize) -> usize {
-        nodes.saturating_mul(16).max(1 << 22)
-    }
-
-    #[allow(clippy::too_many_arguments)]
-    fn build_cell(
-        &mut self,
-        prog: &Program<f64>,
-        prog_source: &[u32],
-        grids: &[Box<dyn GridSampler>],
-        (lo, hi): (DVec3, DVec3),
-        at: [u32; 3],
-        span: u32,
-        budget: usize,
-        (level_error, max_error): (f64, f64),
-    ) -> bool {
-        let work = prog.instrs.len();
-        if work > self.work_left {
-            return false;
-        }
-        self.work_left -= work;
-        self.stats.pruned_nodes += work;
-        let radius = 0.5 * (hi - lo).length();
-        let mut pruned = prune(prog, grids, 0.5 * (lo + hi), radius, level_error);
-        for s in &mut pruned.source {
-            *s = prog_source[*s as usize];
-        }
-        let nodes = pruned.program.instrs.len();
-        // The parent's program may be up to `max_error` off the whole field's value.
-        let far = if pruned.lo >= FAR_FRACTION * radius + max_error {
-            Some(pruned.lo - max_error)
-        } else if pruned.hi <= -FAR_FRACTION * radius - max_error {
-            Some(pruned.hi + max_error)
-        } else {
-            None
-        };
-        let cell = if let Some(bound) = far {
-            self.stats.far_cells += 1;
-            Cell::Far {
-                bound: bound as f32,
-                lo: lo.as_vec3().to_array(),
-                hi: hi.as_vec3().to_array(),
-            }
-        } else if span == 1 || nodes <= LEAF_NODES {
-            if let Some(&id) = self.by_source.get(&pruned.source) {
-                self.stats.program_cells += 1;
-                self.stats.shared_cells += 1;
-                self.fill_index(at, span, id);
-                return true;
-            }
-            if self.stats.program_nodes + nodes > budget {
-                return false;
-            }
-            self.by_source
-                .insert(pruned.source.clone(), self.cells.len() as u32);
-            self.stats.program_cells += 1;
-            self.stats.program_nodes += nodes;
-            self.stats.max_program_nodes = self.stats.max_program_nodes.max(nodes);
-            Cell::Program {
-                p32: pruned.program.cast::<f32>(),
-                p64: pruned.program,
-            }
-        } else {
-            let half = span / 2;
-            let mid = 0.5 * (lo + hi);
-            for o in 0..8u32 {
-                let pick = |axis: u32, l: f64, m: f64, h: f64| {
-                    if (o >> axis) & 1 == 0 { (l, m) } else { (m, h) }
-                };
-                let (x0, x1) = pick(0, lo.x, mid.x, hi.x);
-                let (y0, y1) = pick(1, lo.y, mid.y, hi.y);
-                let (z0, z1) = pick(2, lo.z, mid.z, hi.z);
-                let sub = [0, 1, 2].map(|a| at[a] + ((o >> a) & 1) * half);
-                if !self.build_cell(
-                    &pruned.program,
-                    &pruned.source,
-                    grids,
-                    (DVec3::new(x0, y0, z0), DVec3::new(x1, y1, z1)),
-                    sub,
-                    half,
-                    budget,
-                    (level_error, max_error),
-                ) {
-                    return false;
-                }
-            }
-            return true;
-        };
-        let id = self.cells.len() as u32;
-        self.cells.push(cell);
-        self.fill_index(at, span, id);
-        true
-    }
-
-    /// Points the finest cells of the `span`^3 block at `at` to cell `id`.
-    fn fill_index(&mut self, at: [u32; 3], span: u32, id: u32) {
-        let res = self.res as usize;
-        for z in at[2]..at[2] + span {
-            for y in at[1]..at[1] + span {
-                let row = (z as usize * res + y as usize) * res;
-                self.index[row + at[0] as usize..row + (at[0] + span) as usize].fill(id);
-            }
-        }
-    }
-
-    /// Counts of the build.
-    pub fn stats(&self) -> CellStats {
-        self.stats
-    }
-
-    /// Exact bytes held (index, cells and their programs).
-    pub fn memory_bytes(&self) -> u64 {
-        let programs: u64 = self
-            .cells
-            .iter()
-            .map(|c| match c {
-                Cell::Far { .. } => 0,
-                Cell::Program { p32, p64 } => p32.memory_bytes() + p64.memory_bytes(),
-            })
-            .sum();
-        (self.index.len() * 4 + self.cells.len() * std::mem::size_of::<Cell>()) as u64 + programs
-    }
-
-    /// The cell holding `p`, `None` outside the octree's box.
-    #[inline(always)]
-    pub fn locate(&self, p: [f32; 3]) -> Option<&Cell> {
-        let mut at = [0usize; 3];
-        for a in 0..3 {
-            let f = (p[a] - self.lo[a]) * self.inv_size[a];
-            // Also false for NaN.
-            if !(f >= 0.0 && p[a] <= self.hi[a]) {
-                return None;
-            }
-            at[a] = (f as usize).min(self.res as usize - 1);
-        }
-        let res = self.res as usize;
-        let id = self.index[(at[2] * res + at[1]) * res + at[0]];
-        self.cells.get(id as usize)
-    }
-
-    /// The safe value outside the box: the distance to the box plus the pad.
-    #[inline(always)]
-    pub fn outside(&self, p: [f32; 3]) -> f32 {
-        let mut s = 0.0f32;
-        for a in 0..3 {
-            let d = (self.lo[a] - p[a]).max(p[a] - self.hi[a]).max(0.0);
-            s += d * d;
-        }
-        s.sqrt() + self.pad
-    }
-
-    /// A far cell's value at `p` inside its box: `bound` moved away from zero by `p`'s
-    /// distance to the box's boundary.
-    #[inline(always)]
-    pub fn far_value(bound: f32, lo: &[f32; 3], hi: &[f32; 3], p: [f32; 3]) -> f32 {
-        let mut inner = f32::INFINITY;
-        for a in 0..3 {
-            inner = inner.min(p[a] - lo[a]).min(hi[a] - p[a]);
-        }
-        bound + inner.max(0.0).copysign(bound)
-    }
-
-    /// Values (and materials when `M`) at eight points: each lane answered by its cell, one
-    /// 8-lane evaluation per distinct program cell among the lanes.
-    /// With `M`, lanes outside program cells take their value and material from `whole`
-    /// (the unpruned program: far bounds carry no material).
-    pub fn eval_x8<const M: bool>(
-        &self,
-        p: V3<F32x8>,
-        whole: &Program<f32>,
-        grids: &[Box<dyn GridSampler>],
-    ) -> (F32x8, [u32; 8]) {
-        let mut out = F32x8([0.0; 8]);
-        let mut mat = [0u32; 8];
-        let pts: [[f32; 3]; 8] = std::array::from_fn(|i| [p.x.0[i], p.y.0[i], p.z.0[i]]);
-        let cells: [Option<&Cell>; 8] = std::array::from_fn(|i| self.locate(pts[i]));
-        let mut done = 0u8;
-        if M && cells
-            .iter()
-            .any(|c| !matches!(c, Some(Cell::Program { .. })))
-        {
-            let (d, m) = whole.eval::<F32x8, true>(p, grids);
-            for i in 0..8 {
-                if !matches!(cells[i], Some(Cell::Program { .. })) {
-                    out.0[i] = d.0[i];
-                    mat[i] = m[i];
-                    done |= 1 << i;
-                }
-            }
-        }
-        for i in 0..8 {
-            if (done >> i) & 1 == 1 {
-                continue;
-            }
-            match cells[i] {
-                None => {
-                    out.0[i] = self.outside(pts[i]);
-                    done |= 1 << i;
-                }
-                Some(Cell::Far { bound, lo, hi }) => {
-                    out.0[i] = Self::far_value(*bound, lo, hi, pts[i]);
-                    done |= 1 << i;
-                }
-                Some(c @ Cell::Program { p32, .. }) => {
-                    let (d, m) = p32.eval::<F32x8, M>(p, grids);
-                    for l in i..8 {
-                        if cells[l].is_some_and(|o| std::ptr::eq(o, c)) {
-                            out.0[l] = d.0[l];
-                            mat[l] = m[l];
-                            done |= 1 << l;
-                        }
-                    }
-                }
-            }
-        }
-        (out, mat)
-    }
-
-    /// Value and material at one point in f32 (`M`: track the material, taken from `whole`
-    /// outside program cells).
-    #[cfg_attr(not(debug_assertions), inline)]
-    pub fn eval<const M: bool>(
-        &self,
-        p: Vec3,
-        whole: &Program<f32>,
-        grids: &[Box<dyn GridSampler>],
-    ) -> (f32, u32) {
-        let a = p.to_array();
-        let v = V3::new(p.x, p.y, p.z);
-        match self.locate(a) {
-            Some(Cell::Program { p32, .. }) => p32.eval::<f32, M>(v, grids),
-            _ if M => whole.eval::<f32, true>(v, grids),
-            None => (self.outside(a), 0),
-            Some(Cell::Far { bound, lo, hi }) => (Self::far_value(*bound, lo, hi, a), 0),
-        }
-    }
-
-    /// A bound of the distance to any surface at `p` in f64, with the field's sign, where `p`
-    /// is outside the box or in a far cell (with a slack for the f32 corners), `None` in
-    /// program cells.
-    #[inline]
-    pub fn far_bound_f64(&self, p: DVec3) -> Option<f64> {
-        let a = p.as_vec3().to_array();
-        let slack = 1e-6 * (1.0 + p.abs().max_element());
-        let lo = |b: &[f32; 3]| DVec3::from_array(b.map(f64::from));
-        match self.locate(a) {
-            Some(Cell::Program { .. }) => None,
-            None => {
-                let (blo, bhi) = (lo(&self.lo), lo(&self.hi));
-                let d = (blo - p).max(p - bhi).max(DVec3::ZERO).length();
-                Some(d + f64::from(self.pad) - slack)
-            }
-            Some(Cell::Far {
-                bound,
-                lo: l,
-                hi: h,
-            }) => {
-                let inner = (p - lo(l)).min(lo(h) - p).min_element().max(0.0);
-                let b = f64::from(*bound);
-                Some((b.abs() + inner - slack).max(0.0).copysign(b))
-            }
-        }
-    }
-
-    /// The f64 program of the cell holding `p` when it is a program cell (`None` outside
-    /// the box and in far cells, where the caller evaluates the whole program).
-    #[inline]
-    pub fn program_f64(&self, p: DVec3) -> Option<&Program<f64>> {
-        match self.locate(p.as_vec3().to_array())? {
-            Cell::Program { p64, .. } => Some(p64),
-            Cell::Far { .. } => None,
-        }
-    }
-
-    /// The f32 program of the program cell holding both `a` and `b`, if one does.
-    #[inline]
-    pub fn program_f32_holding(&self, a: Vec3, b: Vec3) -> Option<&Program<f32>> {
-        let ca = self.locate(a.to_array())?;
-        let cb = self.locate(b.to_array())?;
-        match ca {
-            Cell::Program { p32, .. } if std::ptr::eq(ca, cb) => Some(p32),
-            _ => None,
-        }
     }
 }
 

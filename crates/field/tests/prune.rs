@@ -73,6 +73,7 @@ fn check_cells(n: &Node, depth: u32) {
     let mut cells = compile(n);
     let stats = cells.build_cells(depth, 0.0).expect("bounded, no meshes");
     assert!(stats.program_cells > 0);
+    assert!(stats.subset_cells > 0, "{stats:?}");
     let mut exact = 0;
     for p in probes(24) {
         // f64: pruned programs where they exist, the whole program elsewhere: identical.
@@ -97,6 +98,13 @@ fn check_cells(n: &Node, depth: u32) {
                 "{p}: {b} vs {c}"
             );
         }
+        // Segment steps: the same value where the cells answer exactly (a segment within
+        // one program or subset cell, or the whole program).
+        let dir = Vec3::new(0.3, -0.8, 0.52).normalize();
+        let (sw, _) = whole.segment_step(p.as_vec3(), dir, 1e-3);
+        let (sc, step) = cells.segment_step(p.as_vec3(), dir, 1e-3);
+        assert_eq!(sw.to_bits(), sc.to_bits(), "{p}");
+        assert!(step >= 0.0);
         // Materials come from the whole program outside program cells.
         assert_eq!(
             whole.distance_material(p.as_vec3()).1,
@@ -346,26 +354,119 @@ fn intersection_chain(levels: usize) -> Node {
 }
 
 #[test]
-fn the_octree_build_reads_at_most_its_work_budget() {
-    use marchmesh_field::prune::Cells;
-    // A molecule prunes well: its octree is built, within the budget.
+fn the_octree_build_stays_near_its_work_budget_and_never_fails() {
+    use marchmesh_field::prune::{Cells, PruneIndex};
+    // A molecule prunes well: its octree is built within the budget.
     let mut m = compile(&molecule(300, 7, 0.026));
     let nodes = m.node_count();
-    let stats = m
-        .build_cells(6, 0.0)
-        .expect("a molecule's octree fits the budgets");
+    let stats = m.build_cells(6, 0.0).expect("a molecule is bounded");
     assert!(stats.pruned_nodes > 0 && stats.pruned_nodes <= Cells::max_work(nodes));
-    // A deep chain reads its whole program at every octree node: the deep octree gives up at
-    // the budget, and whatever depth is built stayed within it.
+    // A deep chain reads its whole program at every octree node: the refinement stops
+    // where the next level would not fit, and the last level settles its cells anyway
+    // (at most about the budget again), with the whole field's values.
     let chain = intersection_chain(600);
     let mut f = compile(&chain);
     let nodes = f.node_count();
     let whole = whole_program(&chain);
     let (lo, hi) = f.bounds().expect("bounded");
-    assert!(Cells::build(&whole, &[], (lo, hi), 0.01, 6, 0.0).is_none());
-    if let Some(stats) = f.build_cells(6, 0.0) {
-        assert!(stats.pruned_nodes <= Cells::max_work(nodes), "{stats:?}");
+    let index = PruneIndex::build(&whole);
+    let cells = Cells::build(&whole, &index, &[], (lo, hi), 0.01, 6, 0.0).expect("built");
+    assert!(
+        cells.stats().pruned_nodes <= 2 * Cells::max_work(nodes),
+        "{:?}",
+        cells.stats()
+    );
+    let stats = f.build_cells(6, 0.0).expect("built");
+    assert!(
+        stats.pruned_nodes <= 2 * Cells::max_work(nodes),
+        "{stats:?}"
+    );
+    let exact = compile(&chain);
+    for p in probes(6) {
+        assert_eq!(
+            exact.distance_f64(p).to_bits(),
+            f.distance_f64(p).to_bits(),
+            "{p}"
+        );
     }
+}
+
+/// Restricting through the child trees ([`prune_indexed`]) gives the whole program's value
+/// at every point of the ball, bit for bit with no error allowed, on large smooth unions,
+/// hard unions and subtractions (whose children the trees read); on a long chain (a walk
+/// that does not come back) it reads a small part of the children.
+#[test]
+fn an_indexed_restriction_is_the_whole_program_in_its_ball() {
+    use marchmesh_field::prune::{PruneIndex, prune_indexed};
+    let blob = molecule(600, 5, 0.026);
+    let NodeKind::Smooth { children, .. } = blob.kind.clone() else {
+        unreachable!()
+    };
+    let hard = node(NodeKind::Union(children.clone()), DVec3::ZERO);
+    let mut carved_children = vec![sphere(0.35, DVec3::ZERO)];
+    carved_children.extend(children.iter().take(300).cloned());
+    let carved = node(
+        NodeKind::Subtraction(carved_children),
+        DVec3::new(0.01, 0.0, 0.0),
+    );
+    // A helix of 600 spheres, 0.04 apart, over about 24 units.
+    let helix_at = |i: usize| {
+        let a = i as f64 * 0.1;
+        DVec3::new(0.3 * a.cos(), 0.3 * a.sin(), i as f64 * 0.03)
+    };
+    let helix = node(
+        NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children: (0..600).map(|i| sphere(0.032, helix_at(i))).collect(),
+            blend_radius: 0.026,
+        },
+        DVec3::ZERO,
+    );
+    let near_helix: Vec<DVec3> = (0..40)
+        .map(|i| helix_at(i * 15 + 3) + DVec3::new(0.01, -0.03, 0.02))
+        .collect();
+    for (tree, points) in [
+        (&blob, probes(7)),
+        (&hard, probes(7)),
+        (&carved, probes(7)),
+        (&helix, near_helix.clone()),
+    ] {
+        let prog = whole_program(tree);
+        let index = PruneIndex::build(&prog);
+        for (i, centre) in points.into_iter().enumerate() {
+            let radius = [0.0, 0.005, 0.02, 0.08][i % 4];
+            let linear = prune(&prog, &[], centre, radius, 0.0);
+            let indexed = prune_indexed(&prog, &index, &[], centre, radius, 0.0);
+            for dir in [DVec3::ZERO, DVec3::X, -DVec3::Y, DVec3::ONE.normalize()] {
+                let q = centre + dir * radius * 0.999;
+                let w = eval64(&prog, q);
+                assert_eq!(eval64(&indexed.program, q).to_bits(), w.to_bits(), "{q}");
+                assert_eq!(eval64(&linear.program, q).to_bits(), w.to_bits(), "{q}");
+                assert!(indexed.lo <= w && w <= indexed.hi, "{q}: {w} outside");
+            }
+        }
+    }
+    // An exact restriction keeps a walk's whole approach to the ball (each sphere changes
+    // the running blend there); within an error, over a ball smaller than a step of the
+    // walk, the approach is cut, and the trees read a small part of the children.
+    let prog = whole_program(&helix);
+    let index = PruneIndex::build(&prog);
+    let mut read = 0;
+    for (i, &centre) in near_helix.iter().enumerate() {
+        let radius = [0.0, 0.002, 0.005][i % 3];
+        let indexed = prune_indexed(&prog, &index, &[], centre, radius, 1e-6);
+        read += indexed.work;
+        for dir in [DVec3::ZERO, DVec3::X, -DVec3::Y] {
+            let q = centre + dir * radius * 0.999;
+            assert!((eval64(&indexed.program, q) - eval64(&prog, q)).abs() <= 1e-6);
+        }
+    }
+    assert!(
+        read * 5 < near_helix.len() * prog.instrs.len(),
+        "read {read} over {} balls of {} nodes",
+        near_helix.len(),
+        prog.instrs.len()
+    );
 }
 
 /// A field restricted to a small ball ([`Field::restricted_to_ball`]) reads a handful of a

@@ -54,6 +54,33 @@ impl<S: Scalar> Program<S> {
         (v, s.max(fallback(v, d)))
     }
 
+    /// [`Program::segment`] of the program whose root keeps only its children `kids` (see
+    /// [`Program::eval_root_subset`]): the same value and step as that restricted program's.
+    pub fn segment_root_subset(
+        &self,
+        kids: &[u32],
+        p: V3<S>,
+        d: V3<S>,
+        len: S,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (S, S) {
+        if self.instrs.is_empty() || kids.is_empty() || !self.root_is_smooth_union() {
+            return self.segment(p, d, len, grids);
+        }
+        // A blend has the global bound (`seg_node`'s last arm), under the root's box.
+        let ins = &self.instrs[0];
+        let node = || {
+            let (v, _) = self.root_subset_node::<S, false>(kids, p, grids);
+            (v, fallback(v, d))
+        };
+        let (v, s) = if ins.has_bound {
+            bounded_step((ins.lo, ins.hi, ins.tau), None, p, d, node)
+        } else {
+            node()
+        };
+        (v, s.max(fallback(v, d)))
+    }
+
     /// [`Program::child`] with a safe step.
     fn seg_child(
         &self,
