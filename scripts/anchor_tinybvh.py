@@ -436,6 +436,7 @@ def main():
 
     start = time.time()
     load_start = ae.load_average()
+    print("load average at start:", load_start)
     with tempfile.TemporaryDirectory() as workdir:
         try:
             header, source, commit = find_header(workdir)
