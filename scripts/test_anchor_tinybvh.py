@@ -116,9 +116,10 @@ class Header(unittest.TestCase):
         with open(os.path.join(work, "tiny_bvh.h"), "w") as f:
             f.write(HEADER_TEXT)
         git = ["git", "-c", "user.name=t", "-c", "user.email=t@t", "-c", "commit.gpgsign=false"]
-        subprocess.run(["git", "init", "-q", work], check=True)
-        subprocess.run([*git, "-C", work, "add", "tiny_bvh.h"], check=True)
-        subprocess.run([*git, "-C", work, "commit", "-q", "-m", "h"], check=True)
+        # Quiet: git's hints would land in the middle of unittest's `name ... ok` lines.
+        for cmd in (["init", "-q", work], ["-C", work, "add", "tiny_bvh.h"],
+                    ["-C", work, "commit", "-q", "-m", "h"]):
+            subprocess.run([*git, *cmd], check=True, capture_output=True)
         out = os.path.join(self.tmp, "out")
         os.mkdir(out)
         path, source, commit = at.find_header(out, {"TINYBVH_GIT_DIR": os.path.join(work, ".git")})
