@@ -199,7 +199,7 @@ def compile_trace(workdir, header):
         subprocess.run(cmd, check=True)
     except (OSError, subprocess.CalledProcessError) as e:
         raise SetupError(f"compiling {src} with `{cxx}` failed ({e}); set CXX") from e
-    return exe, " ".join([os.path.basename(cxx), *CXX_FLAGS, src])
+    return exe, " ".join([os.path.basename(cxx), *CXX_FLAGS, "scripts/tinybvh_trace.cpp"])
 
 
 def anchor_mesh(mesh, exe, loop, layouts, rounds, repeats, options, boxed=False):
@@ -359,11 +359,14 @@ def time_kind(mesh, kind, rays, workdir, tris_path, exe, scene, loop, layouts, r
             "disagreements": differ.get(s),
         }
     singles = [p for p in peers if p != "embree8"]
+    tinies = [p for p in peers if p.startswith("tinybvh-")]
     for t in tracers:
+        to_tiny, _ = ratio_to_fastest(per[t], {p: per[p] for p in tinies})
         to_single, single_wins = ratio_to_fastest(per[t], {p: per[p] for p in singles})
         to_fastest, wins = ratio_to_fastest(per[t], {p: per[p] for p in peers})
         entry["marchmesh"][t] = {
             "over": {p: ratio(per[t], per[p]) for p in peers},
+            "over_fastest_tinybvh": to_tiny,
             "over_faster_single_ray_peer": to_single,
             "faster_single_ray_peer_rounds": single_wins,
             "over_fastest_peer": to_fastest,
@@ -395,7 +398,8 @@ def print_mesh(record):
     for kind, e in record["kinds"].items():
         for t, m in e["marchmesh"].items():
             over = "  ".join(f"/{p} {v:.3f}" for p, v in m["over"].items())
-            print(f"{kind:<7} {t:<8} {over}  /faster-single "
+            print(f"{kind:<7} {t:<8} {over}  /tinybvh-best {m['over_fastest_tinybvh']:.3f}"
+                  f"  /faster-single "
                   f"{m['over_faster_single_ray_peer']:.3f}  /fastest {m['over_fastest_peer']:.3f}")
 
 
@@ -498,7 +502,8 @@ def main():
             "(camera: time wide1, wide4x2; incoherent: time-rays wide); each side 1 warm-up, "
             "REPEATS timed, median; thread CPU time; ratios are medians of per-round ratios; "
             "over_faster_single_ray_peer divides by the faster of Embree's single-ray call and "
-            "the tinybvh layouts in the round, over_fastest_peer by the fastest Embree or "
+            "the tinybvh layouts in the round, over_fastest_tinybvh by the round's fastest "
+            "tinybvh layout, over_fastest_peer by the fastest Embree or "
             "tinybvh call of the round (8-wide calls included); "
             "disagreements count rays whose answer differs from Embree's single-ray one "
             "(occlusion boolean, hit or miss, hit distance beyond the relative tolerance; "
