@@ -274,12 +274,13 @@ def disagreements(ours, theirs, occlusion):
     return int((hit_a != hit_b).sum() + far.sum())
 
 
-def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repeats, options,
-                    workdir, boxed=False):
-    """Times Embree and the mesh backend's `tracers` on the incoherent rays drawn from the
-    camera rays' hits on `scene` (see anchor_incoherent.py) in `rounds` interleaved rounds,
-    the order reversed on odd rounds; returns the mesh's "incoherent" record. `boxed`: the
-    mesh is a boxed_obj room, whose area light hangs under the ceiling."""
+def incoherent_sets(tris, camera_rays, scene, loop, options, boxed=False):
+    """The incoherent rays drawn from the camera rays' hits on `scene` (Embree's, through
+    `loop`; see anchor_incoherent.py) with the parsed `options` (seed, per_hit,
+    ao_distance): ({kind: rays}, the start of the mesh's "incoherent" record, its "kinds"
+    still empty). `boxed`: the mesh is a boxed_obj room, whose area light hangs under the
+    ceiling. scripts/anchor_tinybvh.py draws its rays here too, so both anchors time the
+    same rays."""
     t_hit, prim = loop.primary_hits(scene, camera_rays)
     lo = tris.reshape(-1, 3).min(axis=0).astype(np.float64)
     hi = tris.reshape(-1, 3).max(axis=0).astype(np.float64)
@@ -309,6 +310,16 @@ def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repea
         "hit_distance_tolerance_relative": T_TOLERANCE,
         "kinds": {},
     }
+    return sets, record
+
+
+def time_incoherent(mesh, tris, camera_rays, scene, loop, tracers, rounds, repeats, options,
+                    workdir, boxed=False):
+    """Times Embree and the mesh backend's `tracers` on the incoherent rays drawn from the
+    camera rays' hits on `scene` (see anchor_incoherent.py) in `rounds` interleaved rounds,
+    the order reversed on odd rounds; returns the mesh's "incoherent" record. `boxed`: the
+    mesh is a boxed_obj room, whose area light hangs under the ceiling."""
+    sets, record = incoherent_sets(tris, camera_rays, scene, loop, options, boxed)
     for kind, rays in sets.items():
         query, occlusion = INCOHERENT_KINDS[kind]
         path = os.path.join(workdir, f"{kind}.f32")

@@ -98,8 +98,8 @@ fn runs_in_the_same_second_get_distinct_output_names() {
     for n in &names {
         assert!(std::path::Path::new(&format!("{n}.md")).exists(), "{n}");
     }
-    // Both scripts use the helpers and no fixed name in a shared folder.
-    for script in ["anchor_embree.sh", "anchor_fidget.sh"] {
+    // Every anchor script uses the helpers and no fixed name in a shared folder.
+    for script in ["anchor_embree.sh", "anchor_fidget.sh", "anchor_tinybvh.sh"] {
         let text =
             std::fs::read_to_string(marchmesh_testkit::repo_root().join("scripts").join(script))
                 .unwrap();
@@ -174,4 +174,39 @@ fn the_mitsuba_path_tracing_crosscheck_decides_by_bias_against_noise() {
         );
     }
     assert!(out.contains("Ran 7 tests"), "{out}");
+}
+
+/// The tinybvh anchor's own logic, which needs neither numpy, Embree nor tinybvh: its
+/// program's output is parsed or refused, ratios are medians of per-round ratios against the
+/// round's fastest peer, and tinybvh's header is looked up where the script documents it.
+#[test]
+fn the_tinybvh_anchor_parses_its_programs_output_and_finds_its_header() {
+    let Some(python) = marchmesh_testkit::tools::require(
+        marchmesh_testkit::tools::Tool::Python,
+        "the_tinybvh_anchor_parses_its_programs_output_and_finds_its_header",
+    ) else {
+        return;
+    };
+    let o = Command::new(python)
+        .args(["-m", "unittest", "-v", "test_anchor_tinybvh"])
+        .current_dir(marchmesh_testkit::repo_root().join("scripts"))
+        .output()
+        .unwrap();
+    let out = text(&o.stderr);
+    assert!(o.status.success(), "{out}");
+    for name in [
+        "test_a_build_line_then_one_rate_per_pass",
+        "test_malformed_output_is_refused",
+        "test_the_fastest_peer_is_taken_round_by_round",
+        "test_tinybvh_dir_must_hold_the_header",
+        "test_without_either_place_the_message_names_both",
+    ] {
+        // unittest -v prints `name ... ok` or, from Python 3.11, `name (module.Class.name) ... ok`.
+        assert!(
+            out.lines()
+                .any(|l| l.starts_with(name) && l.ends_with("... ok")),
+            "{name}: {out}"
+        );
+    }
+    assert!(out.contains("Ran 11 tests"), "{out}");
 }
