@@ -183,8 +183,9 @@ fn root_subset(prog: &Program<f64>, source: &[u32]) -> Option<Box<[u32]>> {
 /// What the child tree of `prog`'s root (an indexed union or smooth union) says of the ball
 /// without restricting the program to it, for an octree cell: a lower bound of the whole
 /// program's value over the ball (from the children's boxes: `-inf` when unknown), whether
-/// restricting would plainly keep more than `cap` children (their boxes come near), and the
-/// work spent. `None` when the root has no child tree.
+/// restricting would plainly keep more than `cap` children (the ball meets a child's box
+/// and more than `cap` boxes come near), and the work spent. `None` when the root has no
+/// child tree.
 fn survey_root(
     prog: &Program<f64>,
     index: &PruneIndex,
@@ -236,7 +237,9 @@ fn survey_root(
     }
     let scale = c.x.abs().max(c.y.abs()).max(c.z.abs()) + radius;
     lower -= SLACK_REL * (1.0 + lower.abs().min(1e300) + scale);
-    let crowded = p.crowded(tree, q, rq, slack + 2.0 * rq, cap);
+    // Only a cell that meets a child's box may be crowded: one that does not could be far,
+    // which restricting it finds exactly.
+    let crowded = nearest == f64::NEG_INFINITY && p.crowded(tree, q, rq, slack + 2.0 * rq, cap);
     Some((lower, crowded, p.work))
 }
 
