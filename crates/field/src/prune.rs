@@ -42,6 +42,49 @@ use crate::shapes;
 mod cells;
 mod index;
 
+/// A hash map with a cheap multiplicative hasher (rustc's "Fx"): the pruner's maps are keyed
+/// by node indices and index lists, hashed millions of times in a build, where the
+/// standard hasher's DoS resistance buys nothing.
+type FastMap<K, V> = std::collections::HashMap<K, V, std::hash::BuildHasherDefault<FxHasher>>;
+
+/// The hasher of [`FastMap`].
+#[derive(Default, Clone, Copy)]
+struct FxHasher(u64);
+
+impl std::hash::Hasher for FxHasher {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        let mut chunks = bytes.chunks_exact(8);
+        for c in &mut chunks {
+            let mut w = [0u8; 8];
+            w.copy_from_slice(c);
+            self.write_u64(u64::from_le_bytes(w));
+        }
+        for &b in chunks.remainder() {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    #[inline]
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    #[inline]
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+
+    #[inline]
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
 pub use cells::{Cell, CellStats, Cells};
 pub use index::PruneIndex;
 use index::{ChildTree, TreeNode};
@@ -135,8 +178,8 @@ pub fn prune_indexed(
         cut_error,
         max_error,
         work: 0,
-        scratch: std::collections::HashMap::new(),
-        known: std::collections::HashMap::new(),
+        scratch: FastMap::default(),
+        known: FastMap::default(),
     };
     let c = V3::new(centre.x, centre.y, centre.z);
     // The root's interval from the restricted program (within `max_error` of the whole's,
@@ -214,8 +257,8 @@ fn survey_root(
         cut_error: 0.0,
         max_error: 0.0,
         work: 0,
-        scratch: std::collections::HashMap::new(),
-        known: std::collections::HashMap::new(),
+        scratch: FastMap::default(),
+        known: FastMap::default(),
     };
     let c = V3::new(centre.x, centre.y, centre.z);
     let q = root.to_local.apply(c);
@@ -269,9 +312,9 @@ struct Pruner<'a> {
     work: usize,
     /// Indexed composites already restricted to find their interval (node, its restricted
     /// nodes with `end` relative to 0, their sources), emitted from here when kept.
-    scratch: std::collections::HashMap<usize, (Vec<Instr<f64>>, Vec<u32>)>,
+    scratch: FastMap<usize, (Vec<Instr<f64>>, Vec<u32>)>,
     /// Intervals already read (a node is read under one ball per restriction).
-    known: std::collections::HashMap<usize, (f64, f64)>,
+    known: FastMap<usize, (f64, f64)>,
 }
 
 /// An upper bound of the stretch of `a`'s linear part (its Frobenius norm; 1 for none).
@@ -824,7 +867,9 @@ impl Pruner<'_> {
 
     /// Emits node `i` (kept) restricted to the ball `(c, r)` in its parent's frame.
     fn emit(&mut self, i: usize, c: V3<f64>, r: f64, depth: usize) {
-        if let Some((instrs, source)) = self.scratch.remove(&i) {
+        if !self.scratch.is_empty()
+            && let Some((instrs, source)) = self.scratch.remove(&i)
+        {
             let base = self.out.len() as u32;
             self.out.extend(instrs.into_iter().map(|mut n| {
                 n.end += base;

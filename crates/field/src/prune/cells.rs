@@ -72,10 +72,16 @@ pub struct Cells {
     stats: CellStats,
     /// While building: the cell holding each distinct program, by its nodes' indices in the
     /// whole program (neighbouring cells often keep the same children; they share one).
-    by_source: std::collections::HashMap<Vec<u32>, u32>,
+    by_source: super::FastMap<Vec<u32>, u32>,
     /// While building: how many more program nodes the pruner may read
     /// ([`Cells::max_work`]).
     work_left: usize,
+}
+
+thread_local! {
+    /// The merged kept children of an 8-lane query over several subset cells.
+    static MERGED: std::cell::RefCell<(Vec<u32>, Vec<u32>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// A cell of the octree being built: its box and its block of finest cells.
@@ -141,6 +147,11 @@ pub struct CellStats {
 /// Cells with at most this many nodes are not subdivided further.
 const LEAF_NODES: usize = 12;
 
+/// Restricted programs of at most this many nodes are copied into their cell (contiguous
+/// nodes evaluate faster than a list of indices into the whole program) while the node
+/// budget lasts; larger ones are stored as subsets when they can be.
+const COPY_NODES: usize = 32;
+
 /// The far test: a cell is far when the field's bound nearest to zero over it is at least
 /// this fraction of its bounding radius away from zero (so far values stay well above any
 /// hit epsilon; the paper's empty cells are those where `|d| > 2R` at the centre).
@@ -153,8 +164,10 @@ impl Cells {
     /// work fits in [`Cells::max_work`] (so a large program gets a coarser octree, and a
     /// deep chain whose cells keep most of it is not read once per octree node); cells
     /// past [`Cells::max_nodes`] program nodes read the whole program. Memory and time stay
-    /// bounded. `None` when the box is not finite or the program holds a mesh grid (grids
-    /// are not Lipschitz bounds, see the module docs). Every cell restricts the whole program through `index` (built
+    /// bounded: the work spent is at most about twice the budget (the last level settles
+    /// its cells whatever they cost). `None` when the box is not finite or the program
+    /// holds a mesh grid (grids are not Lipschitz bounds, see the module docs). Every cell
+    /// restricts the whole program through `index` (built
     /// from `prog` by [`PruneIndex::build`]) within `max_error` of its value in the cell, and
     /// far bounds hold for the whole program: `0` keeps values bit for bit.
     pub fn build(
@@ -165,6 +178,22 @@ impl Cells {
         pad: f64,
         depth: u32,
         max_error: f64,
+    ) -> Option<Cells> {
+        let work = Self::max_work(prog.instrs.len());
+        Self::build_within(prog, index, grids, bounds, pad, depth, max_error, work)
+    }
+
+    /// [`Cells::build`] with a work budget of `work` instead of [`Cells::max_work`].
+    #[allow(clippy::too_many_arguments)]
+    pub fn build_within(
+        prog: &Program<f64>,
+        index: &PruneIndex,
+        grids: &[Box<dyn GridSampler>],
+        bounds: (DVec3, DVec3),
+        pad: f64,
+        depth: u32,
+        max_error: f64,
+        work: usize,
     ) -> Option<Cells> {
         let depth = depth.min(8);
         let max_error = if max_error.is_finite() {
@@ -193,8 +222,8 @@ impl Cells {
             cells: Vec::new(),
             pad: pad as f32,
             stats: CellStats::default(),
-            by_source: std::collections::HashMap::new(),
-            work_left: Self::max_work(prog.instrs.len()),
+            by_source: super::FastMap::default(),
+            work_left: work,
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let mut level = vec![Region {
@@ -225,7 +254,7 @@ impl Cells {
             }
             level = crowded.iter().flat_map(Region::split).collect();
         }
-        cells.by_source = std::collections::HashMap::new();
+        cells.by_source = super::FastMap::default();
         Some(cells)
     }
 
@@ -295,7 +324,9 @@ impl Cells {
         let id = if let Some(&id) = self.by_source.get(&pruned.source) {
             self.stats.shared_cells += 1;
             id
-        } else if let Some(kids) = root_subset(prog, &pruned.source)
+        } else if let Some(kids) = (nodes > COPY_NODES || self.stats.program_nodes + nodes > budget)
+            .then(|| root_subset(prog, &pruned.source))
+            .flatten()
             && self.stats.subset_children + kids.len() <= Self::max_subset_children()
         {
             let id = self.cells.len() as u32;
@@ -463,6 +494,58 @@ impl Cells {
                     done |= 1 << i;
                 }
             }
+        }
+        // Lanes in two or more subset cells: one evaluation over the union of their kept
+        // children (in fold order), exact for every one of them: a child one cell drops is a
+        // no-op or a replaced prefix there, and folding more children only lowers the prefix
+        // (the replacement and no-op tests hold a fortiori), while a cut prefix's influence
+        // only shrinks.
+        let mut subsets = [&[][..]; 8];
+        let mut n_subsets = 0;
+        for i in 0..8 {
+            if (done >> i) & 1 == 0
+                && let Some(Cell::Subset { kids }) = cells[i]
+                && !subsets[..n_subsets]
+                    .iter()
+                    .any(|k| std::ptr::eq(*k, &**kids))
+            {
+                subsets[n_subsets] = kids;
+                n_subsets += 1;
+            }
+        }
+        if n_subsets > 1 {
+            MERGED.with_borrow_mut(|(merged, spare)| {
+                // The lists are in fold order (ascending): merged pairwise in linear time.
+                merged.clear();
+                merged.extend_from_slice(subsets[0]);
+                let mut separate = subsets[0].len();
+                for kids in &subsets[1..n_subsets] {
+                    separate += kids.len();
+                    spare.clear();
+                    let (mut a, mut b) = (0, 0);
+                    while a < merged.len() && b < kids.len() {
+                        let (x, y) = (merged[a], kids[b]);
+                        spare.push(x.min(y));
+                        a += usize::from(x <= y);
+                        b += usize::from(y <= x);
+                    }
+                    spare.extend_from_slice(&merged[a..]);
+                    spare.extend_from_slice(&kids[b..]);
+                    std::mem::swap(merged, spare);
+                }
+                // One evaluation over the union only when it reads fewer children than one
+                // per cell would.
+                if merged.len() < separate {
+                    let (d, m) = whole.eval_root_subset::<F32x8, M>(merged, p, grids);
+                    for l in 0..8 {
+                        if (done >> l) & 1 == 0 && matches!(cells[l], Some(Cell::Subset { .. })) {
+                            out.0[l] = d.0[l];
+                            mat[l] = m[l];
+                            done |= 1 << l;
+                        }
+                    }
+                }
+            });
         }
         for i in 0..8 {
             if (done >> i) & 1 == 1 {

@@ -31,7 +31,7 @@ pub struct PruneIndex {
     /// Mesh leaves among nodes `0..i` (so a subtree `[i, end)` holds one when the counts
     /// at `i` and `end` differ); empty means "scan the subtree".
     mesh_before: Vec<u32>,
-    pub(super) trees: std::collections::HashMap<u32, ChildTree>,
+    pub(super) trees: super::FastMap<u32, ChildTree>,
 }
 
 #[derive(Debug, Clone)]
@@ -104,7 +104,7 @@ impl PruneIndex {
         }
         PruneIndex {
             mesh_before,
-            trees: std::collections::HashMap::new(),
+            trees: super::FastMap::default(),
         }
     }
 
