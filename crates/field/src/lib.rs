@@ -576,6 +576,7 @@ impl Field {
                 stats.max_program_nodes as f64,
             ),
             ("prune_whole_cells".into(), stats.whole_cells as f64),
+            ("prune_subset_cells".into(), stats.subset_cells as f64),
         ]);
         self.cells = Some(cells);
         Some(stats)
