@@ -169,18 +169,7 @@ pub fn prune_indexed(
     } else {
         (0.0, 0.0)
     };
-    let mut p = Pruner {
-        prog,
-        index,
-        grids,
-        out: Vec::with_capacity(prog.instrs.len().min(1024)),
-        source: Vec::with_capacity(prog.instrs.len().min(1024)),
-        cut_error,
-        max_error,
-        work: 0,
-        scratch: FastMap::default(),
-        known: FastMap::default(),
-    };
+    let mut p = Pruner::new(prog, index, grids, (cut_error, max_error));
     let c = V3::new(centre.x, centre.y, centre.z);
     // The root's interval from the restricted program (within `max_error` of the whole's,
     // bit for bit at 0), so a large program is not evaluated whole.
@@ -248,18 +237,7 @@ fn survey_root(
         } => k,
         _ => return None,
     };
-    let mut p = Pruner {
-        prog,
-        index,
-        grids,
-        out: Vec::new(),
-        source: Vec::new(),
-        cut_error: 0.0,
-        max_error: 0.0,
-        work: 0,
-        scratch: FastMap::default(),
-        known: FastMap::default(),
-    };
+    let mut p = Pruner::new(prog, index, grids, (0.0, 0.0));
     let c = V3::new(centre.x, centre.y, centre.z);
     let q = root.to_local.apply(c);
     let rq = radius * stretch(&root.to_local);
@@ -452,7 +430,27 @@ impl FoldChain {
     }
 }
 
-impl Pruner<'_> {
+impl<'a> Pruner<'a> {
+    /// A pruner of `prog` with `(cut_error, max_error)` (see the fields).
+    fn new(
+        prog: &'a Program<f64>,
+        index: &'a PruneIndex,
+        grids: &'a [Box<dyn GridSampler>],
+        (cut_error, max_error): (f64, f64),
+    ) -> Pruner<'a> {
+        Pruner {
+            prog,
+            index,
+            grids,
+            out: Vec::new(),
+            source: Vec::new(),
+            cut_error,
+            max_error,
+            work: 0,
+            scratch: FastMap::default(),
+            known: FastMap::default(),
+        }
+    }
     fn end(&self, i: usize) -> usize {
         self.prog.instrs[i].end as usize
     }
@@ -513,15 +511,7 @@ impl Pruner<'_> {
         if !run.bounded {
             return f64::NEG_INFINITY;
         }
-        let d = {
-            let p = [q.x, q.y, q.z];
-            let mut s = 0.0f64;
-            for a in 0..3 {
-                let e = (run.lo[a] - p[a]).max(p[a] - run.hi[a]).max(0.0);
-                s += e * e;
-            }
-            s.sqrt()
-        };
+        let d = shapes::box_distance(q, V3::splat3(run.lo), V3::splat3(run.hi));
         let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + r;
         let lb = d - r - SLACK_REL * (1.0 + d + scale);
         if lb > 0.0 { lb } else { f64::NEG_INFINITY }
@@ -656,7 +646,8 @@ impl Pruner<'_> {
     }
 
     /// Walks `tree` in fold order into `chain`: runs the fold proves no-ops are skipped,
-    /// runs at least `far` away are folded unread unless `open` (then read whole).
+    /// runs at least `far` away are folded unread unless `open` says to read them whole (an
+    /// empty `open`: everything below is read).
     #[allow(clippy::too_many_arguments)]
     fn fold_walk(
         &mut self,
@@ -674,7 +665,8 @@ impl Pruner<'_> {
         if chain.skips(lb) {
             return;
         }
-        let whole = open[at as usize];
+        // An empty `open` below a run read whole.
+        let whole = open.get(at as usize).copied().unwrap_or(true);
         if !whole && lb >= far {
             chain.run(at, lb);
             return;
@@ -688,42 +680,9 @@ impl Pruner<'_> {
                 }
             }
             Some([a, b]) => {
-                if whole {
-                    self.fold_walk_whole(tree, a, q, r, depth, chain);
-                    self.fold_walk_whole(tree, b, q, r, depth, chain);
-                } else {
-                    self.fold_walk(tree, a, q, r, depth, far, open, chain);
-                    self.fold_walk(tree, b, q, r, depth, far, open, chain);
-                }
-            }
-        }
-    }
-
-    /// [`Pruner::fold_walk`] below a run read whole (only no-op runs skipped).
-    fn fold_walk_whole(
-        &mut self,
-        tree: &ChildTree,
-        at: u32,
-        q: V3<f64>,
-        r: f64,
-        depth: usize,
-        chain: &mut FoldChain,
-    ) {
-        let run = &tree.nodes[at as usize];
-        if chain.skips(self.run_lower(run, q, r)) {
-            return;
-        }
-        match run.sub {
-            None => {
-                for &j in &tree.kids[run.start as usize..run.end as usize] {
-                    let j = j as usize;
-                    let (lo, hi) = self.interval(j, q, r, depth);
-                    chain.child(j, lo, hi);
-                }
-            }
-            Some([a, b]) => {
-                self.fold_walk_whole(tree, a, q, r, depth, chain);
-                self.fold_walk_whole(tree, b, q, r, depth, chain);
+                let below = if whole { &[][..] } else { open };
+                self.fold_walk(tree, a, q, r, depth, far, below, chain);
+                self.fold_walk(tree, b, q, r, depth, far, below, chain);
             }
         }
     }
