@@ -76,6 +76,9 @@ pub struct Cells {
     /// While building: how many more program nodes the pruner may read
     /// ([`Cells::max_work`]).
     work_left: usize,
+    /// The whole program's [`Program::sphere_table`] in f32 when some cell is a
+    /// [`Cell::Subset`] (empty otherwise): subset folds rule far spheres out from it.
+    spheres32: Vec<[f32; 4]>,
 }
 
 thread_local! {
@@ -224,6 +227,7 @@ impl Cells {
             stats: CellStats::default(),
             by_source: super::FastMap::default(),
             work_left: work,
+            spheres32: Vec::new(),
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let mut level = vec![Region {
@@ -255,6 +259,9 @@ impl Cells {
             level = crowded.iter().flat_map(Region::split).collect();
         }
         cells.by_source = super::FastMap::default();
+        if cells.stats.subset_cells > 0 {
+            cells.spheres32 = prog.sphere_table();
+        }
         Some(cells)
     }
 
@@ -414,7 +421,10 @@ impl Cells {
                 Cell::Program { p32, p64 } => p32.memory_bytes() + p64.memory_bytes(),
             })
             .sum();
-        (self.index.len() * 4 + self.cells.len() * std::mem::size_of::<Cell>()) as u64 + programs
+        (self.index.len() * 4
+            + self.cells.len() * std::mem::size_of::<Cell>()
+            + self.spheres32.len() * 16) as u64
+            + programs
     }
 
     /// The cell holding `p`, `None` outside the octree's box.
@@ -536,7 +546,8 @@ impl Cells {
                 // One evaluation over the union only when it reads fewer children than one
                 // per cell would.
                 if merged.len() < separate {
-                    let (d, m) = whole.eval_root_subset::<F32x8, M>(merged, p, grids);
+                    let (d, m) =
+                        whole.eval_root_subset::<F32x8, M>(merged, &self.spheres32, p, grids);
                     for l in 0..8 {
                         if (done >> l) & 1 == 0 && matches!(cells[l], Some(Cell::Subset { .. })) {
                             out.0[l] = d.0[l];
@@ -569,7 +580,9 @@ impl Cells {
             };
             let (d, m) = match c {
                 Cell::Program { p32, .. } => p32.eval::<F32x8, M>(p, grids),
-                Cell::Subset { kids } => whole.eval_root_subset::<F32x8, M>(kids, p, grids),
+                Cell::Subset { kids } => {
+                    whole.eval_root_subset::<F32x8, M>(kids, &self.spheres32, p, grids)
+                }
                 Cell::Whole | Cell::Far { .. } => whole.eval::<F32x8, M>(p, grids),
             };
             // Every lane in the same cell (every lane of a whole cell) takes this answer.
@@ -600,7 +613,9 @@ impl Cells {
         let v = V3::new(p.x, p.y, p.z);
         match self.locate(a) {
             Some(Cell::Program { p32, .. }) => p32.eval::<f32, M>(v, grids),
-            Some(Cell::Subset { kids }) => whole.eval_root_subset::<f32, M>(kids, v, grids),
+            Some(Cell::Subset { kids }) => {
+                whole.eval_root_subset::<f32, M>(kids, &self.spheres32, v, grids)
+            }
             Some(Cell::Whole) => whole.eval::<f32, M>(v, grids),
             _ if M => whole.eval::<f32, true>(v, grids),
             None => (self.outside(a), 0),
@@ -660,7 +675,7 @@ impl Cells {
         let v = V3::new(p.x, p.y, p.z);
         match self.locate(p.as_vec3().to_array()) {
             Some(Cell::Program { p64, .. }) => p64.eval::<f64, M>(v, grids),
-            Some(Cell::Subset { kids }) => whole.eval_root_subset::<f64, M>(kids, v, grids),
+            Some(Cell::Subset { kids }) => whole.eval_root_subset::<f64, M>(kids, &[], v, grids),
             _ => whole.eval::<f64, M>(v, grids),
         }
     }
