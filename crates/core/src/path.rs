@@ -150,7 +150,7 @@ fn trace_tile(
             for ((path, ray), res) in paths.iter().zip(rays.iter()).zip(results.iter()) {
                 let px = path.pixel as usize;
                 let aov = (camera && path.sample == 0 && band.aovs).then_some((&mut *band, px));
-                let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
+                let (hit, n) = match resolve_vertex::<false>(stats, aov, sh, background, ray, res) {
                     Vertex::Emitter(emission) => {
                         if path.count_emission {
                             sum[px] += path.throughput * emission;

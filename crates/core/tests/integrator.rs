@@ -114,6 +114,29 @@ fn diffuse_and_ambient_match_the_phong_formula_and_misses_show_the_background() 
     assert_eq!(out.stats.primary_rays, 33 * 33);
 }
 
+/// A hit skips the secondary rays' origin and the sample key when no light casts shadows: the
+/// colours are the bits of a render whose light casts shadows that nothing blocks (a lone
+/// convex sphere never shadows its own lit side), and the counters of the camera rays agree.
+#[test]
+fn shadowless_lights_shade_the_bits_of_unblocked_shadowed_ones() {
+    let lit = ONE_SPHERE.replace(
+        r#""direction": [0, 0, -1]"#,
+        r#""direction": [0.3, 0.5, -1]"#,
+    );
+    let shadowed = lit.replace(r#""casts_shadows": false"#, r#""casts_shadows": true"#);
+    assert_ne!(lit, shadowed);
+    let (a, b) = (run(&scene(&lit), 1), run(&scene(&shadowed), 1));
+    assert_eq!(a.stats.shadow_rays, 0);
+    assert!(b.stats.shadow_rays > 0);
+    let bits = |c: &[Vec3]| -> Vec<[u32; 3]> {
+        c.iter().map(|v| v.to_array().map(f32::to_bits)).collect()
+    };
+    assert_eq!(bits(&a.framebuffer.color), bits(&b.framebuffer.color));
+    assert_eq!(a.stats.hits, b.stats.hits);
+    assert!(a.stats.hits > 0);
+    assert_eq!(a.stats.primary_rays, b.stats.primary_rays);
+}
+
 #[test]
 fn specular_highlight_adds_to_diffuse() {
     let json = ONE_SPHERE.replace(

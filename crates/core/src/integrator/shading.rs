@@ -27,6 +27,13 @@ pub(crate) struct Shading {
     pub(crate) seed: u64,
     /// Path tracer: most bounces after the camera ray.
     pub(crate) max_bounces: u32,
+    /// Whether a shading point may start a shadow or ambient-occlusion ray (or cone): a
+    /// light that casts shadows, an area light, or ambient occlusion. Without one (and
+    /// without a reflection) the Whitted integrator skips the secondary rays' origin.
+    pub(crate) spawns: bool,
+    /// Whether shading reads the pixel sample's random key (area lights, ambient
+    /// occlusion); the Whitted integrator skips the hashing otherwise.
+    pub(crate) keyed: bool,
 }
 
 pub(crate) enum ShadingLight {
@@ -80,6 +87,15 @@ impl Shading {
             }
         }
         let r = &scene.render;
+        let occlusion = r.ambient_occlusion.is_some() && ambient > 0.0;
+        let spawns = occlusion
+            || lights.iter().any(|l| match l {
+                ShadingLight::Point { shadows, .. } | ShadingLight::Directional { shadows, .. } => {
+                    *shadows
+                }
+                ShadingLight::Area(_) => true,
+            });
+        let keyed = occlusion || !emitters.is_empty();
         Self {
             ambient,
             lights,
@@ -96,6 +112,8 @@ impl Shading {
             emitters,
             seed: r.seed,
             max_bounces: r.max_bounces,
+            spawns,
+            keyed,
         }
     }
 

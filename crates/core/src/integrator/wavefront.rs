@@ -70,11 +70,12 @@ pub(crate) enum Vertex {
     },
 }
 
-/// Classifies one closest-hit result of a wavefront: counts its work and termination, drops a
-/// non-finite hit (counted), records the AOVs of band pixel `aov` (sample 0 of a camera ray),
-/// and decides whether the ray met an area light, the background or a surface.
+/// Classifies one closest-hit result of a wavefront: counts its work and termination (unless
+/// `COUNTED`: the miss pass, [`resolve_no_hits`], counted it already), drops a non-finite hit
+/// (counted), records the AOVs of band pixel `aov` (sample 0 of a camera ray), and decides
+/// whether the ray met an area light, the background or a surface.
 #[inline(always)]
-pub(crate) fn resolve_vertex(
+pub(crate) fn resolve_vertex<const COUNTED: bool>(
     stats: &mut RenderStats,
     aov: Option<(&mut Band<'_>, usize)>,
     sh: &Shading,
@@ -82,8 +83,10 @@ pub(crate) fn resolve_vertex(
     ray: &Ray,
     res: &TraceResult,
 ) -> Vertex {
-    stats.add_work(&res.work);
-    stats.add_termination(res.termination(), false);
+    if !COUNTED {
+        stats.add_work(&res.work);
+        stats.add_termination(res.termination(), false);
+    }
     let hit = res.hit().filter(|h| {
         let ok = h.t.is_finite() && h.position.is_finite() && h.normal.is_finite();
         if !ok {
@@ -147,11 +150,12 @@ impl MissPath for u32 {
     }
 }
 
-/// The first pass over (part of) a wavefront's results: resolves every result without a
-/// hit as [`resolve_vertex`] would (counts, area light or background radiance added to its
-/// pixel's `sum`, AOVs of the first `aov_pixels` paths) and appends the wavefront indices
-/// of the hits (`first` + index in the slices) to `hits`. A path's pixel is `base` plus
-/// [`MissPath::pixel`].
+/// The first pass over (part of) a wavefront's results: counts every result's work and
+/// termination (the hits' too: resolve those with `resolve_vertex::<true>`), resolves every
+/// result without a hit as [`resolve_vertex`] would (area light or background radiance added
+/// to its pixel's `sum`, AOVs of the first `aov_pixels` paths) and appends the wavefront
+/// indices of the hits (`first` + index in the slices) to `hits`. A path's pixel is `base`
+/// plus [`MissPath::pixel`].
 /// Slices as arguments, so the loop keeps their addresses in registers; the loop is built
 /// once per combination of "radiance is one constant" and "records AOVs", so the common
 /// case (constant background, no area light) reads neither rays nor background per ray.
@@ -223,7 +227,7 @@ impl<'b> AovPlanes<'b> {
     }
 }
 
-/// The counters of rays without a hit, kept in locals and added to the render's
+/// The counters of a wavefront's closest-hit rays, kept in locals and added to the render's
 /// [`RenderStats`] once per wavefront (the same sums [`RenderStats::add_work`] and
 /// [`RenderStats::add_termination`] would make ray by ray).
 #[derive(Default)]
@@ -249,6 +253,7 @@ impl MissTally {
     }
 
     fn merge_into(&self, stats: &mut RenderStats) {
+        stats.hits += self.ended[Termination::Hit as usize];
         stats.closest_max_steps += self.ended[Termination::MaxSteps as usize];
         stats.max_distance += self.ended[Termination::MaxDistance as usize];
         stats.steps += self.steps;
@@ -277,11 +282,11 @@ pub(super) fn miss_span<const RECORD: bool, P: MissPath>(
     let (rays, results) = (&rays[..paths.len()], &results[..paths.len()]);
     for (k, ((path, ray), res)) in paths.iter().zip(rays).zip(results).enumerate() {
         let ended = res.termination();
+        tally.add(ended, &res.work);
         if ended == Termination::Hit {
             hits.push((first + k) as u32);
             continue;
         }
-        tally.add(ended, &res.work);
         let px = (base + path.pixel()) as usize;
         assert!(px < n, "path pixel outside its band");
         if RECORD {

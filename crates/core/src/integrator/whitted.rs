@@ -266,7 +266,7 @@ pub(super) fn trace_tile(
             let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
             let px = path.pixel as usize;
             let aov = (depth == 0 && pi < pixels && band.aovs).then_some((&mut *band, px));
-            let (hit, n) = match resolve_vertex(stats, aov, sh, background, ray, res) {
+            let (hit, n) = match resolve_vertex::<true>(stats, aov, sh, background, ray, res) {
                 Vertex::Emitter(radiance) | Vertex::Background(radiance) => {
                     sum[px] += path.throughput * radiance;
                     continue;
@@ -283,10 +283,20 @@ pub(super) fn trace_tile(
             } else {
                 path.throughput
             };
-            let offset = sh.ray_offset * hit.position.length().max(1e-30);
-            let origin = hit.position + n * offset;
-            let (column, row) = band.column_row(path.pixel);
-            let pixel_key = sample_key(sh.seed, column, row, path.sample) ^ mix64(depth as u64);
+            // Where secondary rays start, and the sample's random key: skipped (their square
+            // root, division and hashing) when no light, occlusion or mirror reads them.
+            let (offset, origin) = if reflect || sh.spawns {
+                let offset = sh.ray_offset * hit.position.length().max(1e-30);
+                (offset, hit.position + n * offset)
+            } else {
+                (0.0, hit.position)
+            };
+            let pixel_key = if sh.keyed {
+                let (column, row) = band.column_row(path.pixel);
+                sample_key(sh.seed, column, row, path.sample) ^ mix64(depth as u64)
+            } else {
+                0
+            };
             let ambient = local_weight * sh.ambient * color;
             match sh.ambient_occlusion {
                 Some(_) if sh.ambient > 0.0 && shortcuts.ambient_occlusion => {
