@@ -845,10 +845,7 @@ mod tests {
             if prog.sphere_no_op::<f32>(0, Some(&e), p, best, k) {
                 skipped += 1;
                 let d = sphere_value(e, p);
-                assert!(
-                    !(d < best),
-                    "case {i}: skipped a nearer child, {d} < {best}"
-                );
+                assert!(d >= best, "case {i}: skipped a nearer child, {d} < {best}");
                 assert_eq!(
                     shapes::smin(best, d, k, 1.0 / k).to_bits(),
                     best.to_bits(),
