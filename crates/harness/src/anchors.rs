@@ -119,21 +119,15 @@ pub enum AnchorError {
     },
     /// A rate, ratio or cost is not a finite positive number of at most [`MAX_ANCHOR_VALUE`].
     #[error(
-        "{file}: {subject} ({rays} rays, {tracer} over {peer}): {field} is {shown}, not a finite positive number of at most {max:e}",
+        "{file}: {entry}: {field} is {shown}, not a finite positive number of at most {max:e}",
         shown = short_number(*value),
         max = MAX_ANCHOR_VALUE
     )]
     Value {
         /// The file.
         file: String,
-        /// Its mesh or scene.
-        subject: String,
-        /// Its kind of ray.
-        rays: String,
-        /// Its tracer.
-        tracer: String,
-        /// Its peer (the tool's name when the file has one call).
-        peer: String,
+        /// Which entry: its mesh or scene, kind of ray, tracer and peer.
+        entry: String,
         /// The field.
         field: &'static str,
         /// The value read.
@@ -643,10 +637,13 @@ pub fn read_anchor(path: &Path) -> Result<Anchor, AnchorError> {
             if !(value.is_finite() && value > 0.0 && value <= MAX_ANCHOR_VALUE) {
                 return Err(AnchorError::Value {
                     file: anchor.file.clone(),
-                    subject: e.subject.clone(),
-                    rays: e.rays.clone(),
-                    tracer: e.tracer.clone(),
-                    peer: peer_name(&anchor, e).to_string(),
+                    entry: format!(
+                        "{} ({} rays, {} over {})",
+                        e.subject,
+                        e.rays,
+                        e.tracer,
+                        peer_name(&anchor, e)
+                    ),
                     field,
                     value,
                 });
