@@ -9,9 +9,8 @@
 #   scripts/anchor.sh [--quick] [--large] [--only embree,tinybvh,fidget] [--out DIR] [--check]
 #
 #   --quick   a smoke run: 2 rounds of 3 repeats (the tinybvh anchor on its BVH8 layout
-#             only), fidget's 3 repeats; minutes instead of the better part of an hour.
-#             The files record their rounds and repeats, so a quick run is never mistaken
-#             for a full one.
+#             only), fidget's 3 repeats. The files record their rounds and repeats, so a
+#             quick run is never mistaken for a full one.
 #   --large   the mesh anchors also trace the full Stanford dragon (871k triangles; see
 #             scripts/anchor_embree.sh for where it is found).
 #   --only    a comma-separated subset of the anchors (default: all three).
