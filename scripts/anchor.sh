@@ -179,7 +179,7 @@ for a in "${anchors[@]}"; do
         # Each anchor script's last line: "wrote BASE.json ..." naming what it filed.
         files="$(sed -n 's/^wrote \(.*\.json\).*/\1/p' "$log" | tail -n 1)"
         written+=("$files")
-        echo "| $a | $start | $(load) | ${files#"$root"/} |" >>"$note.md"
+        echo "| $a | $start | $(load) | ${files//"$root"\//} |" >>"$note.md"
     else
         status=1
         echo "| $a | $start | $(load) | failed |" >>"$note.md"
