@@ -19,7 +19,8 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 . "$root/scripts/anchor_common.sh"
 crate="$root/crates/anchor-fidget"
 target="${CARGO_TARGET_DIR:-$crate/target}"
-out="$root/bench-results/anchors"
+# ANCHOR_OUT_DIR: where scripts/anchor.sh files them (default bench-results/anchors).
+out="${ANCHOR_OUT_DIR:-$root/bench-results/anchors}"
 anchor_private_tmp
 
 echo "load at start: $(uptime)"

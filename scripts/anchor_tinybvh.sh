@@ -24,7 +24,8 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 # shellcheck source=scripts/anchor_common.sh
 . "$root/scripts/anchor_common.sh"
 venv="$(anchor_venv embree-venv)"
-out="$root/bench-results/anchors"
+# ANCHOR_OUT_DIR: where scripts/anchor.sh files them (default bench-results/anchors).
+out="${ANCHOR_OUT_DIR:-$root/bench-results/anchors}"
 anchor_private_tmp
 
 # The command line as given (the shift below drops --large from "$@").

@@ -158,8 +158,9 @@ struct BenchArgs {
     )]
     resume: Option<PathBuf>,
     /// Record an external anchor run with this run (repeatable): the JSON of
-    /// scripts/anchor_embree.sh (mesh backend vs Embree 4) or scripts/anchor_fidget.sh (sdf
-    /// backend vs fidget), shown in summary.md and the findings beside the verdicts.
+    /// scripts/anchor_embree.sh (mesh backend vs Embree 4), scripts/anchor_tinybvh.sh (mesh
+    /// backend vs tinybvh and Embree) or scripts/anchor_fidget.sh (sdf backend vs fidget), as
+    /// scripts/anchor.sh writes them, shown in summary.md and the findings beside the verdicts.
     #[arg(long, value_name = "FILE")]
     anchor: Vec<PathBuf>,
 }

@@ -483,11 +483,15 @@ fn anchor(file: &str, ours: f64) -> marchmesh_harness::anchors::Anchor {
         load_average_end: "0".into(),
         entries: vec![marchmesh_harness::anchors::AnchorEntry {
             subject: "bunny.obj".into(),
+            rays: "camera".into(),
+            query: "closest hit".into(),
             tracer: "wide1".into(),
+            peer: String::new(),
             unit: "Mrays/s".into(),
             ours,
             anchor: 2.0,
             ratio: ours / 2.0,
+            ours_ns_per_step: None,
         }],
     }
 }

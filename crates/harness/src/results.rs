@@ -599,7 +599,10 @@ impl Results {
             }
             for e in &mut a.entries {
                 esc(&mut e.subject);
+                esc(&mut e.rays);
+                esc(&mut e.query);
                 esc(&mut e.tracer);
+                esc(&mut e.peer);
                 esc(&mut e.unit);
             }
         }
@@ -659,7 +662,9 @@ impl Results {
         // (a 300-digit rate would be printed in full in every table).
         for (i, a) in self.anchors.iter().enumerate() {
             for (j, e) in a.entries.iter().enumerate() {
-                for (name, x) in [("ours", e.ours), ("anchor", e.anchor), ("ratio", e.ratio)] {
+                let values = [("ours", e.ours), ("anchor", e.anchor), ("ratio", e.ratio)];
+                let cost = e.ours_ns_per_step.map(|x| ("ours_ns_per_step", x));
+                for (name, x) in values.into_iter().chain(cost) {
                     if bad(x, true) || x <= 0.0 {
                         return Err((
                             format!("anchors[{i}].entries[{j}].{name}"),

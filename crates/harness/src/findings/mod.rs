@@ -43,7 +43,8 @@ pub struct Run {
 
 /// The findings document for `runs` and the number of plots written into `plots_dir` (linked
 /// as `plots_link/NAME.svg`; created, or reused only if it is a real folder, never a symbolic
-/// link). Its anchor section lists the anchors the runs recorded, then `more_anchors`.
+/// link). Its anchor section lists the anchors the runs recorded and `more_anchors` (which
+/// replace a run's copy of the same anchor run), by tool and date.
 /// Deterministic: the same inputs give the same bytes.
 ///
 /// Errors: `plots_dir` is a symbolic link, file or special file, or a plot cannot be written.
@@ -222,18 +223,25 @@ pub fn write_findings(
             Clock::for_run(&r.results).name()
         );
     }
-    // How far each backend is from its field's best, as the runs recorded it.
+    // How far each backend is from its field's best. An anchor file given here is read as this
+    // version reads it (a run may have recorded the same file before the reader gave every
+    // figure, such as the sdf backend's cost per step), so it stands for the run's copy of the
+    // same run of the anchor (same tool, file name and date: the run may have been given
+    // another path to it); listed by tool, then date.
     let mut anchors: Vec<crate::anchors::Anchor> = Vec::new();
     let mut seen = std::collections::HashSet::new();
-    for a in runs
+    for a in more_anchors
         .iter()
-        .flat_map(|r| &r.results.anchors)
-        .chain(more_anchors)
+        .chain(runs.iter().flat_map(|r| &r.results.anchors))
     {
-        if seen.insert(crate::anchors::identity(a)) {
+        let name = Path::new(&a.file)
+            .file_name()
+            .map_or_else(|| a.file.clone(), |n| n.to_string_lossy().into_owned());
+        if seen.insert((a.tool.clone(), name, a.date_utc.clone())) {
             anchors.push(a.clone());
         }
     }
+    anchors.sort_by(|a, b| (&a.tool, &a.date_utc).cmp(&(&b.tool, &b.date_utc)));
     if !anchors.is_empty() {
         let _ = write!(s, "\n{}", crate::anchors::anchors_markdown(&anchors));
     }
