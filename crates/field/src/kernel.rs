@@ -237,11 +237,14 @@ enum Run {
     Other(Vec<TapeLeaf>),
 }
 
+/// The leaves of a run when it has one kind (`None` for a run of another kind).
+type RunList<F, S> = fn(&mut Run) -> Option<&mut Vec<Spec<F, S>>>;
+
 /// Appends `l` to the last run when that run has `l`'s kind of `make`'s, else starts one.
 fn extend<F: Frame, S: Shape>(
     runs: &mut Vec<Run>,
     l: &TapeLeaf,
-    list: fn(&mut Run) -> Option<&mut Vec<Spec<F, S>>>,
+    list: RunList<F, S>,
     make: fn(Vec<Spec<F, S>>) -> Run,
 ) -> bool {
     let Some(spec) = Spec::<F, S>::of(l) else {
