@@ -19,6 +19,7 @@ use glam::{DVec3, Vec3};
 use marchmesh_scene::MaterialId;
 
 use crate::Field;
+use crate::kernel::Kernel;
 use crate::lane::{F32x8, V3};
 use crate::program::{Instr, Op, Program};
 use crate::tape::{Tape, tape_leaf};
@@ -196,6 +197,10 @@ pub struct Restricted {
     /// `prog` as a tape, when it is a small union of tape leaves (`taped`).
     tape: Tape,
     taped: bool,
+    /// `tape` specialised ([`crate::kernel`]), when it has a kernel and the field's kernels
+    /// are on (`kerneled`).
+    kernel: Kernel,
+    kerneled: bool,
     /// Buffer of [`flatten`].
     scratch: Vec<Instr<f32>>,
 }
@@ -212,6 +217,12 @@ impl Restricted {
     /// flattened). Otherwise they run the interpreter.
     pub fn is_taped(&self) -> bool {
         self.taped
+    }
+
+    /// Whether the 8-lane distances under this restriction run a specialised
+    /// [`crate::kernel::Kernel`] (its tape has one and the field's kernels are on).
+    pub fn is_kerneled(&self) -> bool {
+        self.kerneled
     }
 
     /// Nodes the restriction dropped.
@@ -233,6 +244,7 @@ impl Field {
         out.dropped = self.p32.instrs.len() - out.prog.instrs.len().min(self.p32.instrs.len());
         flatten(&mut out.prog.instrs, &mut out.scratch);
         out.taped = out.tape.rebuild(&out.prog);
+        out.kerneled = self.kernels && out.taped && out.kernel.rebuild(&out.tape);
     }
 
     /// Distances at eight points under a restriction made by [`Field::restrict_to`] on this
@@ -246,7 +258,9 @@ impl Field {
     /// as [`Field::restricted_distance`]).
     #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
-        if r.taped {
+        if r.kerneled {
+            r.kernel.eval(p)
+        } else if r.taped {
             r.tape.eval::<F32x8, false>(p, &self.grids).0
         } else {
             self.eval::<F32x8, false>(&r.prog, p).0

@@ -45,6 +45,7 @@
 pub mod compile;
 pub mod cull;
 pub mod dual;
+pub mod kernel;
 pub mod lane;
 pub mod leaf;
 pub mod program;
@@ -62,6 +63,7 @@ use marchmesh_scene::{MaterialId, Node, NodeKind, Scene, Shape};
 use compile::{Aabb, MeshResolver, compile_roots};
 pub use cull::{RayCone, Restricted};
 pub use dual::{Dual1, Dual8};
+use kernel::Kernel;
 pub use lane::{F32x8, Lane, M8, Scalar, V3};
 /// The bake crate (grid types, quantization and reconstruction options), re-exported so
 /// backends name the same types.
@@ -223,6 +225,11 @@ pub struct Field {
     /// `p32` flattened when it is a small union of analytic or mesh-grid leaves ([`tape`]): what the
     /// 8-lane evaluations run (same values).
     tape: Option<Tape>,
+    /// `tape` specialised ([`kernel`]) when it has a kernel and kernels are on
+    /// ([`Field::set_kernels`]): what [`Field::distance_lanes`] runs (same values).
+    kernel: Option<Kernel>,
+    /// Whether [`Field::set_kernels`] turned kernels on (off by default).
+    kernels: bool,
     grids: Vec<Box<dyn GridSampler>>,
     bounds: Option<(DVec3, DVec3)>,
     /// The program pruned per octree cell ([`prune`]), when built: what the point queries
@@ -492,6 +499,8 @@ impl Field {
         ];
         Ok(Field {
             tape: Tape::of(&p32),
+            kernel: None,
+            kernels: false,
             p32,
             p64,
             grids: meshes.grids,
@@ -707,6 +716,9 @@ impl Field {
         if let Some(c) = &self.cells {
             return c.eval_x8::<false>(p, &self.p32, &self.grids).0;
         }
+        if let Some(k) = &self.kernel {
+            return k.eval(p);
+        }
         match &self.tape {
             Some(t) => t.eval::<F32x8, false>(p, &self.grids).0,
             None => self.eval::<F32x8, false>(&self.p32, p).0,
@@ -768,6 +780,29 @@ impl Field {
         Some(self.tape.as_ref()?.nearest_gradient(p, &self.grids))
     }
 
+    /// Turns the specialised 8-lane evaluation ([`kernel`]) on or off (off by default, see
+    /// the module docs): with it on, [`Field::distance_lanes`] (and [`Field::distance_x8`]) and the restricted
+    /// evaluations run the field's (or the restriction's) [`Kernel`] when its [`tape`] has
+    /// one; the values are the same either way. Off: the tape and the interpreter.
+    pub fn set_kernels(&mut self, on: bool) {
+        self.kernels = on;
+        self.kernel = self.kernel_of_tape();
+    }
+
+    /// The specialised [`Kernel`] [`Field::distance_lanes`] runs, if any (`None`: kernels
+    /// are off, or the field has no tape or a tape without a kernel).
+    pub fn kernel(&self) -> Option<&Kernel> {
+        self.kernel.as_ref()
+    }
+
+    /// The kernel of the field's tape, when kernels are on.
+    fn kernel_of_tape(&self) -> Option<Kernel> {
+        if !self.kernels {
+            return None;
+        }
+        self.tape.as_ref().and_then(Kernel::of)
+    }
+
     /// Whether the 8-lane evaluations run a flattened [`tape`] (a union of at most
     /// [`Tape::MAX_LEAVES`] analytic or mesh-grid leaves) rather than the interpreter.
     pub fn has_tape(&self) -> bool {
@@ -787,6 +822,7 @@ impl Field {
             i.has_bound = false;
         }
         self.tape = Tape::of(&self.p32);
+        self.kernel = self.kernel_of_tape();
         self.bounds = None;
         self.cells = None;
         self

@@ -26,10 +26,10 @@ use crate::shapes;
 /// A node's bound as the interpreter uses it (`Instr::has_bound`): its box and skip
 /// distance.
 #[derive(Debug, Clone, PartialEq)]
-struct Bound {
-    lo: [f32; 3],
-    hi: [f32; 3],
-    tau: f32,
+pub(crate) struct Bound {
+    pub(crate) lo: [f32; 3],
+    pub(crate) hi: [f32; 3],
+    pub(crate) tau: f32,
 }
 
 impl Bound {
@@ -45,37 +45,37 @@ impl Bound {
 /// One leaf (an analytic shape or a mesh grid) with its frame, distance scale and
 /// (optional) bound.
 #[derive(Debug, Clone, PartialEq)]
-struct TapeLeaf {
-    to_local: Affine<f32>,
-    dscale: f32,
-    bound: Option<Bound>,
+pub(crate) struct TapeLeaf {
+    pub(crate) to_local: Affine<f32>,
+    pub(crate) dscale: f32,
+    pub(crate) bound: Option<Bound>,
     /// The node's box in its parent's frame (every node carries one, also where `bound`
     /// is off because testing it costs more than the leaf): [`Tape::recedes`] uses it.
     bbox: ([f32; 3], [f32; 3]),
     material: u32,
-    shape: Leaf<f32>,
+    pub(crate) shape: Leaf<f32>,
 }
 
 /// The root union's own frame and bound.
 #[derive(Debug, Clone, PartialEq)]
-struct Root {
-    to_local: Affine<f32>,
-    dscale: f32,
-    bound: Option<Bound>,
+pub(crate) struct Root {
+    pub(crate) to_local: Affine<f32>,
+    pub(crate) dscale: f32,
+    pub(crate) bound: Option<Bound>,
     material: u32,
     /// Two members, both bounded: the interpreter visits the nearer one first
     /// (`Program::nearer_second`), which decides the second one's skip.
-    pair: bool,
+    pub(crate) pair: bool,
 }
 
 /// A program flattened to a union of leaves, see the [module docs](self).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Tape {
     /// `None`: the program is the single leaf `leaves[0]`.
-    root: Option<Root>,
-    leaves: Vec<TapeLeaf>,
+    pub(crate) root: Option<Root>,
+    pub(crate) leaves: Vec<TapeLeaf>,
     /// Whether a leaf is a mesh grid (evaluations then take the grid list).
-    has_mesh: bool,
+    pub(crate) has_mesh: bool,
 }
 
 /// Whether `op` is a leaf the tape evaluates: every analytic primitive and mesh grids
@@ -470,7 +470,7 @@ fn msel<T: Lane, const M: bool>(m: T::Mask, a: T::Mat, b: T::Mat) -> T::Mat {
 /// A leaf with its bound logic (`Program::child`), `below` the running minimum it is
 /// skipped against (`Ctx::Below`), `p` in its parent's frame.
 #[inline(always)]
-fn bounded<T: Lane<S = f32>, const M: bool, G: GridSource>(
+pub(crate) fn bounded<T: Lane<S = f32>, const M: bool, G: GridSource>(
     leaf: &TapeLeaf,
     p: V3<T>,
     below: Option<T>,

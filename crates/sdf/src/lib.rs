@@ -363,6 +363,7 @@ fn build_part(
     } else {
         field.without_bounds()
     };
+    field.set_kernels(opts.kernels);
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
         field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
     }

@@ -144,6 +144,16 @@ pub struct SdfOptions {
     /// repetition) never answer yes; a mesh grid is left behind only with its box. Needs
     /// `bounds` (the naive level has none).
     pub recede: bool,
+    /// Evaluate the field's 8-lane distances through kernels specialised per program (and
+    /// per restriction of it to a bundle of rays) instead of the generic tape (false: the
+    /// tape).
+    ///
+    /// Default false: the same values bit for bit ([`marchmesh_field::kernel`]), with the
+    /// per-leaf dispatch decided once when the field is built; measured faster per 8-lane
+    /// evaluation but not yet on full renders
+    /// (`docs/decisions/0023-field-kernels-specialised-per-program.md`). Fields the kernel
+    /// does not cover (mesh grids, CSG) keep the tape or the interpreter.
+    pub kernels: bool,
     /// Switch slowly progressing (grazing) rays to segment tracing with local directional
     /// Lipschitz bounds (false: plain sphere tracing throughout).
     ///
@@ -245,6 +255,7 @@ impl SdfOptions {
         prune_depth: 6,
         beams: true,
         recede: true,
+        kernels: false,
         segment: true,
         bounds: true,
         grid_res: 64,
