@@ -148,9 +148,9 @@ pub struct SdfOptions {
     /// per restriction of it to a bundle of rays) instead of the generic tape (false: the
     /// tape).
     ///
-    /// Default false: the same values bit for bit ([`marchmesh_field::kernel`]), with the
+    /// Default true: the same values bit for bit ([`marchmesh_field::kernel`]), with the
     /// per-leaf dispatch decided once when the field is built; measured faster per 8-lane
-    /// evaluation but not yet on full renders
+    /// evaluation and, by a little, on primary-ray traces with the per-bundle rebuild paid
     /// (`docs/decisions/0023-field-kernels-specialised-per-program.md`). Fields the kernel
     /// does not cover (mesh grids, CSG) keep the tape or the interpreter.
     pub kernels: bool,
@@ -255,7 +255,7 @@ impl SdfOptions {
         prune_depth: 6,
         beams: true,
         recede: true,
-        kernels: false,
+        kernels: true,
         segment: true,
         bounds: true,
         grid_res: 64,
