@@ -7,7 +7,8 @@
 //! whether both variants agree on every ray's hit or miss.
 //!
 //! `cargo run --release -p marchmesh-field --example prune_cost -- SCENE.json... [--side N]
-//! [--rounds R] [--depth D] [--exact] [--error-rel E] [--probe]` (`--exact`: prune without
+//! [--rounds R] [--depth D] [--exact] [--error-rel E] [--probe] [--pruned-only]`
+//! (`--pruned-only`: time only the pruned field, for profiling; `--exact`: prune without
 //! cutting smooth folds; `--error-rel`: the cut's error relative to the field's box, default
 //! 2^-24; `--probe`: also print how many nodes a ball around hit points keeps, by radius and
 //! error: what finer cells could reach)
@@ -88,6 +89,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // The sdf backend's default (`marchmesh_sdf::PRUNE_MAX_ERROR_REL`); `--exact` for 0.
     let mut max_error_rel = 1.0 / 16_777_216.0;
     let mut probe = false;
+    let mut pruned_only = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         let mut num = || -> Result<u32, Box<dyn std::error::Error>> {
@@ -99,6 +101,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--depth" => depth = num()?,
             "--exact" => max_error_rel = 0.0,
             "--probe" => probe = true,
+            "--pruned-only" => pruned_only = true,
             "--error-rel" => {
                 max_error_rel = args.next().ok_or("missing value")?.parse()?;
             }
@@ -130,8 +133,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mut cw, mut cp) = (Vec::new(), Vec::new());
         let (mut last_w, mut last_p) = (None, None);
         for _ in 0..rounds {
-            let w = trace(&whole, &rays, t_max);
             let p = trace(&pruned, &rays, t_max);
+            let w = if pruned_only {
+                trace_once(&pruned, &rays, t_max)
+            } else {
+                trace(&whole, &rays, t_max)
+            };
             cw.push(w.ns as f64 / w.steps.max(1) as f64);
             cp.push(p.ns as f64 / p.steps.max(1) as f64);
             last_w = Some(w);

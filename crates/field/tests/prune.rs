@@ -517,3 +517,91 @@ fn a_single_material_is_known_without_evaluating() {
     }
     assert_eq!(compile(&two).single_material(), None);
 }
+
+/// A fold over kept children that scans them eight at a time (`KidBlock`) gives bit for
+/// bit what the child-by-child fold gives, value and material, in one lane and eight, on
+/// random subsequences of a molecule's children at points near and far from its surface,
+/// many of them far from most children (where the scan rules children out).
+#[test]
+fn a_fold_scanning_blocks_is_the_fold_child_by_child() {
+    use marchmesh_field::V3;
+    use marchmesh_field::lane::F32x8;
+    use marchmesh_field::program::{FOLD_BLOCK, KidBlock};
+    let mut mol = molecule(400, 11, 0.026);
+    if let NodeKind::Smooth { children, .. } = &mut mol.kind {
+        for (i, c) in children.iter_mut().enumerate() {
+            c.material = (i % 3) as u32;
+        }
+    }
+    let p32 = whole_program(&mol).cast::<f32>();
+    let spheres = p32.sphere_table::<f32>();
+    let root_end = p32.instrs[0].end;
+    let mut all = Vec::new();
+    let mut j = 1;
+    while j < root_end {
+        all.push(j);
+        j = p32.instrs[j as usize].end;
+    }
+    let mut rng = 7u64;
+    let mut next = move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut far_children = 0usize;
+    for round in 0..40 {
+        // Every child, or a random subsequence of them (a cell's kept children).
+        let keep = [1.0f32, 0.5, 0.1][round % 3];
+        let kids: Vec<u32> = all
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i == 0 || next() < keep)
+            .map(|(_, &j)| j)
+            .collect();
+        let blocks = KidBlock::table(&spheres, &kids);
+        assert_eq!(blocks.len(), kids.len().div_ceil(FOLD_BLOCK));
+        for _ in 0..100 {
+            // Near the walk (its spheres lie within 0.35 of the origin) and beyond it; the
+            // eight lanes spread or close together.
+            let spread = [0.2f32, 0.4, 1.5][(next() * 3.0) as usize % 3];
+            let centre = [next(), next(), next()].map(|v| (2.0 * v - 1.0) * spread);
+            let gap = [0.001f32, 0.02, 0.3][(next() * 3.0) as usize % 3];
+            let lanes: [[f32; 3]; 8] =
+                std::array::from_fn(|_| centre.map(|v| v + (2.0 * next() - 1.0) * gap));
+            for l in lanes {
+                let v = V3::new(l[0], l[1], l[2]);
+                let a = p32.eval_root_subset::<f32, true>(&kids, &spheres, &blocks, v, &[]);
+                let b = p32.eval_root_subset::<f32, true>(&kids, &spheres, &[], v, &[]);
+                assert_eq!((a.0.to_bits(), a.1), (b.0.to_bits(), b.1), "{l:?}");
+                // Without the material, spheres are read from the blocks (or the table)
+                // alone, not from their nodes.
+                for (table, blocks) in [(&spheres[..], &blocks[..]), (&spheres[..], &[][..])] {
+                    let a = p32.eval_root_subset::<f32, false>(&kids, table, blocks, v, &[]);
+                    assert_eq!(a.0.to_bits(), b.0.to_bits(), "{l:?}");
+                }
+                let a = p32.eval_root_subset::<f32, false>(&kids, &[], &[], v, &[]);
+                assert_eq!(a.0.to_bits(), b.0.to_bits(), "{l:?}");
+            }
+            let v8 = V3::new(
+                F32x8(lanes.map(|l| l[0])),
+                F32x8(lanes.map(|l| l[1])),
+                F32x8(lanes.map(|l| l[2])),
+            );
+            let a = p32.eval_root_subset::<F32x8, true>(&kids, &spheres, &blocks, v8, &[]);
+            let b = p32.eval_root_subset::<F32x8, true>(&kids, &spheres, &[], v8, &[]);
+            assert_eq!(a.0.0.map(f32::to_bits), b.0.0.map(f32::to_bits));
+            assert_eq!(a.1, b.1);
+            for blocks in [&blocks[..], &[][..]] {
+                let a = p32.eval_root_subset::<F32x8, false>(&kids, &spheres, blocks, v8, &[]);
+                assert_eq!(a.0.0.map(f32::to_bits), b.0.0.map(f32::to_bits));
+            }
+            let v = V3::new(lanes[0][0], lanes[0][1], lanes[0][2]);
+            let whole = p32.eval::<f32, false>(v, &[]).0;
+            for b in &blocks {
+                far_children += b.near(lanes[0], 0.0, whole + 0.1, 0.026).count_zeros() as usize;
+            }
+        }
+    }
+    assert!(far_children > 10_000, "{far_children} far children");
+}

@@ -70,7 +70,7 @@ impl<S: Scalar> Program<S> {
         // A blend has the global bound (`seg_node`'s last arm), under the root's box.
         let ins = &self.instrs[0];
         let node = || {
-            let (v, _) = self.root_subset_node::<S, false>(kids, &[], p, grids);
+            let (v, _) = self.root_subset_node::<S, false>(kids, &[], &[], p, grids);
             (v, fallback(v, d))
         };
         let (v, s) = if ins.has_bound {

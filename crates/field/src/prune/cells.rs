@@ -5,7 +5,7 @@ use glam::{DVec3, Vec3};
 use super::{PruneIndex, prune_indexed, root_subset, survey_root};
 use crate::lane::{F32x8, V3};
 use crate::leaf::Leaf;
-use crate::program::{GridSampler, Op, Program};
+use crate::program::{GridSampler, KidBlock, Op, Program};
 
 /// What a cell of [`Cells`] answers.
 #[derive(Debug, Clone, PartialEq)]
@@ -37,6 +37,9 @@ pub enum Cell {
     Subset {
         /// Node indices of the kept children (at least one).
         kids: Box<[u32]>,
+        /// [`KidBlock::table`] of `kids` over the whole program's sphere table (empty
+        /// while building): a fold scans eight children at a time.
+        blocks: Box<[KidBlock]>,
     },
     /// The program restricted to the cell (exact there).
     Program {
@@ -261,6 +264,11 @@ impl Cells {
         cells.by_source = super::FastMap::default();
         if cells.stats.subset_cells > 0 {
             cells.spheres32 = prog.sphere_table();
+            for cell in &mut cells.cells {
+                if let Cell::Subset { kids, blocks } = cell {
+                    *blocks = KidBlock::table(&cells.spheres32, kids).into();
+                }
+            }
         }
         Some(cells)
     }
@@ -341,7 +349,10 @@ impl Cells {
             self.stats.subset_children += kids.len();
             self.stats.max_program_nodes = self.stats.max_program_nodes.max(nodes);
             self.by_source.insert(pruned.source, id);
-            self.cells.push(Cell::Subset { kids });
+            self.cells.push(Cell::Subset {
+                kids,
+                blocks: Box::new([]),
+            });
             id
         } else if self.stats.program_nodes + nodes > budget {
             self.stats.whole_cells += 1;
@@ -364,10 +375,11 @@ impl Cells {
         true
     }
 
-    /// The most kept children all subset cells ([`Cell::Subset`]) may list together: 2^24
-    /// (64 MB); past it cells copy their programs (within [`Cells::max_nodes`]).
+    /// The most kept children all subset cells ([`Cell::Subset`]) may list together: 2^22,
+    /// 20 bytes each with their blocks ([`KidBlock`]), about 84 MB; past it cells copy their
+    /// programs (within [`Cells::max_nodes`]).
     pub fn max_subset_children() -> usize {
-        1 << 24
+        1 << 22
     }
 
     fn spend(&mut self, work: usize) {
@@ -417,7 +429,9 @@ impl Cells {
             .iter()
             .map(|c| match c {
                 Cell::Far { .. } | Cell::Whole => 0,
-                Cell::Subset { kids } => kids.len() as u64 * 4,
+                Cell::Subset { kids, blocks } => {
+                    kids.len() as u64 * 4 + std::mem::size_of_val(&**blocks) as u64
+                }
                 Cell::Program { p32, p64 } => p32.memory_bytes() + p64.memory_bytes(),
             })
             .sum();
@@ -514,7 +528,7 @@ impl Cells {
         let mut n_subsets = 0;
         for i in 0..8 {
             if (done >> i) & 1 == 0
-                && let Some(Cell::Subset { kids }) = cells[i]
+                && let Some(Cell::Subset { kids, .. }) = cells[i]
                 && !subsets[..n_subsets]
                     .iter()
                     .any(|k| std::ptr::eq(*k, &**kids))
@@ -547,7 +561,7 @@ impl Cells {
                 // per cell would.
                 if merged.len() < separate {
                     let (d, m) =
-                        whole.eval_root_subset::<F32x8, M>(merged, &self.spheres32, p, grids);
+                        whole.eval_root_subset::<F32x8, M>(merged, &self.spheres32, &[], p, grids);
                     for l in 0..8 {
                         if (done >> l) & 1 == 0 && matches!(cells[l], Some(Cell::Subset { .. })) {
                             out.0[l] = d.0[l];
@@ -580,8 +594,8 @@ impl Cells {
             };
             let (d, m) = match c {
                 Cell::Program { p32, .. } => p32.eval::<F32x8, M>(p, grids),
-                Cell::Subset { kids } => {
-                    whole.eval_root_subset::<F32x8, M>(kids, &self.spheres32, p, grids)
+                Cell::Subset { kids, blocks } => {
+                    whole.eval_root_subset::<F32x8, M>(kids, &self.spheres32, blocks, p, grids)
                 }
                 Cell::Whole | Cell::Far { .. } => whole.eval::<F32x8, M>(p, grids),
             };
@@ -613,8 +627,8 @@ impl Cells {
         let v = V3::new(p.x, p.y, p.z);
         match self.locate(a) {
             Some(Cell::Program { p32, .. }) => p32.eval::<f32, M>(v, grids),
-            Some(Cell::Subset { kids }) => {
-                whole.eval_root_subset::<f32, M>(kids, &self.spheres32, v, grids)
+            Some(Cell::Subset { kids, blocks }) => {
+                whole.eval_root_subset::<f32, M>(kids, &self.spheres32, blocks, v, grids)
             }
             Some(Cell::Whole) => whole.eval::<f32, M>(v, grids),
             _ if M => whole.eval::<f32, true>(v, grids),
@@ -675,7 +689,9 @@ impl Cells {
         let v = V3::new(p.x, p.y, p.z);
         match self.locate(p.as_vec3().to_array()) {
             Some(Cell::Program { p64, .. }) => p64.eval::<f64, M>(v, grids),
-            Some(Cell::Subset { kids }) => whole.eval_root_subset::<f64, M>(kids, &[], v, grids),
+            Some(Cell::Subset { kids, .. }) => {
+                whole.eval_root_subset::<f64, M>(kids, &[], &[], v, grids)
+            }
             _ => whole.eval::<f64, M>(v, grids),
         }
     }
@@ -700,7 +716,7 @@ impl Cells {
             (Some(c @ Cell::Program { p32, .. }), Some(o)) if std::ptr::eq(c, o) => {
                 p32.segment(v(a), v(dir), len, grids)
             }
-            (Some(c @ Cell::Subset { kids }), Some(o)) if std::ptr::eq(c, o) => {
+            (Some(c @ Cell::Subset { kids, .. }), Some(o)) if std::ptr::eq(c, o) => {
                 whole.segment_root_subset(kids, v(a), v(dir), len, grids)
             }
             _ => whole.segment(v(a), v(dir), len, grids),
