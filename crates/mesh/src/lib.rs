@@ -397,6 +397,15 @@ impl MeshGeometry {
         ) else {
             return false;
         };
+        // Incoherent rays (bounces, reflections) rarely share their origin: find out before
+        // converting eight rays that the fallback converts again.
+        let origin = rays8[0].origin.to_array().map(f32::to_bits);
+        if rays8
+            .iter()
+            .any(|r| r.origin.to_array().map(f32::to_bits) != origin)
+        {
+            return false;
+        }
         let mut r: [ObRay; packet::PACKET] = std::array::from_fn(|k| self.ob_ray(&rays8[k]));
         if r.iter().any(|r| r.tmax.is_nan() || r.tmax < r.tmin) {
             return false;

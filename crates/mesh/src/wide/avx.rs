@@ -1,5 +1,6 @@
 //! The x86_64 node and triangle tests: 256-bit AVX slab tests of a node's 8 boxes (with a
-//! form for rays starting at the origin) and the SSE triangle-block test. The AVX-512
+//! form for rays starting at the origin, and forms specialised per octant of the ray's
+//! direction) and the SSE triangle-block test. The AVX-512
 //! level runs this same source compiled with AVX-512 enabled ([`super::avx_twins`]).
 
 use obvhs::ray::Ray;
@@ -31,6 +32,63 @@ impl NodeTest for AvxAtOrigin {
     #[inline(always)]
     fn test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
         avx_node_test::<true>(node, ray)
+    }
+}
+
+/// [`Avx`] specialised to one octant of ray directions: `NX`, `NY`, `NZ` say which axes the
+/// direction is negative along (the sign bit of the inverse direction, which
+/// `ray.inv_direction` shares with the direction, a zero's sign included). The near plane
+/// of each axis is then known without testing, so each plane distance is computed once as
+/// the entry or the exit distance of its axis instead of both being computed and ordered
+/// by `min` and `max` (Embree's and tinybvh's sign-selected near and far planes). With the
+/// boxes' `lo <= hi`, `(lo - o) * inv <= (hi - o) * inv` for a positive `inv` and the
+/// reverse for a negative one (rounding is monotone), so the masks and the entry distances
+/// are [`Avx`]'s bit for bit but for the sign of a zero. `AT_ORIGIN` as in [`AvxAtOrigin`].
+#[cfg(target_arch = "x86_64")]
+pub(super) struct AvxOctant<const NX: bool, const NY: bool, const NZ: bool, const AT_ORIGIN: bool>;
+
+#[cfg(target_arch = "x86_64")]
+impl<const NX: bool, const NY: bool, const NZ: bool, const AT_ORIGIN: bool> NodeTest
+    for AvxOctant<NX, NY, NZ, AT_ORIGIN>
+{
+    #[inline(always)]
+    fn test(node: &WideNode, ray: &Ray) -> (u32, [f32; WIDTH]) {
+        use std::arch::x86_64::*;
+        // SAFETY: inlined only into AVX-enabled callers (see `closest_avx`); loads are from
+        // 32-byte aligned arrays of 8 f32.
+        unsafe {
+            let plane = |axis: usize, negative: bool| {
+                let (near, far) = match negative {
+                    false => (&node.lo[axis], &node.hi[axis]),
+                    true => (&node.hi[axis], &node.lo[axis]),
+                };
+                let inv = _mm256_set1_ps(ray.inv_direction[axis]);
+                let (near, far) = (_mm256_load_ps(near.as_ptr()), _mm256_load_ps(far.as_ptr()));
+                let (near, far) = match AT_ORIGIN {
+                    true => (near, far),
+                    false => {
+                        let o = _mm256_set1_ps(ray.origin[axis]);
+                        (_mm256_sub_ps(near, o), _mm256_sub_ps(far, o))
+                    }
+                };
+                (_mm256_mul_ps(near, inv), _mm256_mul_ps(far, inv))
+            };
+            let (nx, fx) = plane(0, NX);
+            let (ny, fy) = plane(1, NY);
+            let (nz, fz) = plane(2, NZ);
+            let t_in = _mm256_max_ps(_mm256_max_ps(nx, ny), nz);
+            let t_out = _mm256_min_ps(_mm256_min_ps(fx, fy), fz);
+            let ok = _mm256_and_ps(
+                _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, t_in),
+                _mm256_and_ps(
+                    _mm256_cmp_ps::<_CMP_GE_OQ>(t_out, _mm256_setzero_ps()),
+                    _mm256_cmp_ps::<_CMP_LT_OQ>(t_in, _mm256_set1_ps(ray.tmax)),
+                ),
+            );
+            let mut entry = [0.0f32; WIDTH];
+            _mm256_storeu_ps(entry.as_mut_ptr(), t_in);
+            (_mm256_movemask_ps(ok) as u32, entry)
+        }
     }
 }
 
@@ -152,6 +210,106 @@ unsafe fn select_ps(
 mod tests {
     use glam::Vec3A;
     use obvhs::ray::Ray;
+
+    use super::AvxOctant;
+    use crate::wide::isa::NodeTest;
+    use crate::wide::layout::WideNode;
+
+    /// [`AvxOctant`]'s test for `ray`'s octant, from the origin or not.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,popcnt")]
+    unsafe fn octant_test(node: &WideNode, ray: &Ray, at_origin: bool) -> (u32, [f32; WIDTH]) {
+        macro_rules! by_octant {
+            ($o:literal) => {
+                match ray.inv_direction.is_negative_bitmask() {
+                    0 => AvxOctant::<false, false, false, $o>::test(node, ray),
+                    1 => AvxOctant::<true, false, false, $o>::test(node, ray),
+                    2 => AvxOctant::<false, true, false, $o>::test(node, ray),
+                    3 => AvxOctant::<true, true, false, $o>::test(node, ray),
+                    4 => AvxOctant::<false, false, true, $o>::test(node, ray),
+                    5 => AvxOctant::<true, false, true, $o>::test(node, ray),
+                    6 => AvxOctant::<false, true, true, $o>::test(node, ray),
+                    _ => AvxOctant::<true, true, true, $o>::test(node, ray),
+                }
+            };
+        }
+        match at_origin {
+            true => by_octant!(true),
+            false => by_octant!(false),
+        }
+    }
+
+    #[test]
+    fn octant_node_tests_are_the_min_max_tests() {
+        // Sign-selected near and far planes: the same masks as obvhs' slab test and the
+        // same entry distances as `Avx` (as numbers: a zero's sign may differ), in every
+        // octant, from the origin and from elsewhere, axis-aligned directions and
+        // negative zeros included, with rays whose `tmax` cuts some boxes.
+        #[cfg(target_arch = "x86_64")]
+        if Isa::detect() >= Isa::Avx {
+            let tris = random_tris(400, 17);
+            let boxes: Vec<_> = tris.iter().map(|t| t.aabb()).collect();
+            let mut s = 23u64;
+            let mut entered = 0;
+            for chunk in boxes.chunks(WIDTH) {
+                let mut node = EMPTY_NODE;
+                for (lane, b) in chunk.iter().enumerate() {
+                    for axis in 0..3 {
+                        node.lo[axis][lane] = b.min[axis];
+                        node.hi[axis][lane] = b.max[axis];
+                    }
+                }
+                let mut rays = Vec::new();
+                for k in 0..160 {
+                    let o = match k % 2 {
+                        0 => Vec3A::ZERO,
+                        _ => Vec3A::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 6.0 - 3.0,
+                    };
+                    let target = Vec3A::new(lcg(&mut s), lcg(&mut s), lcg(&mut s)) * 4.0 - 2.0;
+                    let tmax = if k % 3 == 0 { 2.0 } else { 100.0 };
+                    rays.push(Ray::new(o, (target - o).normalize(), 0.0, tmax));
+                }
+                for d in [
+                    Vec3A::X,
+                    Vec3A::NEG_X,
+                    Vec3A::NEG_Y,
+                    Vec3A::Z,
+                    Vec3A::new(-0.0, 0.0, 1.0),
+                    Vec3A::new(0.0, -0.0, -1.0),
+                    Vec3A::new(-0.0, -1.0, -0.0),
+                ] {
+                    rays.push(Ray::new(Vec3A::ZERO, d, 0.0, 3.0));
+                    rays.push(Ray::new(Vec3A::new(0.3, -0.2, 0.1), d, 0.0, 3.0));
+                }
+                for ray in rays {
+                    let mut expected = 0u32;
+                    for (lane, b) in chunk.iter().enumerate() {
+                        if b.intersect_ray(&ray) < ray.tmax {
+                            expected |= 1 << lane;
+                        }
+                    }
+                    // SAFETY: AVX detected above.
+                    let (general, octant) = unsafe {
+                        (
+                            avx_test(&node, &ray),
+                            octant_test(&node, &ray, ray.origin == Vec3A::ZERO),
+                        )
+                    };
+                    assert_eq!(general.0, expected);
+                    assert_eq!(octant.0, expected, "{ray:?}");
+                    for lane in 0..WIDTH {
+                        let (a, b) = (octant.1[lane], general.1[lane]);
+                        assert!(a == b || (a.is_nan() && b.is_nan()), "{a} vs {b}");
+                    }
+                    entered += expected.count_ones();
+                }
+            }
+            assert!(
+                entered > 200,
+                "{entered} boxes entered: the rays must reach the boxes"
+            );
+        }
+    }
 
     use crate::wide::isa::Isa;
     use crate::wide::layout::{EMPTY_NODE, WIDTH};

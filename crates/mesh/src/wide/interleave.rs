@@ -11,9 +11,9 @@ use obvhs::ray::Ray;
 #[cfg(target_arch = "x86_64")]
 use super::avx::{Avx, AvxAtOrigin};
 use super::isa::{Isa, NodeTest};
-use super::layout::{EMPTY, LEAF, STACK, WideBvh, leaf_range};
+use super::layout::{EMPTY, LEAF, STACK, WIDTH, WideBvh, leaf_range};
 use super::portable::Portable;
-use super::traverse::{closest_in_blocks, entered_children, two_entered};
+use super::traverse::{closest_in_blocks, entered_children, push_ranked, two_entered};
 
 /// Rays traced together by [`WideBvh::closest_interleaved`].
 pub(crate) const INTERLEAVE: usize = 8;
@@ -55,8 +55,9 @@ impl WideBvh {
         if self.root == EMPTY {
             return best;
         }
-        let mut stacks: [[MaybeUninit<(u32, f32)>; STACK]; INTERLEAVE] =
-            [const { [const { MaybeUninit::uninit() }; STACK] }; INTERLEAVE];
+        // `WIDTH` spare entries per stack, as in single-ray traversal (`push_ranked`).
+        let mut stacks: [[MaybeUninit<(u32, f32)>; STACK + WIDTH]; INTERLEAVE] =
+            [const { [const { MaybeUninit::uninit() }; STACK + WIDTH] }; INTERLEAVE];
         let mut sps = [0usize; INTERLEAVE];
         let mut curs = [self.root; INTERLEAVE];
         let mut visits = [0u32; INTERLEAVE];
@@ -94,6 +95,10 @@ impl WideBvh {
                                 *sp += 1;
                             }
                             curs[k] = near.0;
+                            continue;
+                        }
+                        hits @ 3..=4 => {
+                            curs[k] = push_ranked(node, &dist, mask, hits as usize, stack, sp);
                             continue;
                         }
                         hits => {

@@ -20,8 +20,8 @@
 //!
 //! One concept per file: `layout` (nodes, triangle blocks and the [`WideBvh`] they form),
 //! `build` (the collapse from the Bvh2), `huge` (the huge-page arrays holding them),
-//! `traverse` (single-ray closest and any-hit traversal, shared child ordering and leaf
-//! tests), `interleave` (batches of single rays traced in turns), `isa` (the SIMD level and
+//! `traverse` (single-ray closest and any-hit traversal, shared child ordering, pushes and
+//! leaf tests), `interleave` (batches of single rays traced in turns), `isa` (the SIMD level and
 //! the node and triangle tests' entry points), and one file per instruction set of those
 //! tests: `portable` and `avx` (x86_64; the AVX-512 twins are the same source compiled
 //! with more features enabled, by [`avx_twins`]). Ray packets live in [`crate::packet`].

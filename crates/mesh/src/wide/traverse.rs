@@ -9,7 +9,7 @@ use marchmesh_core::RayWork;
 use obvhs::ray::Ray;
 
 #[cfg(target_arch = "x86_64")]
-use super::avx::{Avx, AvxAtOrigin};
+use super::avx::AvxOctant;
 use super::isa::{Isa, NodeTest, block_hits};
 use super::layout::{BLOCK, EMPTY, LEAF, STACK, TriBlock, WIDTH, WideBvh, WideNode, leaf_range};
 use super::portable::Portable;
@@ -24,22 +24,54 @@ impl WideBvh {
         if self.isa != Isa::Portable {
             // SAFETY: `isa` is above `Portable` only when the CPU reports its features.
             return unsafe {
-                use {closest_avx as c, closest_avx512 as c512};
-                match (self.prefetch, ray.origin == Vec3A::ZERO) {
-                    (true, false) => by_isa!(self.isa, c, c512, ::<Avx, true>(self, ray, work)),
-                    (false, false) => by_isa!(self.isa, c, c512, ::<Avx, false>(self, ray, work)),
-                    (true, true) => {
-                        by_isa!(self.isa, c, c512, ::<AvxAtOrigin, true>(self, ray, work))
-                    }
-                    (false, true) => {
-                        by_isa!(self.isa, c, c512, ::<AvxAtOrigin, false>(self, ray, work))
-                    }
+                match octant(ray) {
+                    0 => self.closest_octant::<false, false, false>(ray, work),
+                    1 => self.closest_octant::<true, false, false>(ray, work),
+                    2 => self.closest_octant::<false, true, false>(ray, work),
+                    3 => self.closest_octant::<true, true, false>(ray, work),
+                    4 => self.closest_octant::<false, false, true>(ray, work),
+                    5 => self.closest_octant::<true, false, true>(ray, work),
+                    6 => self.closest_octant::<false, true, true>(ray, work),
+                    _ => self.closest_octant::<true, true, true>(ray, work),
                 }
             };
         }
         match self.prefetch {
             true => self.closest_with::<Portable, true>(ray, work),
             false => self.closest_with::<Portable, false>(ray, work),
+        }
+    }
+
+    /// [`WideBvh::closest`] at an AVX level for rays in one octant (see [`AvxOctant`]).
+    ///
+    /// # Safety
+    /// `self.isa` must not be [`Isa::Portable`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn closest_octant<const NX: bool, const NY: bool, const NZ: bool>(
+        &self,
+        ray: &mut Ray,
+        work: &mut RayWork,
+    ) -> Option<(u32, f32)> {
+        use {closest_avx as c, closest_avx512 as c512};
+        type Off<const X: bool, const Y: bool, const Z: bool> = AvxOctant<X, Y, Z, false>;
+        type At<const X: bool, const Y: bool, const Z: bool> = AvxOctant<X, Y, Z, true>;
+        // SAFETY: the caller checked the level.
+        unsafe {
+            match (self.prefetch, ray.origin == Vec3A::ZERO) {
+                (true, false) => {
+                    by_isa!(self.isa, c, c512, ::<Off<NX, NY, NZ>, true>(self, ray, work))
+                }
+                (false, false) => {
+                    by_isa!(self.isa, c, c512, ::<Off<NX, NY, NZ>, false>(self, ray, work))
+                }
+                (true, true) => {
+                    by_isa!(self.isa, c, c512, ::<At<NX, NY, NZ>, true>(self, ray, work))
+                }
+                (false, true) => {
+                    by_isa!(self.isa, c, c512, ::<At<NX, NY, NZ>, false>(self, ray, work))
+                }
+            }
         }
     }
 
@@ -50,15 +82,43 @@ impl WideBvh {
         if self.isa != Isa::Portable {
             // SAFETY: `isa` is above `Portable` only when the CPU reports its features.
             return unsafe {
-                match self.prefetch {
-                    true => by_isa!(self.isa, any_avx, any_avx512, ::<true>(self, ray, work)),
-                    false => by_isa!(self.isa, any_avx, any_avx512, ::<false>(self, ray, work)),
+                match octant(ray) {
+                    0 => self.any_octant::<false, false, false>(ray, work),
+                    1 => self.any_octant::<true, false, false>(ray, work),
+                    2 => self.any_octant::<false, true, false>(ray, work),
+                    3 => self.any_octant::<true, true, false>(ray, work),
+                    4 => self.any_octant::<false, false, true>(ray, work),
+                    5 => self.any_octant::<true, false, true>(ray, work),
+                    6 => self.any_octant::<false, true, true>(ray, work),
+                    _ => self.any_octant::<true, true, true>(ray, work),
                 }
             };
         }
         match self.prefetch {
             true => self.any_with::<Portable, true>(ray, work),
             false => self.any_with::<Portable, false>(ray, work),
+        }
+    }
+
+    /// [`WideBvh::any`] at an AVX level for rays in one octant (see [`AvxOctant`]).
+    ///
+    /// # Safety
+    /// `self.isa` must not be [`Isa::Portable`].
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn any_octant<const NX: bool, const NY: bool, const NZ: bool>(
+        &self,
+        ray: &mut Ray,
+        work: &mut RayWork,
+    ) -> bool {
+        use {any_avx as a, any_avx512 as a512};
+        type Off<const X: bool, const Y: bool, const Z: bool> = AvxOctant<X, Y, Z, false>;
+        // SAFETY: the caller checked the level.
+        unsafe {
+            match self.prefetch {
+                true => by_isa!(self.isa, a, a512, ::<Off<NX, NY, NZ>, true>(self, ray, work)),
+                false => by_isa!(self.isa, a, a512, ::<Off<NX, NY, NZ>, false>(self, ray, work)),
+            }
         }
     }
 
@@ -143,7 +203,9 @@ impl WideBvh {
         if self.root == EMPTY {
             return;
         }
-        let mut stack: [MaybeUninit<(u32, f32)>; STACK] = [const { MaybeUninit::uninit() }; STACK];
+        // `WIDTH` spare entries: the branch-free pushes below write all 8 lanes.
+        let mut stack: [MaybeUninit<(u32, f32)>; STACK + WIDTH] =
+            [const { MaybeUninit::uninit() }; STACK + WIDTH];
         let mut sp = 0usize;
         let mut cur = self.root;
         let mut visits = 0u32;
@@ -161,22 +223,38 @@ impl WideBvh {
                 if PREFETCH {
                     self.prefetch_children(node, mask);
                 }
-                match mask.count_ones() {
-                    0 => {}
-                    1 => {
-                        cur = node.child[mask.trailing_zeros() as usize];
-                        continue 'walk;
-                    }
-                    2 if !ANY => {
+                // A tree of comparisons rather than a `match`, which compiles to a jump
+                // table: one indirect branch per node that the predictor often misses.
+                let hits = mask.count_ones();
+                if hits == 1 {
+                    cur = node.child[mask.trailing_zeros() as usize];
+                    continue 'walk;
+                }
+                if hits > 1 {
+                    if ANY {
+                        // Lanes pushed highest first, one unconditional write each, so
+                        // the lowest entered lane ends on top and becomes `cur`: the order
+                        // of `entered_children::<true>` without a branch per lane.
+                        let mut top = sp;
+                        for lane in (0..WIDTH).rev() {
+                            if let Some(s) = stack.get_mut(top) {
+                                s.write((node.child[lane], 0.0));
+                            }
+                            top += ((mask >> lane) & 1) as usize;
+                        }
+                        sp += hits as usize - 1;
+                        // SAFETY: written just above (`sp < top`).
+                        cur = unsafe { stack[sp].assume_init() }.0;
+                    } else if hits == 2 {
                         let (near, far) = two_entered(node, &dist, mask);
                         if let Some(s) = stack.get_mut(sp) {
                             s.write(far);
                             sp += 1;
                         }
                         cur = near.0;
-                        continue 'walk;
-                    }
-                    hits => {
+                    } else if hits <= 4 {
+                        cur = push_ranked(node, &dist, mask, hits as usize, &mut stack, &mut sp);
+                    } else {
                         let near = entered_children::<ANY>(node, &dist, mask);
                         for e in near[1..hits as usize].iter().rev() {
                             // The depth limit of the conversion keeps sp < STACK.
@@ -186,8 +264,8 @@ impl WideBvh {
                             }
                         }
                         cur = near[0].0;
-                        continue 'walk;
                     }
+                    continue 'walk;
                 }
             }
             // Pop the next entry still in front of the closest hit.
@@ -206,6 +284,13 @@ impl WideBvh {
         }
         work.node_visits += visits;
     }
+}
+
+/// The octant of `ray`'s direction: bit `axis` set when the direction is negative along
+/// `axis` (the sign bit of the inverse direction, which is the direction's).
+#[inline(always)]
+fn octant(ray: &Ray) -> u32 {
+    ray.inv_direction.is_negative_bitmask()
 }
 
 /// Node and block bytes from which single-ray traversal prefetches each entered child.
@@ -274,12 +359,12 @@ avx_twins! {
 
 avx_twins! {
     /// [`WideBvh::any_with`] compiled for AVX / AVX-512.
-    unsafe fn [any_avx, any_avx512]<const PREFETCH: bool>(
+    unsafe fn [any_avx, any_avx512]<N: NodeTest, const PREFETCH: bool>(
         bvh: &WideBvh,
         ray: &mut Ray,
         work: &mut RayWork,
     ) -> bool {
-        bvh.any_with::<Avx, PREFETCH>(ray, work)
+        bvh.any_with::<N, PREFETCH>(ray, work)
     }
 }
 
@@ -343,6 +428,55 @@ pub(crate) fn entered_children<const ANY: bool>(
         k += 1;
     }
     near
+}
+
+/// Pushes the `n` children (3 or 4) of `node` whose lanes are set in `mask` as
+/// [`entered_children`] orders them (by entry distance `dist`, the lower lane first on a
+/// tie), the nearest left out: returns it, and `*sp` grows by `n - 1`. Without a branch on
+/// the distances or on `n`: the first four entered lanes are taken (a missing fourth as
+/// distance `+inf`, so it ranks last), each one's rank is counted from the six comparisons
+/// of pairs, and each is stored straight into its stack slot: the nearest (rank 0) into the
+/// slot above the pushed ones, read back as the return value, a missing one above that.
+#[inline(always)]
+pub(super) fn push_ranked(
+    node: &WideNode,
+    dist: &[f32; WIDTH],
+    mask: u32,
+    n: usize,
+    stack: &mut [MaybeUninit<(u32, f32)>],
+    sp: &mut usize,
+) -> u32 {
+    const MAX: usize = 4;
+    let mut entries = [(EMPTY, f32::INFINITY); MAX];
+    let mut m = mask;
+    for e in &mut entries {
+        let lane = (m.trailing_zeros() as usize) & (WIDTH - 1);
+        let d = if m != 0 { dist[lane] } else { f32::INFINITY };
+        m &= m.wrapping_sub(1);
+        *e = (node.child[lane], d);
+    }
+    let mut rank = [0usize; MAX];
+    for i in 0..MAX {
+        for j in i + 1..MAX {
+            // The later lane goes first only when strictly nearer.
+            let later_first = usize::from(entries[j].1 < entries[i].1);
+            rank[i] += later_first;
+            rank[j] += 1 - later_first;
+        }
+    }
+    let top = *sp + n - 1;
+    for i in 0..MAX {
+        let r = rank[i];
+        let slot = if r < n { top - r } else { top + 1 + r };
+        if let Some(s) = stack.get_mut(slot) {
+            s.write(entries[i]);
+        }
+    }
+    *sp = top;
+    // SAFETY: the entered lanes take ranks 0..n, so slot `top` (rank 0) was written.
+    stack
+        .get(top)
+        .map_or(EMPTY, |s| unsafe { s.assume_init() }.0)
 }
 
 /// The two children a ray enters (`mask` has exactly two lanes set) as `(near, far)`
