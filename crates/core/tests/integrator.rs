@@ -599,3 +599,88 @@ fn column_batches_come_from_the_calling_thread_and_give_the_same_image() {
         "every column batch is traced on the thread that called render"
     );
 }
+
+/// Camera rays ending every way a closest-hit query can, by direction: to the right out of
+/// steps, to the left at the maximum distance, straight up a hit, else a miss.
+struct Endings;
+
+impl Geometry for Endings {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        let work = RayWork {
+            steps: 3 + (ray.dir.x.to_bits() & 7),
+            node_visits: ray.dir.y.to_bits() & 15,
+            primitive_tests: 1,
+        };
+        if ray.dir.x > 0.05 {
+            TraceResult::not_found(marchmesh_core::NoHit::MaxSteps, work)
+        } else if ray.dir.x < -0.05 {
+            TraceResult::not_found(marchmesh_core::NoHit::MaxDistance, work)
+        } else if ray.dir.y > 0.0 {
+            TraceResult::found(
+                Hit {
+                    t: 1.0,
+                    position: ray.dir,
+                    normal: -ray.dir,
+                    material: 0,
+                },
+                work,
+            )
+        } else {
+            TraceResult::not_found(marchmesh_core::NoHit::Miss, work)
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        let r = self.closest_hit(ray);
+        OcclusionResult {
+            occluded: r.hit().is_some(),
+            termination: r.termination(),
+            work: r.work,
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        GeometryReport {
+            backend: "test-endings".into(),
+            ..Default::default()
+        }
+    }
+}
+
+/// The miss pass counts every termination and the work of every camera ray: the counters are
+/// the sums over the AOV planes (one sample a pixel, no secondary rays).
+#[test]
+fn counters_sum_the_terminations_and_work_of_every_ray() {
+    let s = scene(
+        r#"{
+      "camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60, "width": 83, "height": 19},
+      "lights": [{"ambient": {"intensity": 0.3}}],
+      "objects": []
+    }"#,
+    );
+    for threads in [1, 2] {
+        let out = marchmesh_testkit::render_with(&s, &Endings, threads);
+        let fb = &out.framebuffer;
+        let count = |t: Termination| fb.termination.iter().filter(|&&e| e == t).count() as u64;
+        for t in [
+            Termination::Hit,
+            Termination::Miss,
+            Termination::MaxSteps,
+            Termination::MaxDistance,
+        ] {
+            assert!(count(t) > 0, "no {t:?}");
+        }
+        let st = &out.stats;
+        assert_eq!(st.hits, count(Termination::Hit));
+        assert_eq!(st.closest_max_steps, count(Termination::MaxSteps));
+        assert_eq!(st.max_distance, count(Termination::MaxDistance));
+        assert_eq!(st.primary_rays, fb.len() as u64);
+        let sum = |f: fn(&RayWork) -> u32| fb.work.iter().map(|w| f(w) as u64).sum::<u64>();
+        assert_eq!(st.steps, sum(|w| w.steps));
+        assert_eq!(st.node_visits, sum(|w| w.node_visits));
+        assert_eq!(st.primitive_tests, sum(|w| w.primitive_tests));
+        let max = |f: fn(&RayWork) -> u32| fb.work.iter().map(f).max().unwrap_or(0);
+        assert_eq!(st.max_steps_seen, max(|w| w.steps));
+        assert_eq!(st.max_node_visits_seen, max(|w| w.node_visits));
+    }
+}

@@ -234,7 +234,7 @@ pub(super) fn trace_tile(
                         tile.x,
                     ),
                     band,
-                    if sample == 0 && band.aovs { n } else { 0 },
+                    (if sample == 0 && band.aovs { n } else { 0 }, sample == 0),
                     sum,
                     (sh, background),
                     hits,
@@ -254,7 +254,7 @@ pub(super) fn trace_tile(
             resolve_no_hits(
                 (paths, rays, results, 0, 0),
                 band,
-                0,
+                (0, false),
                 sum,
                 (sh, background),
                 hits,
