@@ -137,6 +137,71 @@ fn shadowless_lights_shade_the_bits_of_unblocked_shadowed_ones() {
     assert_eq!(a.stats.primary_rays, b.stats.primary_rays);
 }
 
+/// The direct hit pass (a scene whose shading points spawn no secondary ray) shades the bits
+/// of the general hit loop: the same scene with one more light, which casts shadows (so every
+/// hit takes the general loop) but has no intensity (so it adds nothing and traces nothing),
+/// gives the same colours, AOV planes and counters. Point and directional lights, a specular
+/// and a half-mirror sphere (its hits left to the general loop, their reflections shaded by
+/// the direct pass at depth 1), one sample a pixel (hits shaded eight at a time) and three,
+/// tiles cut at the image's edges.
+#[test]
+fn direct_hit_pass_shades_the_bits_of_the_general_loop() {
+    for spp in [1, 3] {
+        direct_pass_matches_the_general_loop(spp);
+    }
+}
+
+fn direct_pass_matches_the_general_loop(spp: u32) {
+    let direct = r#"{
+      "camera": {"position": [0.3, 0.2, -6], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 37, "height": 21},
+      "background": {"color": [0.1, 0.2, 0.3]},
+      "lights": [{"ambient": {"intensity": 0.15}},
+                 {"point": {"position": [3, 4, -5], "intensity": 0.6, "casts_shadows": false}},
+                 {"directional": {"direction": [-0.4, 0.5, -1], "intensity": 0.35, "casts_shadows": false}}],
+      "objects": [
+        {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [-1.1, 0, 0]},
+         "material": {"color": [0.8, 0.4, 0.2], "specular_exponent": 12}},
+        {"shape": {"sphere": {"radius": 0.9}}, "transform": {"translate": [1.0, 0.1, 0.4]},
+         "material": {"color": [0.3, 0.7, 0.9], "reflectivity": 0.4}}
+      ],
+      "render": {"samples_per_pixel": SPP, "max_reflection_depth": 2}
+    }"#
+    .replace("SPP", &spp.to_string());
+    let general = direct.replace(
+        r#"{"ambient": {"intensity": 0.15}},"#,
+        r#"{"ambient": {"intensity": 0.15}},
+           {"directional": {"direction": [0, 1, 0], "intensity": 0, "casts_shadows": true}},"#,
+    );
+    assert_ne!(direct, general);
+    let (a, b) = (run(&scene(&direct), 1), run(&scene(&general), 2));
+    let bits = |v: &[Vec3]| -> Vec<[u32; 3]> {
+        v.iter().map(|c| c.to_array().map(f32::to_bits)).collect()
+    };
+    let (fa, fb) = (&a.framebuffer, &b.framebuffer);
+    assert_eq!(bits(&fa.color), bits(&fb.color));
+    assert_eq!(bits(&fa.normal), bits(&fb.normal));
+    assert_eq!(
+        fa.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+        fb.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>()
+    );
+    assert_eq!(fa.material, fb.material);
+    assert_eq!(fa.termination, fb.termination);
+    assert_eq!(fa.work, fb.work);
+    assert!(fa.material.contains(&1) && fa.material.contains(&2));
+    assert_eq!(b.stats.shadow_rays, 0);
+    assert!(a.stats.reflection_rays > 0);
+    let counters = |s: &marchmesh_core::RenderStats| {
+        (
+            s.primary_rays,
+            s.reflection_rays,
+            s.hits,
+            s.primitive_tests,
+            s.non_finite_pixels,
+        )
+    };
+    assert_eq!(counters(&a.stats), counters(&b.stats));
+}
+
 #[test]
 fn specular_highlight_adds_to_diffuse() {
     let json = ONE_SPHERE.replace(
