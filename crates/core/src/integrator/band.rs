@@ -12,9 +12,10 @@ use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::{BatchPolicy, Geometry, Hit, RayWork, Termination, TraceResult};
 use crate::stats::RenderStats;
 
-/// One worker's copy of a band's AOV planes (see [`run_bands`](super::run_bands)).
+/// One worker's copy of a band's pixel planes (see [`run_bands`](super::run_bands)).
 #[derive(Default)]
 pub(super) struct Planes {
+    color: Vec<Vec3>,
     depth: Vec<f32>,
     normal: Vec<Vec3>,
     material: Vec<u32>,
@@ -106,11 +107,11 @@ impl<'a> Band<'a> {
         bands
     }
 
-    /// A band of the same rows whose AOV planes are `planes` (resized to the band's
-    /// pixels) and whose colour is this band's: the colour is written once per pixel, by
-    /// [`Band::set_colors`] after the band's last tile, straight into the framebuffer.
-    pub(super) fn staged<'p>(&'p mut self, planes: &'p mut Planes) -> Band<'p> {
+    /// A band of the same rows over `planes` (resized to the band's pixels).
+    pub(super) fn staged<'p>(&self, planes: &'p mut Planes) -> Band<'p> {
+        let n = self.color.len();
         let m = self.depth.len();
+        planes.color.resize(n, Vec3::ZERO);
         planes.depth.resize(m, NO_HIT_DEPTH);
         planes.normal.resize(m, Vec3::ZERO);
         planes.material.resize(m, u32::MAX);
@@ -121,7 +122,7 @@ impl<'a> Band<'a> {
             y: self.y,
             rows: self.rows,
             aovs: self.aovs,
-            color: &mut *self.color,
+            color: &mut planes.color[..n],
             depth: &mut planes.depth[..m],
             normal: &mut planes.normal[..m],
             material: &mut planes.material[..m],
@@ -130,10 +131,11 @@ impl<'a> Band<'a> {
         }
     }
 
-    /// Copies the AOVs [`Band::staged`] traced into `planes` into this band, with
+    /// Copies the pixels [`Band::staged`] traced into `planes` into this band, with
     /// non-temporal stores (the framebuffer is not read again during the render).
     pub(super) fn copy_from(&mut self, planes: &Planes) {
-        let m = self.depth.len();
+        let (n, m) = (self.color.len(), self.depth.len());
+        crate::stream::copy_streaming(self.color, &planes.color[..n]);
         crate::stream::copy_streaming(self.depth, &planes.depth[..m]);
         crate::stream::copy_streaming(self.normal, &planes.normal[..m]);
         crate::stream::copy_streaming(self.material, &planes.material[..m]);
