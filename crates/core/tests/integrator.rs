@@ -137,6 +137,71 @@ fn shadowless_lights_shade_the_bits_of_unblocked_shadowed_ones() {
     assert_eq!(a.stats.primary_rays, b.stats.primary_rays);
 }
 
+/// The direct hit pass (a scene whose shading points spawn no secondary ray) shades the bits
+/// of the general hit loop: the same scene with one more light, which casts shadows (so every
+/// hit takes the general loop) but has no intensity (so it adds nothing and traces nothing),
+/// gives the same colours, AOV planes and counters. Point and directional lights, a specular
+/// and a half-mirror sphere (its hits left to the general loop, their reflections shaded by
+/// the direct pass at depth 1), one sample a pixel (hits shaded eight at a time) and three,
+/// tiles cut at the image's edges.
+#[test]
+fn direct_hit_pass_shades_the_bits_of_the_general_loop() {
+    for spp in [1, 3] {
+        direct_pass_matches_the_general_loop(spp);
+    }
+}
+
+fn direct_pass_matches_the_general_loop(spp: u32) {
+    let direct = r#"{
+      "camera": {"position": [0.3, 0.2, -6], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 37, "height": 21},
+      "background": {"color": [0.1, 0.2, 0.3]},
+      "lights": [{"ambient": {"intensity": 0.15}},
+                 {"point": {"position": [3, 4, -5], "intensity": 0.6, "casts_shadows": false}},
+                 {"directional": {"direction": [-0.4, 0.5, -1], "intensity": 0.35, "casts_shadows": false}}],
+      "objects": [
+        {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [-1.1, 0, 0]},
+         "material": {"color": [0.8, 0.4, 0.2], "specular_exponent": 12}},
+        {"shape": {"sphere": {"radius": 0.9}}, "transform": {"translate": [1.0, 0.1, 0.4]},
+         "material": {"color": [0.3, 0.7, 0.9], "reflectivity": 0.4}}
+      ],
+      "render": {"samples_per_pixel": SPP, "max_reflection_depth": 2}
+    }"#
+    .replace("SPP", &spp.to_string());
+    let general = direct.replace(
+        r#"{"ambient": {"intensity": 0.15}},"#,
+        r#"{"ambient": {"intensity": 0.15}},
+           {"directional": {"direction": [0, 1, 0], "intensity": 0, "casts_shadows": true}},"#,
+    );
+    assert_ne!(direct, general);
+    let (a, b) = (run(&scene(&direct), 1), run(&scene(&general), 2));
+    let bits = |v: &[Vec3]| -> Vec<[u32; 3]> {
+        v.iter().map(|c| c.to_array().map(f32::to_bits)).collect()
+    };
+    let (fa, fb) = (&a.framebuffer, &b.framebuffer);
+    assert_eq!(bits(&fa.color), bits(&fb.color));
+    assert_eq!(bits(&fa.normal), bits(&fb.normal));
+    assert_eq!(
+        fa.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>(),
+        fb.depth.iter().map(|d| d.to_bits()).collect::<Vec<_>>()
+    );
+    assert_eq!(fa.material, fb.material);
+    assert_eq!(fa.termination, fb.termination);
+    assert_eq!(fa.work, fb.work);
+    assert!(fa.material.contains(&1) && fa.material.contains(&2));
+    assert_eq!(b.stats.shadow_rays, 0);
+    assert!(a.stats.reflection_rays > 0);
+    let counters = |s: &marchmesh_core::RenderStats| {
+        (
+            s.primary_rays,
+            s.reflection_rays,
+            s.hits,
+            s.primitive_tests,
+            s.non_finite_pixels,
+        )
+    };
+    assert_eq!(counters(&a.stats), counters(&b.stats));
+}
+
 #[test]
 fn specular_highlight_adds_to_diffuse() {
     let json = ONE_SPHERE.replace(
@@ -598,4 +663,89 @@ fn column_batches_come_from_the_calling_thread_and_give_the_same_image() {
         batches.iter().all(|b| b.1 == std::thread::current().id()),
         "every column batch is traced on the thread that called render"
     );
+}
+
+/// Camera rays ending every way a closest-hit query can, by direction: to the right out of
+/// steps, to the left at the maximum distance, straight up a hit, else a miss.
+struct Endings;
+
+impl Geometry for Endings {
+    fn closest_hit(&self, ray: &Ray) -> TraceResult {
+        let work = RayWork {
+            steps: 3 + (ray.dir.x.to_bits() & 7),
+            node_visits: ray.dir.y.to_bits() & 15,
+            primitive_tests: 1,
+        };
+        if ray.dir.x > 0.05 {
+            TraceResult::not_found(marchmesh_core::NoHit::MaxSteps, work)
+        } else if ray.dir.x < -0.05 {
+            TraceResult::not_found(marchmesh_core::NoHit::MaxDistance, work)
+        } else if ray.dir.y > 0.0 {
+            TraceResult::found(
+                Hit {
+                    t: 1.0,
+                    position: ray.dir,
+                    normal: -ray.dir,
+                    material: 0,
+                },
+                work,
+            )
+        } else {
+            TraceResult::not_found(marchmesh_core::NoHit::Miss, work)
+        }
+    }
+
+    fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        let r = self.closest_hit(ray);
+        OcclusionResult {
+            occluded: r.hit().is_some(),
+            termination: r.termination(),
+            work: r.work,
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        GeometryReport {
+            backend: "test-endings".into(),
+            ..Default::default()
+        }
+    }
+}
+
+/// The miss pass counts every termination and the work of every camera ray: the counters are
+/// the sums over the AOV planes (one sample a pixel, no secondary rays).
+#[test]
+fn counters_sum_the_terminations_and_work_of_every_ray() {
+    let s = scene(
+        r#"{
+      "camera": {"position": [0, 0, 0], "look_at": [0, 0, 1], "vfov_deg": 60, "width": 83, "height": 19},
+      "lights": [{"ambient": {"intensity": 0.3}}],
+      "objects": []
+    }"#,
+    );
+    for threads in [1, 2] {
+        let out = marchmesh_testkit::render_with(&s, &Endings, threads);
+        let fb = &out.framebuffer;
+        let count = |t: Termination| fb.termination.iter().filter(|&&e| e == t).count() as u64;
+        for t in [
+            Termination::Hit,
+            Termination::Miss,
+            Termination::MaxSteps,
+            Termination::MaxDistance,
+        ] {
+            assert!(count(t) > 0, "no {t:?}");
+        }
+        let st = &out.stats;
+        assert_eq!(st.hits, count(Termination::Hit));
+        assert_eq!(st.closest_max_steps, count(Termination::MaxSteps));
+        assert_eq!(st.max_distance, count(Termination::MaxDistance));
+        assert_eq!(st.primary_rays, fb.len() as u64);
+        let sum = |f: fn(&RayWork) -> u32| fb.work.iter().map(|w| f(w) as u64).sum::<u64>();
+        assert_eq!(st.steps, sum(|w| w.steps));
+        assert_eq!(st.node_visits, sum(|w| w.node_visits));
+        assert_eq!(st.primitive_tests, sum(|w| w.primitive_tests));
+        let max = |f: fn(&RayWork) -> u32| fb.work.iter().map(f).max().unwrap_or(0);
+        assert_eq!(st.max_steps_seen, max(|w| w.steps));
+        assert_eq!(st.max_node_visits_seen, max(|w| w.node_visits));
+    }
 }

@@ -21,7 +21,8 @@
 //! One concept per file: this file holds the render entry points, their options and the
 //! tiling; `band` the image bands workers write; `shading` Phong shading and light
 //! sampling; `wavefront` batched queries and the resolution of rays that hit nothing;
-//! `whitted` the per-tile wavefronts of the Whitted integrator.
+//! `whitted` the per-tile wavefronts of the Whitted integrator; `direct` its hit pass for
+//! scenes whose shading spawns no secondary rays.
 
 use std::time::{Duration, Instant};
 
@@ -36,6 +37,7 @@ use crate::geometry::{BatchPolicy, Geometry};
 use crate::stats::RenderStats;
 
 mod band;
+mod direct;
 mod shading;
 mod wavefront;
 mod whitted;

@@ -34,6 +34,39 @@ pub(crate) struct Shading {
     /// Whether shading reads the pixel sample's random key (area lights, ambient
     /// occlusion); the Whitted integrator skips the hashing otherwise.
     pub(crate) keyed: bool,
+    /// `materials` converted once to the f32 values shading reads (same index).
+    pub(crate) surfaces: Vec<Surface>,
+    /// The point and directional lights that can light anything (positive intensity, a
+    /// finite direction), in the order of `lights`: all a shading point of a scene that
+    /// spawns nothing (`spawns` false: no shadows, area lights or ambient occlusion) reads.
+    pub(crate) direct: Vec<DirectLight>,
+}
+
+/// A material as shading reads it: the f32 conversions of [`Material`]'s fields (the same
+/// bits the shading loops got converting them per hit).
+#[derive(Clone, Copy)]
+pub(crate) struct Surface {
+    pub(crate) color: Vec3,
+    pub(crate) reflectivity: f32,
+    pub(crate) specular_exponent: Option<f32>,
+}
+
+impl Surface {
+    fn of(m: &Material) -> Self {
+        Self {
+            color: m.color.as_vec3(),
+            reflectivity: m.reflectivity as f32,
+            specular_exponent: m.specular_exponent.map(|s| s as f32),
+        }
+    }
+}
+
+/// A point or directional light that casts no shadow, as the direct-lighting pass of a
+/// scene that spawns no secondary rays reads it.
+#[derive(Clone, Copy)]
+pub(crate) enum DirectLight {
+    Point { position: Vec3, intensity: f32 },
+    Directional { to_light: Vec3, intensity: f32 },
 }
 
 pub(crate) enum ShadingLight {
@@ -96,6 +129,32 @@ impl Shading {
                 ShadingLight::Area(_) => true,
             });
         let keyed = occlusion || !emitters.is_empty();
+        // Lights the Whitted loop would skip for every point (non-positive intensity, or a
+        // non-finite direction) are left out; a point light's direction depends on the point.
+        let direct = lights
+            .iter()
+            .filter_map(|l| match *l {
+                ShadingLight::Point {
+                    position,
+                    intensity,
+                    ..
+                } => (intensity > 0.0).then_some(DirectLight::Point {
+                    position,
+                    intensity,
+                }),
+                ShadingLight::Directional {
+                    to_light,
+                    intensity,
+                    ..
+                } => {
+                    (intensity > 0.0 && to_light.is_finite()).then_some(DirectLight::Directional {
+                        to_light,
+                        intensity,
+                    })
+                }
+                ShadingLight::Area(_) => None,
+            })
+            .collect();
         Self {
             ambient,
             lights,
@@ -114,6 +173,8 @@ impl Shading {
             max_bounces: r.max_bounces,
             spawns,
             keyed,
+            surfaces: scene.materials.iter().map(Surface::of).collect(),
+            direct,
         }
     }
 
@@ -135,16 +196,23 @@ impl Shading {
             .copied()
             .unwrap_or(self.materials[0])
     }
+
+    /// [`Shading::material`] as f32 shading values.
+    #[inline(always)]
+    pub(crate) fn surface(&self, id: u32) -> &Surface {
+        self.surfaces.get(id as usize).unwrap_or(&self.surfaces[0])
+    }
 }
 
 /// Phong's diffuse plus specular factor of a light of `intensity` in direction `to_light`
 /// (unit) at a point with facing normal `n` seen along `d`; 0 when the light is behind.
+#[inline(always)]
 pub(super) fn phong(
     n: Vec3,
     d: Vec3,
     to_light: Vec3,
     intensity: f32,
-    specular: Option<f64>,
+    specular: Option<f32>,
 ) -> f32 {
     let ndl = n.dot(to_light);
     if ndl.is_nan() || ndl <= 0.0 {
@@ -155,7 +223,7 @@ pub(super) fn phong(
         let r = 2.0 * n * ndl - to_light;
         let rv = r.dot(-d);
         if rv > 0.0 {
-            amount += intensity * rv.powf(s as f32);
+            amount += intensity * rv.powf(s);
         }
     }
     amount

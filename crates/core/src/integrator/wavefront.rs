@@ -155,7 +155,9 @@ impl MissPath for u32 {
 /// result without a hit as [`resolve_vertex`] would (area light or background radiance added
 /// to its pixel's `sum`, AOVs of the first `aov_pixels` paths) and appends the wavefront
 /// indices of the hits (`first` + index in the slices) to `hits`. A path's pixel is `base`
-/// plus [`MissPath::pixel`].
+/// plus [`MissPath::pixel`]. With `fresh`, no path's pixel has a contribution yet (its sum
+/// is zero: the first sample of a tile's camera rays), so a miss stores `0 + radiance`
+/// instead of reading the sum.
 /// Slices as arguments, so the loop keeps their addresses in registers; the loop is built
 /// once per combination of "radiance is one constant" and "records AOVs", so the common
 /// case (constant background, no area light) reads neither rays nor background per ray.
@@ -163,7 +165,7 @@ impl MissPath for u32 {
 pub(super) fn resolve_no_hits<P: MissPath>(
     (paths, rays, results, first, base): (&[P], &[Ray], &[TraceResult], usize, u32),
     band: &mut Band<'_>,
-    aov_pixels: usize,
+    (aov_pixels, fresh): (usize, bool),
     sum: &mut [Vec3],
     (sh, background): (&Shading, &BackgroundSampler),
     hits: &mut Vec<u32>,
@@ -193,11 +195,20 @@ pub(super) fn resolve_no_hits<P: MissPath>(
             first + from,
             base,
         );
-        match (constant, record) {
-            (Some(c), true) => miss_span::<true, P>(span, |_| c, sum, &mut aov, hits),
-            (Some(c), false) => miss_span::<false, P>(span, |_| c, sum, &mut aov, hits),
-            (None, true) => miss_span::<true, P>(span, radiance, sum, &mut aov, hits),
-            (None, false) => miss_span::<false, P>(span, radiance, sum, &mut aov, hits),
+        macro_rules! miss_span {
+            ($record:literal, $fresh:literal, $radiance:expr) => {
+                miss_span::<$record, $fresh, P>(span, $radiance, sum, &mut aov, hits)
+            };
+        }
+        match (constant, record, fresh) {
+            (Some(c), true, true) => miss_span!(true, true, |_| c),
+            (Some(c), true, false) => miss_span!(true, false, |_| c),
+            (Some(c), false, true) => miss_span!(false, true, |_| c),
+            (Some(c), false, false) => miss_span!(false, false, |_| c),
+            (None, true, true) => miss_span!(true, true, radiance),
+            (None, true, false) => miss_span!(true, false, radiance),
+            (None, false, true) => miss_span!(false, true, radiance),
+            (None, false, false) => miss_span!(false, false, radiance),
         }
         .merge_into(stats);
     }
@@ -232,8 +243,9 @@ impl<'b> AovPlanes<'b> {
 /// [`RenderStats::add_termination`] would make ray by ray).
 #[derive(Default)]
 pub(super) struct MissTally {
-    /// Count per [`Termination`] discriminant.
-    ended: [u64; 4],
+    hits: u64,
+    max_steps_ended: u64,
+    max_distance_ended: u64,
     steps: u64,
     max_steps: u32,
     node_visits: u64,
@@ -242,20 +254,10 @@ pub(super) struct MissTally {
 }
 
 impl MissTally {
-    #[inline(always)]
-    fn add(&mut self, ended: Termination, w: &RayWork) {
-        self.ended[ended as usize] += 1;
-        self.steps += w.steps as u64;
-        self.max_steps = self.max_steps.max(w.steps);
-        self.node_visits += w.node_visits as u64;
-        self.max_node_visits = self.max_node_visits.max(w.node_visits);
-        self.primitive_tests += w.primitive_tests as u64;
-    }
-
     fn merge_into(&self, stats: &mut RenderStats) {
-        stats.hits += self.ended[Termination::Hit as usize];
-        stats.closest_max_steps += self.ended[Termination::MaxSteps as usize];
-        stats.max_distance += self.ended[Termination::MaxDistance as usize];
+        stats.hits += self.hits;
+        stats.closest_max_steps += self.max_steps_ended;
+        stats.max_distance += self.max_distance_ended;
         stats.steps += self.steps;
         stats.max_steps_seen = stats.max_steps_seen.max(self.max_steps);
         stats.node_visits += self.node_visits;
@@ -265,27 +267,44 @@ impl MissTally {
 }
 
 /// [`resolve_no_hits`] over one span of a wavefront (`first` = the span's index in it, `base` = what
-/// its paths' pixels are relative to): `RECORD` says whether the span's paths record AOVs. Returns the span's counters (a
+/// its paths' pixels are relative to): `RECORD` says whether the span's paths record AOVs,
+/// `FRESH` whether their sums are zero (see [`resolve_no_hits`]). Returns the span's counters (a
 /// local tally, so they can stay in registers).
 #[inline(never)]
-pub(super) fn miss_span<const RECORD: bool, P: MissPath>(
+pub(super) fn miss_span<const RECORD: bool, const FRESH: bool, P: MissPath>(
     (paths, rays, results, first, base): (&[P], &[Ray], &[TraceResult], usize, u32),
     radiance: impl Fn(&Ray) -> Vec3,
     sum: &mut [Vec3],
     aov: &mut AovPlanes<'_>,
     hits: &mut Vec<u32>,
 ) -> MissTally {
-    let mut tally = MissTally::default();
     let n = if RECORD { aov.depth.len() } else { sum.len() };
     let sum = &mut sum[..n];
+    let hits_before = hits.len();
+    hits.reserve(paths.len());
+    // The counters in locals (never borrowed, so they stay in registers); hits are counted
+    // by how many were listed: an indexed counter per termination made every ray wait on
+    // the previous one's store.
+    let (mut steps, mut node_visits, mut primitive_tests) = (0u64, 0u64, 0u64);
+    let (mut max_steps, mut max_node_visits) = (0u32, 0u32);
+    let (mut max_steps_ended, mut max_distance_ended) = (0u64, 0u64);
     // One length for the three slices, so the loop tests one end.
     let (rays, results) = (&rays[..paths.len()], &results[..paths.len()]);
     for (k, ((path, ray), res)) in paths.iter().zip(rays).zip(results).enumerate() {
-        let ended = res.termination();
-        tally.add(ended, &res.work);
-        if ended == Termination::Hit {
-            hits.push((first + k) as u32);
-            continue;
+        let (ended, w) = (res.termination(), res.work);
+        steps += w.steps as u64;
+        max_steps = max_steps.max(w.steps);
+        node_visits += w.node_visits as u64;
+        max_node_visits = max_node_visits.max(w.node_visits);
+        primitive_tests += w.primitive_tests as u64;
+        match ended {
+            Termination::Hit => {
+                hits.push((first + k) as u32);
+                continue;
+            }
+            Termination::Miss => {}
+            Termination::MaxSteps => max_steps_ended += 1,
+            Termination::MaxDistance => max_distance_ended += 1,
         }
         let px = (base + path.pixel()) as usize;
         assert!(px < n, "path pixel outside its band");
@@ -296,7 +315,22 @@ pub(super) fn miss_span<const RECORD: bool, P: MissPath>(
             aov.normal[px] = Vec3::ZERO;
             aov.material[px] = u32::MAX;
         }
-        sum[px] += path.weigh(radiance(ray));
+        let r = path.weigh(radiance(ray));
+        if FRESH {
+            // The sum is zero: the same addition, without reading it.
+            sum[px] = Vec3::ZERO + r;
+        } else {
+            sum[px] += r;
+        }
     }
-    tally
+    MissTally {
+        hits: (hits.len() - hits_before) as u64,
+        max_steps_ended,
+        max_distance_ended,
+        steps,
+        max_steps,
+        node_visits,
+        max_node_visits,
+        primitive_tests,
+    }
 }

@@ -4,6 +4,7 @@
 use glam::Vec3;
 
 use super::band::{Band, Frame};
+use super::direct::{Wavefront, shade_direct};
 use super::shading::{ShadingLight, phong, rotation_of};
 use super::wavefront::{Vertex, resolve_no_hits, resolve_vertex, timed, trace_wavefront};
 use crate::camera::{Tile, sample_offset};
@@ -19,7 +20,7 @@ use crate::stats::RenderStats;
 pub(super) struct Path {
     /// Band index of the pixel.
     pub(super) pixel: u32,
-    sample: u32,
+    pub(super) sample: u32,
     pub(super) throughput: f32,
 }
 
@@ -234,7 +235,7 @@ pub(super) fn trace_tile(
                         tile.x,
                     ),
                     band,
-                    if sample == 0 && band.aovs { n } else { 0 },
+                    (if sample == 0 && band.aovs { n } else { 0 }, sample == 0),
                     sum,
                     (sh, background),
                     hits,
@@ -254,15 +255,36 @@ pub(super) fn trace_tile(
             resolve_no_hits(
                 (paths, rays, results, 0, 0),
                 band,
-                0,
+                (0, false),
                 sum,
                 (sh, background),
                 hits,
                 stats,
             );
         }
-        for &pi in hits.iter() {
-            let pi = pi as usize;
+        // A scene that spawns nothing shades its plain hits in the direct pass; the loop
+        // below takes the hits it stops at, one at a time, in order.
+        let direct = !sh.spawns;
+        // One sample a pixel: no two paths of a wavefront share a pixel (a path spawns at
+        // most one reflection), so the direct pass may shade hits eight at a time.
+        let distinct = sh.spp == 1;
+        let wavefront = direct.then(|| Wavefront {
+            paths,
+            rays,
+            results,
+            aov_paths: if depth == 0 && band.aovs { pixels } else { 0 },
+            depth,
+        });
+        let mut next_hit = 0;
+        while next_hit < hits.len() {
+            if let Some(w) = &wavefront {
+                next_hit += shade_direct(&hits[next_hit..], w, sum, band, sh, distinct);
+                if next_hit == hits.len() {
+                    break;
+                }
+            }
+            let pi = hits[next_hit] as usize;
+            next_hit += 1;
             let (path, ray, res) = (&paths[pi], &rays[pi], &results[pi]);
             let px = path.pixel as usize;
             let aov = (depth == 0 && pi < pixels && band.aovs).then_some((&mut *band, px));
@@ -274,9 +296,9 @@ pub(super) fn trace_tile(
                 Vertex::Surface { hit, normal } => (hit, normal),
             };
             let d = ray.dir;
-            let m = sh.material(hit.material);
-            let color = m.color.as_vec3();
-            let refl = m.reflectivity as f32;
+            let m = sh.surface(hit.material);
+            let color = m.color;
+            let refl = m.reflectivity;
             let reflect = refl > 0.0 && depth < sh.max_depth && path.throughput * refl > sh.cutoff;
             let local_weight = if reflect {
                 path.throughput * (1.0 - refl)
