@@ -908,7 +908,7 @@ impl KidBlock {
     /// A bit per child (bit `i` for child `i`) that may change a fold whose running value
     /// is at most `best` at every point within `rho` of `c` (the fold's frame), with blend
     /// radius `k`: a child's bit is clear only when its sphere is at least `k` above `best`
-    /// over the whole ball, decided as [`Program::sphere_no_op`] decides one child
+    /// over the whole ball, decided as a fold decides one child far
     /// (`|c + t|^2 > (best + k + r + rho + 1e-5 (|best| + k + r + rho))^2`, no square root),
     /// so folding it would leave the value and material bit for bit. Every bit is set when
     /// `best`, `c` or `rho` is not finite.
