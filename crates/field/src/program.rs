@@ -376,18 +376,20 @@ impl<S: Scalar> Program<S> {
         let k = T::splat(*k);
         let inv_k = T::splat(*inv_k);
         let (mut best, mut bm) = self.child::<T, M>(kids[0] as usize, q, Ctx::Plain, grids);
+        // Blocks hold f32 constants: only an f32 program reads them, and only when they
+        // hold exactly `kids`.
+        if std::mem::size_of::<S>() != 4 || blocks.len() != kids.len().div_ceil(FOLD_BLOCK) {
+            for &j in &kids[1..] {
+                let sphere = spheres.get(j as usize).copied();
+                (best, bm) = self.fold_child::<T, M>(j, sphere, q, best, bm, (k, inv_k), grids);
+            }
+            return (best * T::splat(ins.dscale), bm);
+        }
         // The lanes' bounding ball (centre `c`, radius `rho`): a block of eight kept
         // children is scanned at once against it with the lanes' largest running value,
         // and only the children it cannot rule out are tested one by one and folded.
         let (c, rho) = lanes_ball(q);
-        // Blocks hold f32 constants: only an f32 program reads them, and only when they
-        // hold exactly `kids`.
-        let blocks =
-            if std::mem::size_of::<S>() == 4 && blocks.len() == kids.len().div_ceil(FOLD_BLOCK) {
-                blocks
-            } else {
-                &[]
-            };
+        let k32 = k.hmax() as f32;
         for (b, block) in blocks.iter().enumerate() {
             // The largest running value, NaN when a lane's is not finite (`hmax` passes
             // over NaN; `hsum` does not).
@@ -396,7 +398,7 @@ impl<S: Scalar> Program<S> {
             } else {
                 f32::NAN
             };
-            let mut near = block.near(c, rho, most, k.hmax() as f32);
+            let mut near = block.near(c, rho, most, k32);
             if b == 0 {
                 // The first child started the fold.
                 near &= !1;
@@ -407,57 +409,46 @@ impl<S: Scalar> Program<S> {
                 let Some(&j) = kids.get(b * FOLD_BLOCK + i) else {
                     break;
                 };
-                // A sphere is read from the block, not from its node: its value is
-                // `shapes::sphere(q + t, r)`, as `node` computes it.
-                let e = [block.x[i], block.y[i], block.z[i], block.r[i]]
+                let sphere = [block.x[i], block.y[i], block.z[i], block.r[i]]
                     .map(|v| S::from_f64(f64::from(v)));
-                let d = if e[3].to_f64().is_nan() {
-                    None
-                } else if ball_far(&e, q, best, k) {
-                    continue;
-                } else if M {
-                    None
-                } else {
-                    Some(shapes::sphere(
-                        q + V3::<T>::splat3([e[0], e[1], e[2]]),
-                        T::splat(e[3]),
-                    ))
-                };
-                let (d, m) = match d {
-                    Some(d) => (d, bm),
-                    None => {
-                        if self.sphere_no_op(j as usize, spheres.get(j as usize), q, best, k) {
-                            continue;
-                        }
-                        self.child::<T, M>(j as usize, q, Ctx::Below(best + k), grids)
-                    }
-                };
-                let take = T::lt(d, best);
-                best = shapes::smin(best, d, k, inv_k);
-                bm = msel::<T, M>(take, m, bm);
-            }
-        }
-        if blocks.is_empty() {
-            for &j in &kids[1..] {
-                let sphere = spheres.get(j as usize);
-                if self.sphere_no_op(j as usize, sphere, q, best, k) {
-                    continue;
-                }
-                // A child at least k above the running value leaves it unchanged. Without
-                // the material, a sphere is read from the table, not from its node.
-                let (d, m) = match sphere {
-                    Some(e) if !M && !e[3].to_f64().is_nan() => (
-                        shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
-                        bm,
-                    ),
-                    _ => self.child::<T, M>(j as usize, q, Ctx::Below(best + k), grids),
-                };
-                let take = T::lt(d, best);
-                best = shapes::smin(best, d, k, inv_k);
-                bm = msel::<T, M>(take, m, bm);
+                (best, bm) =
+                    self.fold_child::<T, M>(j, Some(sphere), q, best, bm, (k, inv_k), grids);
             }
         }
         (best * T::splat(ins.dscale), bm)
+    }
+
+    /// Folds child `j` of a smooth union (blend radius and its inverse `kk`) into the
+    /// running value and material `(best, bm)` at `q` (the union's frame). `sphere` is the
+    /// child's [`Program::sphere_table`] entry, if known (`NaN` when it is not a sphere): a
+    /// sphere at least `k` above `best` at every lane is skipped, and without the material
+    /// its value is computed from the entry (`shapes::sphere(q + t, r)`, as `node` computes
+    /// it) instead of reading its node. The same value and material as folding the node.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn fold_child<T: Lane<S = S>, const M: bool>(
+        &self,
+        j: u32,
+        sphere: Option<[S; 4]>,
+        q: V3<T>,
+        best: T,
+        bm: T::Mat,
+        (k, inv_k): (T, T),
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
+        if self.sphere_no_op(j as usize, sphere.as_ref(), q, best, k) {
+            return (best, bm);
+        }
+        // A child at least k above the running value leaves it unchanged.
+        let (d, m) = match sphere {
+            Some(e) if !M && !e[3].to_f64().is_nan() => (
+                shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
+                bm,
+            ),
+            _ => self.child::<T, M>(j as usize, q, Ctx::Below(best + k), grids),
+        };
+        let take = T::lt(d, best);
+        (shapes::smin(best, d, k, inv_k), msel::<T, M>(take, m, bm))
     }
 
     /// Per node, `[tx, ty, tz, r]` when the node is a sphere placed by a translation alone
