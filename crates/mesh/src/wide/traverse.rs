@@ -36,6 +36,14 @@ impl WideBvh {
                 }
             };
         }
+        self.closest_portable(ray, work)
+    }
+
+    /// [`WideBvh::closest`] without SIMD node tests. Not inlined: its traversal stack
+    /// would otherwise sit in the frame of the dispatch above, which every ray enters (a
+    /// stack probe, six saved registers and their restores on the way to the AVX code).
+    #[inline(never)]
+    fn closest_portable(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         match self.prefetch {
             true => self.closest_with::<Portable, true>(ray, work),
             false => self.closest_with::<Portable, false>(ray, work),
@@ -94,6 +102,13 @@ impl WideBvh {
                 }
             };
         }
+        self.any_portable(ray, work)
+    }
+
+    /// [`WideBvh::any`] without SIMD node tests, not inlined (see
+    /// [`WideBvh::closest_portable`]).
+    #[inline(never)]
+    fn any_portable(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
         match self.prefetch {
             true => self.any_with::<Portable, true>(ray, work),
             false => self.any_with::<Portable, false>(ray, work),
