@@ -485,8 +485,8 @@ pub(super) fn push_ranked(
 /// Each of four distances' place in their stable ascending order: `d[i]` goes after
 /// `d[j]` when `d[j] < d[i]`, or on a tie when `j < i` (no NaN among them). The six pairs'
 /// comparisons on SSE2 lanes: lane `i` against lane `(i + r) % 4` for `r` in 1..4, a
-/// later lane counted when strictly nearer, an earlier one unless strictly further.
-/// (Scalar comparisons with `setcc`, as before, took about 50 instructions with spills.)
+/// later lane counted when strictly nearer, an earlier one unless strictly further
+/// (scalar comparisons compile to `setcc` and spills; measured: `docs/decisions/0027`).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn ranks4(d: [f32; 4]) -> [usize; 4] {
