@@ -500,6 +500,35 @@ impl MeshGeometry {
 }
 
 impl MeshGeometry {
+    /// [`MeshGeometry::closest_with`] for a scene without instances (no TLAS): the flat
+    /// BVH's closest hit alone, with the same ray, hit and work as the general form but
+    /// none of its instance bookkeeping (its frame, its far-instance ray, its TLAS
+    /// traversal). Measured: `docs/decisions/0027`.
+    #[inline]
+    fn closest_flat(&self, ray: &Ray) -> TraceResult {
+        let mut work = RayWork::default();
+        let mut r = self.ob_ray(ray);
+        if r.tmax.is_nan() || r.tmax < r.tmin {
+            return TraceResult::not_found(NoHit::Miss, work);
+        }
+        let Some(flat) = &self.flat else {
+            return TraceResult::not_found(NoHit::Miss, work);
+        };
+        let Some(hit) = flat.closest(&mut r, &mut work) else {
+            return TraceResult::not_found(NoHit::Miss, work);
+        };
+        let t = r.tmax;
+        TraceResult::found(
+            Hit {
+                t,
+                position: ray.origin + ray.dir * t,
+                normal: flat.normal(&r, &hit),
+                material: flat.material(&hit).unwrap_or(self.flat_materials_default),
+            },
+            work,
+        )
+    }
+
     /// The closest hit of `ray`; far instances are entered along `exact_dir` when given (the
     /// exact camera direction `ray.dir` was rounded from), else along `ray.dir`.
     #[inline]
@@ -619,7 +648,10 @@ impl Geometry for MeshGeometry {
     }
 
     fn closest_hit(&self, ray: &Ray) -> TraceResult {
-        self.closest_with(ray, None)
+        match self.tlas {
+            None => self.closest_flat(ray),
+            Some(_) => self.closest_with(ray, None),
+        }
     }
 
     /// With far instances, primary rays enter them along their exact f64 directions.
@@ -643,6 +675,48 @@ impl Geometry for MeshGeometry {
     }
 
     fn occluded(&self, ray: &Ray) -> OcclusionResult {
+        match self.tlas {
+            None => self.occluded_flat(ray),
+            Some(_) => self.occluded_with_instances(ray),
+        }
+    }
+
+    fn report(&self) -> GeometryReport {
+        self.report.clone()
+    }
+}
+
+/// An occlusion query's answer from its outcome and work.
+#[inline(always)]
+fn occlusion(occluded: bool, work: RayWork) -> OcclusionResult {
+    OcclusionResult {
+        occluded,
+        termination: if occluded {
+            Termination::Hit
+        } else {
+            Termination::Miss
+        },
+        work,
+    }
+}
+
+impl MeshGeometry {
+    /// [`Geometry::occluded`] for a scene without instances: the flat BVH's any-hit query
+    /// alone (the same ray, answer and work as [`MeshGeometry::occluded_with_instances`]).
+    #[inline]
+    fn occluded_flat(&self, ray: &Ray) -> OcclusionResult {
+        let mut work = RayWork::default();
+        let mut r = self.ob_ray(ray);
+        let occluded = r.tmax >= r.tmin
+            && match &self.flat {
+                Some(flat) => flat.any(&mut r, &mut work),
+                None => false,
+            };
+        occlusion(occluded, work)
+    }
+
+    /// [`Geometry::occluded`] in general: the flat BVH, then the instances under the TLAS.
+    fn occluded_with_instances(&self, ray: &Ray) -> OcclusionResult {
         let mut work = RayWork::default();
         let mut r = self.ob_ray(ray);
         let mut occluded = false;
@@ -680,19 +754,7 @@ impl Geometry for MeshGeometry {
                 work.primitive_tests += inner.primitive_tests;
             }
         }
-        OcclusionResult {
-            occluded,
-            termination: if occluded {
-                Termination::Hit
-            } else {
-                Termination::Miss
-            },
-            work,
-        }
-    }
-
-    fn report(&self) -> GeometryReport {
-        self.report.clone()
+        occlusion(occluded, work)
     }
 }
 

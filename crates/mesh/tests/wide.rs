@@ -244,3 +244,71 @@ fn interleaved_batches_match_single_rays_on_a_large_mesh() {
         "the sphere should fill much of the view: {hits} hits"
     );
 }
+
+#[test]
+fn batches_answer_each_incoherent_ray_as_if_alone() {
+    // Rays around the bunny in every direction octant, in one batch longer than a run the
+    // batch queries reorder by octant (and not a multiple of a packet): each answer and its
+    // work equal the single-ray query's.
+    let s = scene(
+        r#"{"camera": {"position": [0.02, 0.12, 0.35], "look_at": [-0.02, 0.1, 0], "vfov_deg": 40},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}}]}"#,
+    );
+    let g = build(
+        &s,
+        &MeshOptions {
+            bvh: Some(BvhKind::Wide),
+            ..MeshOptions::default()
+        },
+    )
+    .expect("build");
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut unit = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 40) as f32) / (1u64 << 24) as f32 * 2.0 - 1.0
+    };
+    // The bunny's centre in render space (world minus the camera position).
+    let centre = Vec3::new(-0.037, -0.02, -0.35);
+    let rays: Vec<Ray> = (0..601)
+        .map(|k| {
+            let origin = centre + Vec3::new(unit(), unit(), unit()) * 0.1;
+            let dir = Vec3::new(unit(), unit(), unit()).normalize_or(Vec3::X);
+            let t_max = if k % 3 == 0 { 0.05 } else { f32::INFINITY };
+            Ray {
+                origin,
+                dir,
+                t_min: 0.0,
+                t_max,
+            }
+        })
+        .collect();
+    let mut closest = vec![marchmesh_core::TraceResult::default(); rays.len()];
+    let mut occluded = vec![marchmesh_core::OcclusionResult::default(); rays.len()];
+    g.closest_hits(&rays, &mut closest);
+    g.occluded_many(&rays, &mut occluded);
+    let (mut hits, mut blocked) = (0, 0);
+    for (k, ray) in rays.iter().enumerate() {
+        let one = g.closest_hit(ray);
+        assert_eq!(one.work, closest[k].work, "ray {k}: work");
+        match (one.hit(), closest[k].hit()) {
+            (Some(a), Some(b)) => {
+                hits += 1;
+                assert_eq!(a.t.to_bits(), b.t.to_bits(), "ray {k}");
+                assert_eq!(a.normal, b.normal, "ray {k}");
+                assert_eq!(a.material, b.material, "ray {k}");
+            }
+            (None, None) => {}
+            (a, b) => panic!("ray {k}: single {a:?} vs batch {b:?}"),
+        }
+        let alone = g.occluded(ray);
+        assert_eq!(alone.occluded, occluded[k].occluded, "ray {k}: occlusion");
+        assert_eq!(alone.work, occluded[k].work, "ray {k}: occlusion work");
+        blocked += usize::from(alone.occluded);
+    }
+    assert!(
+        hits > 100 && blocked > 50,
+        "{hits} hits, {blocked} occluded: the rays must reach the bunny"
+    );
+}

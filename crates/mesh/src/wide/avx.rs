@@ -138,6 +138,42 @@ fn avx_node_test<const AT_ORIGIN: bool>(node: &WideNode, ray: &Ray) -> (u32, [f3
 #[inline(always)]
 pub(super) fn block_hits_sse(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     use std::arch::x86_64::*;
+    let (t, valid) = block_test_sse::<false>(b, ray);
+    // SAFETY: SSE2 is baseline on x86_64.
+    unsafe {
+        let hit_t = select_ps(_mm_set1_ps(f32::INFINITY), t, valid);
+        let mut out = [0.0f32; BLOCK];
+        _mm_storeu_ps(out.as_mut_ptr(), hit_t);
+        out
+    }
+}
+
+/// SSE form of [`block_hit_mask`](super::isa::block_hit_mask): the lanes of
+/// [`block_hits_sse`] below `ray.tmax` as a mask, straight from the test's own
+/// comparisons (no select of `+inf`, no second comparison against `ray.tmax`), and each
+/// lane's `t`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(super) fn block_hit_mask_sse(b: &TriBlock, ray: &Ray) -> (u32, [f32; BLOCK]) {
+    use std::arch::x86_64::*;
+    let (t, valid) = block_test_sse::<true>(b, ray);
+    // SAFETY: SSE2 is baseline on x86_64.
+    unsafe {
+        let mut out = [0.0f32; BLOCK];
+        _mm_storeu_ps(out.as_mut_ptr(), t);
+        (_mm_movemask_ps(valid) as u32, out)
+    }
+}
+
+/// Möller-Trumbore on a block's 4 lanes: each lane's `t` and whether it hits within
+/// `[ray.tmin, ray.tmax]`, or with `BELOW_TMAX` within `[ray.tmin, ray.tmax)`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn block_test_sse<const BELOW_TMAX: bool>(
+    b: &TriBlock,
+    ray: &Ray,
+) -> (std::arch::x86_64::__m128, std::arch::x86_64::__m128) {
+    use std::arch::x86_64::*;
     // SAFETY: SSE2 is baseline on x86_64; loads are from 16-byte aligned arrays of 4 f32.
     unsafe {
         let ld = |a: &[f32; BLOCK]| _mm_load_ps(a.as_ptr());
@@ -179,17 +215,18 @@ pub(super) fn block_hits_sse(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
         let signs = _mm_or_ps(_mm_or_ps(u, v), w);
         let positive =
             _mm_castsi128_ps(_mm_cmpgt_epi32(_mm_castps_si128(signs), _mm_set1_epi32(-1)));
+        let tmax = _mm_set1_ps(ray.tmax);
         let valid = _mm_and_ps(
             _mm_and_ps(positive, _mm_cmpneq_ps(inv_det, _mm_setzero_ps())),
             _mm_and_ps(
                 _mm_cmpge_ps(t, _mm_set1_ps(ray.tmin)),
-                _mm_cmple_ps(t, _mm_set1_ps(ray.tmax)),
+                match BELOW_TMAX {
+                    true => _mm_cmplt_ps(t, tmax),
+                    false => _mm_cmple_ps(t, tmax),
+                },
             ),
         );
-        let hit_t = select_ps(_mm_set1_ps(f32::INFINITY), t, valid);
-        let mut out = [0.0f32; BLOCK];
-        _mm_storeu_ps(out.as_mut_ptr(), hit_t);
-        out
+        (t, valid)
     }
 }
 

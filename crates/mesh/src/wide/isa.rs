@@ -58,6 +58,9 @@ pub(crate) trait NodeTest {
 /// `RtTriangle::intersect`: each lane's `t` if it hits within `[ray.tmin, ray.tmax]`, else
 /// `+inf` (padding lanes, all zero, compute `t = NaN` and never hit).
 #[inline(always)]
+// Traversal asks for the mask form ([`block_hit_mask`]); this one is the reference the
+// tests compare it with.
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) fn block_hits(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     #[cfg(target_arch = "x86_64")]
     {
@@ -66,6 +69,26 @@ pub(crate) fn block_hits(b: &TriBlock, ray: &Ray) -> [f32; BLOCK] {
     #[cfg(not(target_arch = "x86_64"))]
     {
         super::portable::block_hits_portable(b, ray)
+    }
+}
+
+/// The lanes of [`block_hits`] nearer than `ray.tmax` as a mask (bit `lane`), and each
+/// lane's `t`, which is [`block_hits`]' on the mask's lanes (and meaningless on the
+/// others). The form traversal asks for: one mask decides whether a block holds a hit.
+#[inline(always)]
+pub(crate) fn block_hit_mask(b: &TriBlock, ray: &Ray) -> (u32, [f32; BLOCK]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        super::avx::block_hit_mask_sse(b, ray)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        let t = super::portable::block_hits_portable(b, ray);
+        let mut mask = 0u32;
+        for lane in 0..BLOCK {
+            mask |= u32::from(t[lane] < ray.tmax) << lane;
+        }
+        (mask, t)
     }
 }
 
@@ -89,6 +112,7 @@ mod tests {
         // 399: the last block has a padding lane, which must never hit.
         let tris = random_tris(399, 7);
         let mut s = 99u64;
+        let mut masked = 0;
         for chunk in tris.chunks(BLOCK) {
             let mut w = Builder::default();
             let slots: Vec<u32> = (0..chunk.len() as u32).collect();
@@ -105,8 +129,25 @@ mod tests {
                     assert_eq!(simd[lane].to_bits(), scalar.to_bits(), "lane {lane}");
                     assert_eq!(portable[lane].to_bits(), scalar.to_bits(), "lane {lane}");
                 }
+                // The mask form: the lanes below `tmax`, with the same `t` there, also
+                // when `tmax` is a lane's own `t` (then that lane is not below it).
+                let firsts = simd.iter().copied().filter(|t| t.is_finite());
+                for tmax in [ray.tmax, 1.0, f32::INFINITY].into_iter().chain(firsts) {
+                    let ray = Ray { tmax, ..ray };
+                    let expected = block_hits(&block, &ray);
+                    let (mask, t) = block_hit_mask(&block, &ray);
+                    for lane in 0..BLOCK {
+                        let below = expected[lane] < tmax;
+                        assert_eq!(mask >> lane & 1 == 1, below, "lane {lane}, tmax {tmax}");
+                        if below {
+                            assert_eq!(t[lane].to_bits(), expected[lane].to_bits());
+                        }
+                    }
+                    masked += mask.count_ones();
+                }
             }
         }
+        assert!(masked > 100, "{masked} masked lanes: the rays must hit");
     }
 
     #[test]

@@ -10,7 +10,7 @@ use obvhs::ray::Ray;
 
 #[cfg(target_arch = "x86_64")]
 use super::avx::AvxOctant;
-use super::isa::{Isa, NodeTest, block_hits};
+use super::isa::{Isa, NodeTest, block_hit_mask};
 use super::layout::{BLOCK, EMPTY, LEAF, STACK, TriBlock, WIDTH, WideBvh, WideNode, leaf_range};
 use super::portable::Portable;
 
@@ -36,6 +36,14 @@ impl WideBvh {
                 }
             };
         }
+        self.closest_portable(ray, work)
+    }
+
+    /// [`WideBvh::closest`] without SIMD node tests. Not inlined: its traversal stack
+    /// would otherwise sit in the frame of the dispatch above, which every ray enters (a
+    /// stack probe, six saved registers and their restores on the way to the AVX code).
+    #[inline(never)]
+    fn closest_portable(&self, ray: &mut Ray, work: &mut RayWork) -> Option<(u32, f32)> {
         match self.prefetch {
             true => self.closest_with::<Portable, true>(ray, work),
             false => self.closest_with::<Portable, false>(ray, work),
@@ -94,6 +102,13 @@ impl WideBvh {
                 }
             };
         }
+        self.any_portable(ray, work)
+    }
+
+    /// [`WideBvh::any`] without SIMD node tests, not inlined (see
+    /// [`WideBvh::closest_portable`]).
+    #[inline(never)]
+    fn any_portable(&self, ray: &mut Ray, work: &mut RayWork) -> bool {
         match self.prefetch {
             true => self.any_with::<Portable, true>(ray, work),
             false => self.any_with::<Portable, false>(ray, work),
@@ -179,7 +194,7 @@ impl WideBvh {
         self.traverse::<N, true, PREFETCH>(ray, work, |ray, _, blocks| {
             for b in blocks {
                 tests += BLOCK as u32;
-                if block_hits(b, ray).iter().any(|&t| t < ray.tmax) {
+                if block_hit_mask(b, ray).0 != 0 {
                     hit = true;
                     return false;
                 }
@@ -379,13 +394,9 @@ pub(crate) fn closest_in_blocks(
     best: &mut Option<(u32, f32)>,
 ) -> u32 {
     for (i, b) in blocks.iter().enumerate() {
-        let t = block_hits(b, ray);
-        // Most blocks hold no hit: one vector compare decides, and the lanes below `tmax`
-        // then update in lane order (a later lane must be strictly nearer), as before.
-        let mut below = 0u32;
-        for lane in 0..BLOCK {
-            below |= u32::from(t[lane] < ray.tmax) << lane;
-        }
+        // Most blocks hold no hit: the test's mask decides, and the lanes below `tmax`
+        // then update in lane order (a later lane must be strictly nearer).
+        let (mut below, t) = block_hit_mask(b, ray);
         while below != 0 {
             let lane = below.trailing_zeros() as usize;
             below &= below - 1;
@@ -455,15 +466,7 @@ pub(super) fn push_ranked(
         m &= m.wrapping_sub(1);
         *e = (node.child[lane], d);
     }
-    let mut rank = [0usize; MAX];
-    for i in 0..MAX {
-        for j in i + 1..MAX {
-            // The later lane goes first only when strictly nearer.
-            let later_first = usize::from(entries[j].1 < entries[i].1);
-            rank[i] += later_first;
-            rank[j] += 1 - later_first;
-        }
-    }
+    let rank = ranks4(entries.map(|e| e.1));
     let top = *sp + n - 1;
     for i in 0..MAX {
         let r = rank[i];
@@ -477,6 +480,57 @@ pub(super) fn push_ranked(
     stack
         .get(top)
         .map_or(EMPTY, |s| unsafe { s.assume_init() }.0)
+}
+
+/// Each of four distances' place in their stable ascending order: `d[i]` goes after
+/// `d[j]` when `d[j] < d[i]`, or on a tie when `j < i` (no NaN among them). The six pairs'
+/// comparisons on SSE2 lanes: lane `i` against lane `(i + r) % 4` for `r` in 1..4, a
+/// later lane counted when strictly nearer, an earlier one unless strictly further
+/// (scalar comparisons compile to `setcc` and spills; measured: `docs/decisions/0027`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn ranks4(d: [f32; 4]) -> [usize; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is baseline on x86_64.
+    unsafe {
+        let v = _mm_loadu_ps(d.as_ptr());
+        let mut rank = _mm_setzero_si128();
+        // One rotation: lanes below `later` compare with a later lane (`<`), the others
+        // with an earlier one (`<=`); each counted comparison is a -1 lane subtracted.
+        macro_rules! rotation {
+            ($imm:literal, $later:expr) => {{
+                let other = _mm_shuffle_ps::<$imm>(v, v);
+                let later = _mm_castsi128_ps($later);
+                let before = _mm_or_ps(
+                    _mm_and_ps(later, _mm_cmplt_ps(other, v)),
+                    _mm_andnot_ps(later, _mm_cmple_ps(other, v)),
+                );
+                rank = _mm_sub_epi32(rank, _mm_castps_si128(before));
+            }};
+        }
+        rotation!(0x39, _mm_setr_epi32(-1, -1, -1, 0)); // lane i against i + 1
+        rotation!(0x4E, _mm_setr_epi32(-1, -1, 0, 0)); // i + 2
+        rotation!(0x93, _mm_setr_epi32(-1, 0, 0, 0)); // i + 3
+        let mut out = [0u32; 4];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), rank);
+        out.map(|r| r as usize)
+    }
+}
+
+/// [`ranks4`] off x86_64: the six comparisons one by one.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn ranks4(d: [f32; 4]) -> [usize; 4] {
+    let mut rank = [0usize; 4];
+    for i in 0..4 {
+        for j in i + 1..4 {
+            // The later lane goes first only when strictly nearer.
+            let later_first = usize::from(d[j] < d[i]);
+            rank[i] += later_first;
+            rank[j] += 1 - later_first;
+        }
+    }
+    rank
 }
 
 /// The two children a ray enters (`mask` has exactly two lanes set) as `(near, far)`
@@ -503,6 +557,51 @@ mod tests {
 
     use crate::wide::Isa;
     use crate::wide::test_util::{lcg, wide_of_random};
+
+    #[test]
+    fn ranked_pushes_keep_the_insertion_sort_order() {
+        // Every mask of 3 or 4 entered lanes, with distances drawn from a few values
+        // (ties, and a zero of either sign) and from random ones: the pushed children,
+        // popped, come in `entered_children`' order, the nearest returned first.
+        use std::mem::MaybeUninit;
+
+        use super::{entered_children, push_ranked};
+        use crate::wide::layout::{EMPTY_NODE, STACK, WIDTH};
+        let mut node = EMPTY_NODE;
+        for lane in 0..WIDTH {
+            node.child[lane] = 100 + lane as u32;
+        }
+        let few = [0.5f32, -0.0, 0.0, 0.5, 2.0, -1.0];
+        let mut s = 71u64;
+        let mut checked = 0;
+        for mask in 0u32..256 {
+            let n = mask.count_ones() as usize;
+            if !(3..=4).contains(&n) {
+                continue;
+            }
+            for round in 0..64 {
+                let dist: [f32; WIDTH] = std::array::from_fn(|_| match round % 2 {
+                    0 => few[(lcg(&mut s) * few.len() as f32) as usize % few.len()],
+                    _ => lcg(&mut s) * 4.0 - 1.0,
+                });
+                let expected = entered_children::<false>(&node, &dist, mask);
+                let mut stack = [const { MaybeUninit::uninit() }; STACK + WIDTH];
+                let mut sp = 3;
+                let first = push_ranked(&node, &dist, mask, n, &mut stack, &mut sp);
+                assert_eq!(sp, 3 + n - 1);
+                let mut order = vec![first];
+                while sp > 3 {
+                    sp -= 1;
+                    // SAFETY: the entries from 3 to `sp` were written by the push.
+                    order.push(unsafe { stack[sp].assume_init() }.0);
+                }
+                let want: Vec<u32> = expected[..n].iter().map(|e| e.0).collect();
+                assert_eq!(order, want, "mask {mask:08b}, distances {dist:?}");
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, (56 + 70) * 64);
+    }
 
     #[test]
     fn prefetching_changes_no_hit_and_no_count() {
