@@ -99,7 +99,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let pts = points(&scene);
         if let Some(o) = &only {
             // One variant alone (for callgrind: difference two pass counts).
-            let k = VARIANTS.iter().position(|v| v == o).ok_or("unknown --only")?;
+            let k = VARIANTS
+                .iter()
+                .position(|v| v == o)
+                .ok_or("unknown --only")?;
             let f = &fields[k];
             for _ in 0..rounds {
                 let (ns, _) = time(|p| f.distance_lanes(p), &pts, passes);
@@ -119,7 +122,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 t[v] = time(|p| f.distance_lanes(p), &pts, passes);
             }
             assert_eq!(t[0].1.to_bits(), t[2].1.to_bits(), "the same values (jit)");
-            assert_eq!(t[1].1.to_bits(), t[2].1.to_bits(), "the same values (kernel)");
+            assert_eq!(
+                t[1].1.to_bits(),
+                t[2].1.to_bits(),
+                "the same values (kernel)"
+            );
             for v in 0..3 {
                 ns[v].push(t[v].0);
             }

@@ -365,7 +365,14 @@ fn host_isa() -> Result<isa::OwnedTargetIsa, JitError> {
         ("opt_level", "speed"),
         ("is_pic", "false"),
         ("use_colocated_libcalls", "false"),
-        ("enable_verifier", if cfg!(debug_assertions) { "true" } else { "false" }),
+        (
+            "enable_verifier",
+            if cfg!(debug_assertions) {
+                "true"
+            } else {
+                "false"
+            },
+        ),
     ] {
         flags.set(k, v).map_err(|e| err(&e))?;
     }
@@ -452,11 +459,6 @@ fn compile(ops: &[Op], result: u32) -> Result<Jit, JitError> {
         .declare_function("field", Linkage::Local, &ctx.func.signature)
         .map_err(|e| err(&e))?;
     module.define_function(id, &mut ctx).map_err(|e| err(&e))?;
-    if let Ok(path) = std::env::var("JIT_DUMP_TMP") {
-        if let Some(c) = ctx.compiled_code() {
-            let _ = std::fs::write(path, c.code_buffer());
-        }
-    }
     module.clear_context(&mut ctx);
     module.finalize_definitions().map_err(|e| err(&e))?;
     let code = module.get_finalized_function(id);
@@ -483,8 +485,11 @@ fn emit_range(
     consts: &mut Vec<Slot>,
     (pin, pconst): (Value, Value),
 ) -> Result<(), JitError> {
-    let mem = MemFlagsData::trusted();
-    let cmem = MemFlagsData::trusted().with_readonly();
+    // Read-only and movable: the loads are pure, so each is placed beside its use and
+    // becomes the arithmetic instruction's memory operand (loaded up front, the constants
+    // filled the registers and spilled).
+    let mem = MemFlagsData::trusted().with_readonly().with_can_move();
+    let cmem = mem;
     let vflags = MemFlagsData::new().with_endianness(cranelift_codegen::ir::Endianness::Little);
     let f4 = types::F32X4;
     // The constant slot of each constant operation of the range.
@@ -602,8 +607,8 @@ mod tests {
     }
 
     fn tape_of(n: &Node) -> Tape {
-        let f = Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default())
-            .expect("compiles");
+        let f =
+            Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default()).expect("compiles");
         Tape::of(&f.p32).expect("a tape")
     }
 
@@ -642,7 +647,12 @@ mod tests {
             let want = tape.eval::<F32x8, false>(p, &[]).0;
             let got = jit.eval(p);
             for i in 0..8 {
-                assert_eq!(got.0[i].to_bits(), want.0[i].to_bits(), "lane {i} at {}", pt(i));
+                assert_eq!(
+                    got.0[i].to_bits(),
+                    want.0[i].to_bits(),
+                    "lane {i} at {}",
+                    pt(i)
+                );
             }
         }
     }
