@@ -11,7 +11,7 @@
 //! # Bit for bit the tape, by construction
 //! The code is not written a second time: the tape's own evaluation (the root's bound, each
 //! leaf through `tape::bounded` and [`crate::leaf::Leaf`]'s distance, the running minimum,
-//! the scales) is run once on a symbolic lane type ([`Sym`]) whose arithmetic records each
+//! the scales) is run once on a symbolic lane type (`Sym`) whose arithmetic records each
 //! operation instead of computing it, so the recorded trace is the tape's operations in the
 //! tape's order, and is then lowered one for one to cranelift instructions:
 //! - `+ - * /`, square root, absolute value and negation are IEEE operations in both (and
