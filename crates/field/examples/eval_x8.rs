@@ -7,8 +7,10 @@
 //! (medians) with the medians of the per-round ratios. `--only jit|kernel|tape` runs one
 //! variant alone (for callgrind: the difference of two pass counts).
 //!
-//! `cargo run --release -p marchmesh-field --example eval_x8 -- SCENE.json... [--passes N]
-//! [--rounds R] [--only VARIANT]`
+//! `cargo run --release -p marchmesh-field --features jit --example eval_x8 -- SCENE.json...
+//! [--passes N] [--rounds R] [--only VARIANT]` (without the feature `jit` the "jit" variant
+//! is the kernel). The thread CPU time advances in steps of a few milliseconds on some
+//! machines: use enough passes that one timing is a few hundred milliseconds.
 
 use std::hint::black_box;
 use std::path::PathBuf;

@@ -34,22 +34,36 @@
 //! [`crate::kernel::Kernel`]. A tape the trace cannot follow, or a cranelift error, is an
 //! error ([`JitError`]), never a panic: the caller keeps the kernel or the tape.
 //!
+//! The lowering needs the crate's cargo feature `jit` (off by default: cranelift doubles the
+//! crate's cold build, and on x64 the compiled function is slower than the kernel,
+//! `docs/decisions/0026-field-programs-compiled-with-cranelift.md`); without it the trace is
+//! built and [`Jit::of`] is an error.
+//!
 //! The one module of the crate that allows `unsafe` code: calling the generated function
 //! (and freeing its memory). Its memory contract: it reads 24 f32 (the points' x, y and z
 //! lanes) from its first argument and the constant table from its second, writes 8 f32 to
 //! its third, and touches nothing else (no calls, no stack arguments).
 #![allow(unsafe_code)]
+// Without the `jit` feature the trace is kept (and tested) but nothing lowers it.
+#![cfg_attr(not(feature = "jit"), allow(dead_code))]
 
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+#[cfg(feature = "jit")]
 use cranelift_codegen::ir::condcodes::FloatCC;
+#[cfg(feature = "jit")]
 use cranelift_codegen::ir::{AbiParam, InstBuilder, MemFlagsData, Value, types};
+#[cfg(feature = "jit")]
 use cranelift_codegen::settings::{self, Configurable};
+#[cfg(feature = "jit")]
 use cranelift_codegen::{Context, isa};
+#[cfg(feature = "jit")]
 use cranelift_frontend::{FunctionBuilder, FunctionBuilderContext};
+#[cfg(feature = "jit")]
 use cranelift_jit::{JITBuilder, JITModule};
+#[cfg(feature = "jit")]
 use cranelift_module::{Linkage, Module};
 
 use crate::lane::{F32x8, Lane, V3};
@@ -293,17 +307,23 @@ fn trace(tape: &Tape) -> Result<(Vec<Op>, u32), JitError> {
 struct Slot([f32; 8]);
 
 /// The generated function: points (3 slots: x, y, z), constant table, result (1 slot).
+#[cfg(feature = "jit")]
 type Func = unsafe extern "C" fn(*const Slot, *const Slot, *mut Slot);
 
 /// A [`Tape`] compiled to a straight-line function, see the [module docs](self).
 pub struct Jit {
+    #[cfg(feature = "jit")]
     func: Func,
+    /// Without the `jit` feature no `Jit` exists.
+    #[cfg(not(feature = "jit"))]
+    never: std::convert::Infallible,
     /// The function's constants, one slot per recorded constant.
     consts: Box<[Slot]>,
     /// Operations recorded (for reports).
     ops: usize,
     /// The module owning the code (freed on drop); behind a mutex only so that `Jit` is
     /// `Sync` (it is never locked while evaluating).
+    #[cfg(feature = "jit")]
     module: Mutex<Option<JITModule>>,
 }
 
@@ -316,6 +336,7 @@ impl std::fmt::Debug for Jit {
     }
 }
 
+#[cfg(feature = "jit")]
 impl Drop for Jit {
     fn drop(&mut self) {
         let module = self.module.get_mut().ok().and_then(Option::take);
@@ -333,8 +354,18 @@ impl Jit {
     /// as an error too).
     pub fn of(tape: &Tape) -> Result<Jit, JitError> {
         let (ops, out) = trace(tape)?;
-        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| compile(&ops, out)))
-            .unwrap_or_else(|_| Err(JitError::Codegen("cranelift panicked".into())))
+        #[cfg(feature = "jit")]
+        {
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| compile(&ops, out)))
+                .unwrap_or_else(|_| Err(JitError::Codegen("cranelift panicked".into())))
+        }
+        #[cfg(not(feature = "jit"))]
+        {
+            let _ = (ops, out);
+            Err(JitError::Unsupported(
+                "built without the field crate's `jit` feature",
+            ))
+        }
     }
 
     /// Operations of the compiled trace.
@@ -344,6 +375,15 @@ impl Jit {
 
     /// The distances at eight points, bit for bit [`Tape::eval`]'s on the tape the
     /// function was compiled from.
+    #[cfg_attr(not(debug_assertions), inline)]
+    #[cfg(not(feature = "jit"))]
+    pub fn eval(&self, _: V3<F32x8>) -> F32x8 {
+        match self.never {}
+    }
+
+    /// The distances at eight points, bit for bit [`Tape::eval`]'s on the tape the
+    /// function was compiled from.
+    #[cfg(feature = "jit")]
     #[cfg_attr(not(debug_assertions), inline)]
     pub fn eval(&self, p: V3<F32x8>) -> F32x8 {
         let input = [Slot(p.x.0), Slot(p.y.0), Slot(p.z.0)];
@@ -357,6 +397,7 @@ impl Jit {
     }
 }
 
+#[cfg(feature = "jit")]
 /// The host's code generator.
 fn host_isa() -> Result<isa::OwnedTargetIsa, JitError> {
     let err = |e: &dyn std::fmt::Display| JitError::Codegen(e.to_string());
@@ -382,6 +423,7 @@ fn host_isa() -> Result<isa::OwnedTargetIsa, JitError> {
         .map_err(|e| err(&e))
 }
 
+#[cfg(feature = "jit")]
 /// Lowers a trace to a function of the host (two halves of four lanes).
 fn compile(ops: &[Op], result: u32) -> Result<Jit, JitError> {
     let err = |e: &dyn std::fmt::Display| JitError::Codegen(e.to_string());
@@ -475,6 +517,7 @@ fn compile(ops: &[Op], result: u32) -> Result<Jit, JitError> {
     })
 }
 
+#[cfg(feature = "jit")]
 /// Emits operations `range` of the trace, first every lane of the first half, then of the
 /// second (inputs and constants loaded where first used).
 fn emit_range(
@@ -590,6 +633,7 @@ impl Cache {
 }
 
 #[cfg(test)]
+#[cfg_attr(not(feature = "jit"), allow(unused_imports))]
 mod tests {
     use super::*;
     use crate::{Field, FieldOptions};
@@ -612,6 +656,7 @@ mod tests {
         Tape::of(&f.p32).expect("a tape")
     }
 
+    #[cfg(feature = "jit")]
     /// A union of a sphere and a box, compiled: the tape's bits at ordinary and odd points
     /// (NaN, infinities, signed zeros), inside and outside the root's bound.
     #[test]

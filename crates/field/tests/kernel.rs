@@ -177,8 +177,10 @@ impl Evaluator for TapeEval {
 }
 
 /// The function compiled per program ([`marchmesh_field::jit`]; the kernel where it does
-/// not compile).
+/// not compile). Needs the crate's `jit` feature.
+#[cfg(feature = "jit")]
 struct JitEval;
+#[cfg(feature = "jit")]
 impl Evaluator for JitEval {
     fn prepare(mut field: Field) -> Field {
         field.set_kernels(true);
@@ -191,7 +193,9 @@ impl Evaluator for JitEval {
 }
 
 /// [`RestrictedEval`] with JIT compilation on (the restrictions' compiled functions).
+#[cfg(feature = "jit")]
 struct RestrictedJitEval;
+#[cfg(feature = "jit")]
 impl Evaluator for RestrictedJitEval {
     fn prepare(field: Field) -> Field {
         JitEval::prepare(field)
@@ -379,12 +383,15 @@ macro_rules! evaluator_tests {
 evaluator_tests!(kernel, KernelEval);
 evaluator_tests!(tape, TapeEval);
 evaluator_tests!(restricted, RestrictedEval);
+#[cfg(feature = "jit")]
 evaluator_tests!(jit, JitEval);
+#[cfg(feature = "jit")]
 evaluator_tests!(restricted_jit, RestrictedJitEval);
 
 /// Which programs compile: every analytic leaf kind (with the kernel's fallback leaves),
 /// bounded or not; not mesh grids (below) nor a root union of two bounded members; a
 /// bundle's restriction compiles once and is then found in the field's cache.
+#[cfg(feature = "jit")]
 #[test]
 fn which_programs_compile() {
     let at = |k: usize, x: f64| {

@@ -10,7 +10,7 @@
 //! [beams=true|false] [recede=true|false] [relaxation=OMEGA] [versus=KEY=VALUE]`
 //!
 //! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`,
-//! `kernels=false`, `jit=true`, `relaxation=1.5`) builds a second geometry with that option
+//! `kernels=false`, `jit=true` (built with `--features jit`), `relaxation=1.5`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.

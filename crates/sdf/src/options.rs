@@ -159,10 +159,11 @@ pub struct SdfOptions {
     /// once per set of kept objects and cached) instead of the kernel (false: `kernels`
     /// decides).
     ///
-    /// The same values bit for bit ([`marchmesh_field::jit`]). Default false
-    /// (`docs/decisions/0026-field-programs-compiled-with-cranelift.md`). Fields it does not
-    /// compile (mesh grids, CSG, a union of two bounded members) keep the kernel, the tape
-    /// or the interpreter.
+    /// The same values bit for bit ([`marchmesh_field::jit`]). Default false: slower than
+    /// the kernel on x64 (`docs/decisions/0026-field-programs-compiled-with-cranelift.md`).
+    /// Needs the crate's cargo feature `jit`; without it (the default build) the option
+    /// changes nothing. Fields it does not compile (mesh grids, CSG, a union of two bounded
+    /// members) keep the kernel, the tape or the interpreter.
     pub jit: bool,
     /// Switch slowly progressing (grazing) rays to segment tracing with local directional
     /// Lipschitz bounds (false: plain sphere tracing throughout).
