@@ -1,12 +1,16 @@
 //! Per-evaluation cost of a scene's field on eight lanes: the field of each scene given is
 //! evaluated at points along its camera rays (pixel centres of a 256 x 256 image, every
 //! seventh, at distance 3: the `field_*/x8` points of the sdf backend's `trace` bench) by
-//! the specialised kernel ([`marchmesh_field::kernel`]) and by the tape, in rounds that
-//! alternate which runs first, and the nanoseconds of thread CPU time (Linux schedstat) per
-//! 8-lane evaluation printed (medians) with the median of the per-round ratios.
+//! the function compiled per program ([`marchmesh_field::jit`]), the specialised kernel
+//! ([`marchmesh_field::kernel`]) and the tape, in rounds that rotate which runs first, and
+//! the nanoseconds of thread CPU time (Linux schedstat) per 8-lane evaluation printed
+//! (medians) with the medians of the per-round ratios. `--only jit|kernel|tape` runs one
+//! variant alone (for callgrind: the difference of two pass counts).
 //!
-//! `cargo run --release -p marchmesh-field --example eval_x8 -- SCENE.json... [--passes N]
-//! [--rounds R]`
+//! `cargo run --release -p marchmesh-field --features jit --example eval_x8 -- SCENE.json...
+//! [--passes N] [--rounds R] [--only VARIANT]` (without the feature `jit` the "jit" variant
+//! is the kernel). The thread CPU time advances in steps of a few milliseconds on some
+//! machines: use enough passes that one timing is a few hundred milliseconds.
 
 use std::hint::black_box;
 use std::path::PathBuf;
@@ -63,50 +67,89 @@ fn time(f: impl Fn(V3<F32x8>) -> F32x8, pts: &[V3<F32x8>], passes: usize) -> (f6
     (dt / (passes * pts.len()) as f64, s)
 }
 
+/// The variants timed: name and how the field evaluates.
+const VARIANTS: [&str; 3] = ["jit", "kernel", "tape"];
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut scenes = Vec::new();
     let mut passes = 50;
     let mut rounds = 11;
+    let mut only: Option<String> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--passes" => passes = args.next().ok_or("--passes needs a value")?.parse()?,
             "--rounds" => rounds = args.next().ok_or("--rounds needs a value")?.parse()?,
+            "--only" => only = Some(args.next().ok_or("--only needs jit, kernel or tape")?),
             _ => scenes.push(PathBuf::from(a)),
         }
     }
     for path in scenes {
         let scene = marchmesh_scene::load(&path)?.with_image_size(256, 256)?;
-        let mut kernel = Field::compile_scene(&scene, &FieldOptions::DEFAULT)?;
-        kernel.set_kernels(true);
-        let mut tape = Field::compile_scene(&scene, &FieldOptions::DEFAULT)?;
-        tape.set_kernels(false);
-        let pts = points(&scene);
-        // Rounds alternate which variant runs first; the median of per-round ratios.
-        let (mut tk, mut tt, mut ratios) = (Vec::new(), Vec::new(), Vec::new());
-        for round in 0..rounds {
-            let (k, t) = if round % 2 == 0 {
-                let k = time(|p| kernel.distance_lanes(p), &pts, passes);
-                (k, time(|p| tape.distance_lanes(p), &pts, passes))
-            } else {
-                let t = time(|p| tape.distance_lanes(p), &pts, passes);
-                (time(|p| kernel.distance_lanes(p), &pts, passes), t)
-            };
-            assert_eq!(k.1.to_bits(), t.1.to_bits(), "the same values");
-            tk.push(k.0);
-            tt.push(t.0);
-            ratios.push(t.0 / k.0);
+        let mut fields = Vec::new();
+        let mut compile_us = 0.0;
+        for v in VARIANTS {
+            let mut f = Field::compile_scene(&scene, &FieldOptions::DEFAULT)?;
+            f.set_kernels(v != "tape");
+            let t = Instant::now();
+            f.set_jit(v == "jit");
+            if v == "jit" {
+                compile_us = t.elapsed().as_secs_f64() * 1e6;
+            }
+            fields.push(f);
         }
+        let pts = points(&scene);
+        if let Some(o) = &only {
+            // One variant alone (for callgrind: difference two pass counts).
+            let k = VARIANTS
+                .iter()
+                .position(|v| v == o)
+                .ok_or("unknown --only")?;
+            let f = &fields[k];
+            for _ in 0..rounds {
+                let (ns, _) = time(|p| f.distance_lanes(p), &pts, passes);
+                println!("{}: {o} {ns:.2} ns per 8-lane evaluation", path.display());
+            }
+            continue;
+        }
+        // Rounds rotate which variant runs first; medians of the times and of the
+        // per-round ratios.
+        let mut ns: [Vec<f64>; 3] = Default::default();
+        let (mut kj, mut tj) = (Vec::new(), Vec::new());
+        for round in 0..rounds {
+            let mut t = [(0.0, 0.0f32); 3];
+            for k in 0..3 {
+                let v = (k + round) % 3;
+                let f = &fields[v];
+                t[v] = time(|p| f.distance_lanes(p), &pts, passes);
+            }
+            assert_eq!(t[0].1.to_bits(), t[2].1.to_bits(), "the same values (jit)");
+            assert_eq!(
+                t[1].1.to_bits(),
+                t[2].1.to_bits(),
+                "the same values (kernel)"
+            );
+            for v in 0..3 {
+                ns[v].push(t[v].0);
+            }
+            kj.push(t[1].0 / t[0].0);
+            tj.push(t[2].0 / t[0].0);
+        }
+        let (jit, kernel) = (&fields[0], &fields[1]);
         println!(
-            "{}: kernel {} ({} runs, {} leaves on the tape's path), ns per 8-lane evaluation: kernel {:.2}, tape {:.2} (medians of {rounds} rounds x {} evaluations); tape / kernel per round median {:.3}",
+            "{}: jit {} ({} operations, compiled in {compile_us:.0} us), kernel {} ({} runs, {} leaves on the tape's path); ns per 8-lane evaluation: jit {:.2}, kernel {:.2}, tape {:.2} (medians of {rounds} rounds x {} evaluations); per-round medians kernel / jit {:.3}, tape / jit {:.3}",
             path.display(),
+            jit.jit().is_some(),
+            jit.jit().map_or(0, |j| j.ops()),
             kernel.kernel().is_some(),
             kernel.kernel().map_or(0, |k| k.runs()),
             kernel.kernel().map_or(0, |k| k.fallback_leaves()),
-            median(&mut tk),
-            median(&mut tt),
+            median(&mut ns[0]),
+            median(&mut ns[1]),
+            median(&mut ns[2]),
             passes * pts.len(),
-            median(&mut ratios)
+            median(&mut kj),
+            median(&mut tj)
         );
     }
     Ok(())

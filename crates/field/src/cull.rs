@@ -14,11 +14,14 @@
 //! synthetic groups and the scene's top-level list), because their children's boxes are in
 //! render space; every other node is kept or dropped whole.
 
+use std::sync::Arc;
+
 use glam::{DVec3, Vec3};
 
 use marchmesh_scene::MaterialId;
 
 use crate::Field;
+use crate::jit::Jit;
 use crate::kernel::Kernel;
 use crate::lane::{F32x8, V3};
 use crate::program::{Instr, Op, Program};
@@ -201,6 +204,12 @@ pub struct Restricted {
     /// are on (`kerneled`).
     kernel: Kernel,
     kerneled: bool,
+    /// The program compiled ([`crate::jit`]), when the field's JIT compilation is on and it
+    /// compiles (shared through the field's cache, keyed by `kept`).
+    jit: Option<Arc<Jit>>,
+    /// The field's nodes the restriction kept, in the order copied (what determines the
+    /// restricted program).
+    kept: Vec<u32>,
     /// Buffer of [`flatten`].
     scratch: Vec<Instr<f32>>,
 }
@@ -225,6 +234,12 @@ impl Restricted {
         self.kerneled
     }
 
+    /// Whether the 8-lane distances under this restriction run a compiled
+    /// [`crate::jit::Jit`] (its tape compiles and the field's JIT compilation is on).
+    pub fn is_jitted(&self) -> bool {
+        self.jit.is_some()
+    }
+
     /// Nodes the restriction dropped.
     pub fn dropped(&self) -> usize {
         self.dropped
@@ -238,13 +253,26 @@ impl Field {
     /// at most [`Tape::MAX_LEAVES`] tape leaves, so the bundle runs a [`Tape`].
     pub fn restrict_to(&self, cone: &RayCone, out: &mut Restricted) {
         out.prog.instrs.clear();
+        out.kept.clear();
         if !self.p32.instrs.is_empty() {
-            emit(&self.p32.instrs, 0, &Wedge::of(cone), &mut out.prog.instrs);
+            emit(
+                &self.p32.instrs,
+                0,
+                &Wedge::of(cone),
+                &mut out.prog.instrs,
+                &mut out.kept,
+            );
         }
         out.dropped = self.p32.instrs.len() - out.prog.instrs.len().min(self.p32.instrs.len());
         flatten(&mut out.prog.instrs, &mut out.scratch);
         out.taped = out.tape.rebuild(&out.prog);
-        out.kerneled = self.kernels && out.taped && out.kernel.rebuild(&out.tape);
+        out.jit = if self.jits && out.taped {
+            self.jit_cache.get_or_compile(&out.kept, &out.tape)
+        } else {
+            None
+        };
+        out.kerneled =
+            out.jit.is_none() && self.kernels && out.taped && out.kernel.rebuild(&out.tape);
     }
 
     /// Distances at eight points under a restriction made by [`Field::restrict_to`] on this
@@ -258,7 +286,9 @@ impl Field {
     /// as [`Field::restricted_distance`]).
     #[cfg_attr(not(debug_assertions), inline)]
     pub fn restricted_distance_lanes(&self, r: &Restricted, p: V3<F32x8>) -> F32x8 {
-        if r.kerneled {
+        if let Some(j) = &r.jit {
+            j.eval(p)
+        } else if r.kerneled {
             r.kernel.eval(p)
         } else if r.taped {
             r.tape.eval::<F32x8, false>(p, &self.grids).0
@@ -350,7 +380,13 @@ fn identity_frame(ins: &Instr<f32>) -> bool {
 
 /// Emits node `i` of `src` restricted to `cone` into `out`; false when nothing of it can
 /// be reached (then nothing is emitted).
-fn emit(src: &[Instr<f32>], i: usize, cone: &Wedge, out: &mut Vec<Instr<f32>>) -> bool {
+fn emit(
+    src: &[Instr<f32>],
+    i: usize,
+    cone: &Wedge,
+    out: &mut Vec<Instr<f32>>,
+    kept: &mut Vec<u32>,
+) -> bool {
     let ins = &src[i];
     // Every node carries its box (in its parent's frame), also where `has_bound` is off
     // because testing it would cost more than the cheap leaf it guards.
@@ -361,21 +397,24 @@ fn emit(src: &[Instr<f32>], i: usize, cone: &Wedge, out: &mut Vec<Instr<f32>>) -
     if matches!(ins.op, Op::Union) && identity_frame(ins) {
         let at = out.len();
         out.push(ins.clone());
+        kept.push(i as u32);
         let mut j = i + 1;
-        let mut kept = 0;
+        let mut children = 0;
         while j < end {
-            kept += usize::from(emit(src, j, cone, out));
+            children += usize::from(emit(src, j, cone, out, kept));
             j = src[j].end as usize;
         }
-        match kept {
+        match children {
             0 => {
                 out.truncate(at);
+                kept.truncate(at);
                 return false;
             }
             1 => {
                 // A union of one child is that child (same frame): drop the wrapper, a box
                 // test and a dispatch per evaluation.
                 out.remove(at);
+                kept.remove(at);
                 for n in &mut out[at..] {
                     n.end -= 1;
                 }
@@ -386,6 +425,7 @@ fn emit(src: &[Instr<f32>], i: usize, cone: &Wedge, out: &mut Vec<Instr<f32>>) -
     }
     // Kept whole: copy the subtree with its end indices moved to the new position.
     let shift = out.len() as i64 - i as i64;
+    kept.extend(i as u32..end as u32);
     out.extend(src[i..end].iter().map(|n| {
         let mut n = n.clone();
         n.end = (i64::from(n.end) + shift) as u32;

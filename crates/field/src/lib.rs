@@ -45,6 +45,7 @@
 pub mod compile;
 pub mod cull;
 pub mod dual;
+pub mod jit;
 pub mod kernel;
 pub mod lane;
 pub mod leaf;
@@ -230,6 +231,15 @@ pub struct Field {
     kernel: Option<Kernel>,
     /// Whether [`Field::set_kernels`] turned kernels on (off by default).
     kernels: bool,
+    /// `tape` compiled to machine code ([`jit`]) when JIT compilation is on
+    /// ([`Field::set_jit`]) and the tape compiles: what [`Field::distance_lanes`] runs
+    /// first (same values).
+    jit: Option<std::sync::Arc<jit::Jit>>,
+    /// Whether [`Field::set_jit`] turned JIT compilation on (off by default).
+    jits: bool,
+    /// The restrictions' compiled functions ([`Field::restrict_to`]), keyed by the nodes
+    /// each kept.
+    jit_cache: jit::Cache,
     grids: Vec<Box<dyn GridSampler>>,
     bounds: Option<(DVec3, DVec3)>,
     /// The program pruned per octree cell ([`prune`]), when built: what the point queries
@@ -501,6 +511,9 @@ impl Field {
             tape: Tape::of(&p32),
             kernel: None,
             kernels: false,
+            jit: None,
+            jits: false,
+            jit_cache: jit::Cache::default(),
             p32,
             p64,
             grids: meshes.grids,
@@ -716,6 +729,9 @@ impl Field {
         if let Some(c) = &self.cells {
             return c.eval_x8::<false>(p, &self.p32, &self.grids).0;
         }
+        if let Some(j) = &self.jit {
+            return j.eval(p);
+        }
         if let Some(k) = &self.kernel {
             return k.eval(p);
         }
@@ -795,6 +811,37 @@ impl Field {
         self.kernel.as_ref()
     }
 
+    /// Turns the 8-lane evaluation compiled to machine code ([`jit`]) on or off (off by
+    /// default): with it on, [`Field::distance_lanes`] and the restricted evaluations run
+    /// a function compiled from the field's (or the restriction's) [`tape`] when it
+    /// compiles (restrictions compiled once per set of kept nodes and cached), and the
+    /// kernel or the tape otherwise; the values are the same either way.
+    pub fn set_jit(&mut self, on: bool) {
+        self.jits = on;
+        self.jit_cache.clear();
+        self.jit = self.jit_of_tape();
+    }
+
+    /// The compiled function [`Field::distance_lanes`] runs, if any (`None`: JIT
+    /// compilation is off, or the field has no tape or one that does not compile).
+    pub fn jit(&self) -> Option<&jit::Jit> {
+        self.jit.as_deref()
+    }
+
+    /// Restrictions compiled so far (and cached) since JIT compilation was turned on.
+    pub fn jit_cached(&self) -> usize {
+        self.jit_cache.len()
+    }
+
+    /// The field's tape compiled, when JIT compilation is on and it compiles.
+    fn jit_of_tape(&self) -> Option<std::sync::Arc<jit::Jit>> {
+        if !self.jits {
+            return None;
+        }
+        let t = self.tape.as_ref()?;
+        jit::Jit::of(t).ok().map(std::sync::Arc::new)
+    }
+
     /// The kernel of the field's tape, when kernels are on.
     fn kernel_of_tape(&self) -> Option<Kernel> {
         if !self.kernels {
@@ -823,6 +870,8 @@ impl Field {
         }
         self.tape = Tape::of(&self.p32);
         self.kernel = self.kernel_of_tape();
+        self.jit_cache.clear();
+        self.jit = self.jit_of_tape();
         self.bounds = None;
         self.cells = None;
         self

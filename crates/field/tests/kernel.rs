@@ -1,8 +1,9 @@
 //! Every 8-lane evaluator of the field against the interpreter, as fidget tests its
 //! evaluators: one suite of checks ([`Suite`]), instantiated once per evaluator by
 //! [`evaluator_tests!`]. The evaluators are the specialised kernel
-//! ([`marchmesh_field::kernel`]), the tape it specialises (kernels off) and the
-//! interpreter on the restricted programs of a bundle of rays; the reference is the f32
+//! ([`marchmesh_field::kernel`]), the tape it specialises (kernels off), the function
+//! compiled per program ([`marchmesh_field::jit`]), and the interpreter, the kernel or the
+//! compiled function on the restricted programs of a bundle of rays; the reference is the f32
 //! interpreter one point at a time ([`Field::distance`]), compared bit for bit, on random
 //! unions of random leaves of every analytic kind in random frames, with and without bounds,
 //! at random points. Plus: which programs get a kernel, and that the leaves it does not
@@ -175,6 +176,35 @@ impl Evaluator for TapeEval {
     }
 }
 
+/// The function compiled per program ([`marchmesh_field::jit`]; the kernel where it does
+/// not compile). Needs the crate's `jit` feature.
+#[cfg(feature = "jit")]
+struct JitEval;
+#[cfg(feature = "jit")]
+impl Evaluator for JitEval {
+    fn prepare(mut field: Field) -> Field {
+        field.set_kernels(true);
+        field.set_jit(true);
+        field
+    }
+    fn eval(field: &Field, pts: [Vec3; 8]) -> [f32; 8] {
+        field.distance_x8(pts)
+    }
+}
+
+/// [`RestrictedEval`] with JIT compilation on (the restrictions' compiled functions).
+#[cfg(feature = "jit")]
+struct RestrictedJitEval;
+#[cfg(feature = "jit")]
+impl Evaluator for RestrictedJitEval {
+    fn prepare(field: Field) -> Field {
+        JitEval::prepare(field)
+    }
+    fn eval(field: &Field, pts: [Vec3; 8]) -> [f32; 8] {
+        RestrictedEval::eval(field, pts)
+    }
+}
+
 /// The field restricted to a cone around the lanes from the origin (kernels on): on the
 /// lanes' own rays it is the whole field's value wherever no dropped object is nearer, so
 /// it is compared with the interpreter on the restricted program.
@@ -195,8 +225,9 @@ impl Evaluator for RestrictedEval {
                     assert_eq!(
                         lanes[i].to_bits(),
                         field.restricted_distance(&r, *p).to_bits(),
-                        "restricted lane {i} at {p} (kernel {})",
-                        r.is_kerneled()
+                        "restricted lane {i} at {p} (kernel {}, jit {})",
+                        r.is_kerneled(),
+                        r.is_jitted()
                     );
                 }
                 field.distance_x8(pts)
@@ -352,6 +383,50 @@ macro_rules! evaluator_tests {
 evaluator_tests!(kernel, KernelEval);
 evaluator_tests!(tape, TapeEval);
 evaluator_tests!(restricted, RestrictedEval);
+#[cfg(feature = "jit")]
+evaluator_tests!(jit, JitEval);
+#[cfg(feature = "jit")]
+evaluator_tests!(restricted_jit, RestrictedJitEval);
+
+/// Which programs compile: every analytic leaf kind (with the kernel's fallback leaves),
+/// bounded or not; not mesh grids (below) nor a root union of two bounded members; a
+/// bundle's restriction compiles once and is then found in the field's cache.
+#[cfg(feature = "jit")]
+#[test]
+fn which_programs_compile() {
+    let at = |k: usize, x: f64| {
+        node(
+            NodeKind::Leaf(shape(k, 0.3, 0.3)),
+            compose_transform(
+                DVec3::new(x, 0.0, 3.0),
+                DVec3::new(0.0, 20.0, 0.0),
+                DVec3::ONE,
+            ),
+            1,
+        )
+    };
+    // Unions of at most eight members (larger ones get a hierarchy, and no tape).
+    for kinds in [0..6, 6..11] {
+        let every: Vec<Node> = kinds.map(|k| at(k, k as f64 * 0.5 - 2.5)).collect();
+        let f = JitEval::prepare(compile(&union(every.clone())));
+        assert!(f.jit().is_some_and(|j| j.ops() > 100));
+        let f = JitEval::prepare(compile(&union(every)).without_bounds());
+        assert!(f.jit().is_some());
+    }
+    let pair = JitEval::prepare(compile(&union(vec![at(3, 0.0), at(5, 2.0)])));
+    assert!(pair.has_tape() && pair.jit().is_none());
+    let mut off = compile(&union(vec![at(0, 0.0), at(1, 1.0)]));
+    off.set_jit(false);
+    assert!(off.jit().is_none());
+    let f = JitEval::prepare(compile(&union(vec![at(0, -1.0), at(1, 0.0), at(2, 1.0)])));
+    let pts = lanes(DVec3::new(0.0, 0.0, 3.0), 0.05);
+    let mut r = Restricted::default();
+    for _ in 0..3 {
+        f.restrict_to(&cone(&pts).expect("a cone"), &mut r);
+        assert!(r.is_jitted() && !r.is_kerneled());
+    }
+    assert_eq!(f.jit_cached(), 1);
+}
 
 /// Spheres, planes and boxes are specialised (no leaf on the tape's path); the other
 /// shapes are not, and take the tape's leaf evaluation; fields with mesh grids, with a
@@ -445,4 +520,6 @@ fn mesh_grids_keep_the_tape() {
     let mut f = Field::compile_node(&scene, DAffine3::IDENTITY, &opts).expect("compiles");
     f.set_kernels(true);
     assert!(f.has_tape() && f.kernel().is_none());
+    f.set_jit(true);
+    assert!(f.jit().is_none());
 }

@@ -10,8 +10,7 @@
 //! [beams=true|false] [recede=true|false] [relaxation=OMEGA] [versus=KEY=VALUE]`
 //!
 //! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`,
-//! `kernels=false`,
-//! `relaxation=1.5`) builds a second geometry with that option
+//! `kernels=false`, `jit=true` (built with `--features jit`), `relaxation=1.5`) builds a second geometry with that option
 //! changed and times the two in alternating rounds (order swapped every round), printing
 //! the median of the per-round time ratios: the number to quote on a shared machine, with
 //! the load average (`uptime`); absolute times drift.
@@ -92,6 +91,8 @@ fn run() -> Result<(), String> {
                 "recede=true" => other.recede = true,
                 "kernels=false" => other.kernels = false,
                 "kernels=true" => other.kernels = true,
+                "jit=false" => other.jit = false,
+                "jit=true" => other.jit = true,
                 _ if spec.starts_with("relaxation=") => {
                     other.relaxation = spec["relaxation=".len()..]
                         .parse()
@@ -99,7 +100,7 @@ fn run() -> Result<(), String> {
                 }
                 _ => {
                     return Err(format!(
-                        "versus: {spec}: expected cull=, lockstep=, segment=, beams=, recede= or kernels=BOOL, or relaxation=OMEGA"
+                        "versus: {spec}: expected cull=, lockstep=, segment=, beams=, recede=, kernels= or jit=BOOL, or relaxation=OMEGA"
                     ));
                 }
             }

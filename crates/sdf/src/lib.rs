@@ -364,6 +364,7 @@ fn build_part(
         field.without_bounds()
     };
     field.set_kernels(opts.kernels);
+    field.set_jit(opts.jit);
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
         field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
     }

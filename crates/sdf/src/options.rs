@@ -154,6 +154,17 @@ pub struct SdfOptions {
     /// (`docs/decisions/0023-field-kernels-specialised-per-program.md`). Fields the kernel
     /// does not cover (mesh grids, CSG) keep the tape or the interpreter.
     pub kernels: bool,
+    /// Evaluate the field's 8-lane distances through a function compiled to machine code
+    /// per program with cranelift (and per restriction of it to a bundle of rays, compiled
+    /// once per set of kept objects and cached) instead of the kernel (false: `kernels`
+    /// decides).
+    ///
+    /// The same values bit for bit ([`marchmesh_field::jit`]). Default false: slower than
+    /// the kernel on x64 (`docs/decisions/0026-field-programs-compiled-with-cranelift.md`).
+    /// Needs the crate's cargo feature `jit`; without it (the default build) the option
+    /// changes nothing. Fields it does not compile (mesh grids, CSG, a union of two bounded
+    /// members) keep the kernel, the tape or the interpreter.
+    pub jit: bool,
     /// Switch slowly progressing (grazing) rays to segment tracing with local directional
     /// Lipschitz bounds (false: plain sphere tracing throughout).
     ///
@@ -256,6 +267,7 @@ impl SdfOptions {
         beams: true,
         recede: true,
         kernels: true,
+        jit: false,
         segment: true,
         bounds: true,
         grid_res: 64,
