@@ -6,7 +6,9 @@
 #    the fidget anchor (fidget and its JIT stay out of the root build) and the fuzz targets.
 #    The fuzz targets need nightly and cargo-fuzz to run, but they compile on stable, which is
 #    what this checks.
-# 2. The root workspace builds (libraries and the binary, debug) for a portable x86-64 target.
+# 2. The field crate's optional cranelift JIT (cargo feature `jit`, off by default because
+#    cranelift doubles the crate's cold build) type-checks with its tests, so it cannot rot.
+# 3. The root workspace builds (libraries and the binary, debug) for a portable x86-64 target.
 #    `.cargo/config.toml` builds for the host CPU (`target-cpu=native`); RUSTFLAGS replaces
 #    that setting, so this catches code that only compiles with the host's target features
 #    (the mesh backend's AVX and AVX-512 paths are chosen at run time and must compile without
@@ -29,6 +31,9 @@ CARGO_TARGET_DIR="$extra" cargo check --manifest-path crates/anchor-fidget/Cargo
 echo "== cargo check crates/fuzz (own workspace, --locked, stable)"
 CARGO_TARGET_DIR="$extra" cargo check --manifest-path crates/fuzz/Cargo.toml \
   --all-targets --locked
+
+echo "== cargo check the field crate's optional cranelift JIT (feature jit, off by default)"
+cargo check -p marchmesh-field -p marchmesh-sdf --features marchmesh-sdf/jit --all-targets --locked
 
 echo "== cargo build --workspace for a portable x86-64 target"
 RUSTFLAGS="-C target-cpu=x86-64" CARGO_TARGET_DIR="$PWD/target/portable" \
