@@ -4,7 +4,7 @@
 use glam::Vec3;
 
 use super::band::{Band, Frame};
-use super::direct::{Wavefront, shade_direct};
+use super::direct::{Shadows, Wavefront, shade_direct};
 use super::shading::{ShadingLight, phong, rotation_of};
 use super::wavefront::{Vertex, resolve_no_hits, resolve_vertex, timed, trace_wavefront};
 use crate::camera::{Tile, sample_offset};
@@ -26,8 +26,9 @@ pub(super) struct Path {
 
 /// A shadow ray's pending contribution: added to its path's pixel if the ray is not blocked.
 pub(super) struct PendingLight {
-    path: u32,
-    amount: Vec3,
+    /// Wavefront index of the path.
+    pub(super) path: u32,
+    pub(super) amount: Vec3,
 }
 
 /// Most shadow (or ambient-occlusion) rays one batch holds: a wavefront's rays are traced
@@ -262,9 +263,10 @@ pub(super) fn trace_tile(
                 stats,
             );
         }
-        // A scene that spawns nothing shades its plain hits in the direct pass; the loop
-        // below takes the hits it stops at, one at a time, in order.
-        let direct = !sh.spawns;
+        // A scene with only point, directional and ambient lights and no ambient occlusion
+        // shades its plain hits in the direct pass (queueing their shadow rays as the loop
+        // below would); the loop takes the hits it stops at, one at a time, in order.
+        let direct = sh.direct_pass;
         // One sample a pixel: no two paths of a wavefront share a pixel (a path spawns at
         // most one reflection), so the direct pass may shade hits eight at a time.
         let distinct = sh.spp == 1;
@@ -278,7 +280,11 @@ pub(super) fn trace_tile(
         let mut next_hit = 0;
         while next_hit < hits.len() {
             if let Some(w) = &wavefront {
-                next_hit += shade_direct(&hits[next_hit..], w, sum, band, sh, distinct);
+                let shadows = Shadows {
+                    rays: &mut *shadow_rays,
+                    pending: &mut *pending,
+                };
+                next_hit += shade_direct(&hits[next_hit..], w, sum, band, shadows, sh, distinct);
                 if next_hit == hits.len() {
                     break;
                 }
