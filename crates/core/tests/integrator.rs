@@ -137,27 +137,31 @@ fn shadowless_lights_shade_the_bits_of_unblocked_shadowed_ones() {
     assert_eq!(a.stats.primary_rays, b.stats.primary_rays);
 }
 
-/// The direct hit pass (a scene whose shading points spawn no secondary ray) shades the bits
-/// of the general hit loop: the same scene with one more light, which casts shadows (so every
-/// hit takes the general loop) but has no intensity (so it adds nothing and traces nothing),
-/// gives the same colours, AOV planes and counters. Point and directional lights, a specular
-/// and a half-mirror sphere (its hits left to the general loop, their reflections shaded by
-/// the direct pass at depth 1), one sample a pixel (hits shaded eight at a time) and three,
-/// tiles cut at the image's edges.
+/// The direct hit pass (a scene of point, directional and ambient lights without ambient
+/// occlusion) shades the bits of the general hit loop: the same scene with one more light, an
+/// area light far out of view that casts no shadows (so every hit takes the general loop) and
+/// emits nothing (so it adds nothing), gives the same colours, AOV planes and counters. Point
+/// and directional lights, with and without shadows (the spheres shadow each other), a
+/// specular and a half-mirror sphere (its hits left to the general loop, their reflections
+/// shaded by the direct pass at depth 1), one sample a pixel (hits shaded eight at a time)
+/// and three, tiles cut at the image's edges.
 #[test]
 fn direct_hit_pass_shades_the_bits_of_the_general_loop() {
     for spp in [1, 3] {
-        direct_pass_matches_the_general_loop(spp);
+        for shadows in [false, true] {
+            direct_pass_matches_the_general_loop(spp, shadows);
+        }
     }
 }
 
-fn direct_pass_matches_the_general_loop(spp: u32) {
+fn direct_pass_matches_the_general_loop(spp: u32, shadows: bool) {
     let direct = r#"{
       "camera": {"position": [0.3, 0.2, -6], "look_at": [0, 0, 0], "vfov_deg": 40, "width": 37, "height": 21},
       "background": {"color": [0.1, 0.2, 0.3]},
       "lights": [{"ambient": {"intensity": 0.15}},
-                 {"point": {"position": [3, 4, -5], "intensity": 0.6, "casts_shadows": false}},
-                 {"directional": {"direction": [-0.4, 0.5, -1], "intensity": 0.35, "casts_shadows": false}}],
+                 {"point": {"position": [3, 4, -5], "intensity": 0.6, "casts_shadows": SHADOWS}},
+                 {"directional": {"direction": [-0.4, 0.5, -1], "intensity": 0.35, "casts_shadows": SHADOWS}},
+                 {"point": {"position": [-4, -1, -2], "intensity": 0.3, "casts_shadows": false}}],
       "objects": [
         {"shape": {"sphere": {"radius": 1}}, "transform": {"translate": [-1.1, 0, 0]},
          "material": {"color": [0.8, 0.4, 0.2], "specular_exponent": 12}},
@@ -166,11 +170,12 @@ fn direct_pass_matches_the_general_loop(spp: u32) {
       ],
       "render": {"samples_per_pixel": SPP, "max_reflection_depth": 2}
     }"#
-    .replace("SPP", &spp.to_string());
+    .replace("SPP", &spp.to_string())
+    .replace("SHADOWS", &shadows.to_string());
     let general = direct.replace(
         r#"{"ambient": {"intensity": 0.15}},"#,
         r#"{"ambient": {"intensity": 0.15}},
-           {"directional": {"direction": [0, 1, 0], "intensity": 0, "casts_shadows": true}},"#,
+           {"sphere_light": {"position": [0, -60, 0], "radius": 1e-4, "intensity": 0, "casts_shadows": false}},"#,
     );
     assert_ne!(direct, general);
     let (a, b) = (run(&scene(&direct), 1), run(&scene(&general), 2));
@@ -188,7 +193,8 @@ fn direct_pass_matches_the_general_loop(spp: u32) {
     assert_eq!(fa.termination, fb.termination);
     assert_eq!(fa.work, fb.work);
     assert!(fa.material.contains(&1) && fa.material.contains(&2));
-    assert_eq!(b.stats.shadow_rays, 0);
+    assert_eq!(a.stats.shadow_rays, b.stats.shadow_rays);
+    assert_eq!(a.stats.shadow_rays > 0, shadows);
     assert!(a.stats.reflection_rays > 0);
     let counters = |s: &marchmesh_core::RenderStats| {
         (

@@ -1,15 +1,16 @@
-//! The hit pass of a scene whose shading points spawn no secondary rays (no shadows, area
-//! lights or ambient occlusion): each surface hit's colour is its ambient term plus Phong
-//! over the point and directional lights, with the material and lights converted once per
-//! render, in a loop of its own. The same operations in the same order as the Whitted
-//! integrator's general hit loop, so the same bits; a hit it does not take (a reflecting
-//! surface, a non-finite hit) is left to that loop.
+//! The hit pass of a scene whose lights are point, directional and ambient lights, without
+//! ambient occlusion: each surface hit's colour is its ambient term plus Phong over the point
+//! and directional lights, with the material and lights converted once per render, in a loop
+//! of its own; a light that casts shadows queues its shadow ray and contribution instead of
+//! adding it. The same operations in the same order as the Whitted integrator's general hit
+//! loop, and the same shadow rays in the same order, so the same bits; a hit it does not take
+//! (a reflecting surface, a non-finite hit) is left to that loop.
 
 use glam::Vec3;
 
 use super::band::Band;
 use super::shading::{DirectLight, Shading, phong};
-use super::whitted::Path;
+use super::whitted::{Path, PendingLight};
 use crate::geometry::{Ray, TraceResult};
 
 /// One wavefront as the direct pass reads it: its paths, rays and results (one per path),
@@ -22,15 +23,41 @@ pub(super) struct Wavefront<'a> {
     pub(super) depth: u32,
 }
 
+/// The wavefront's queue of shadow rays and, at the same index, their pending contributions
+/// (added to their path's pixel if the ray is not blocked).
+pub(super) struct Shadows<'a> {
+    pub(super) rays: &'a mut Vec<Ray>,
+    pub(super) pending: &'a mut Vec<PendingLight>,
+}
+
+impl Shadows<'_> {
+    /// Queues a shadow ray from `origin` towards `dir` up to `t_max` for path `path`.
+    #[inline(always)]
+    fn push(&mut self, path: usize, origin: Vec3, dir: Vec3, t_max: f32, amount: Vec3) {
+        self.rays.push(Ray {
+            origin,
+            dir,
+            t_min: 0.0,
+            t_max,
+        });
+        self.pending.push(PendingLight {
+            path: path as u32,
+            amount,
+        });
+    }
+}
+
 /// Shades the hits `hits` (wavefront indices of results that hold a hit) in order, adding
 /// each one's colour to its pixel's `sum` (and recording its AOVs when its index is below
 /// `w.aov_paths`), and stops at the first hit the general loop must take: one whose hit is
-/// not finite or whose surface reflects. Returns how many hits it shaded.
+/// not finite or whose surface reflects. Returns how many hits it shaded. A light that casts
+/// shadows queues its ray and contribution in `shadows` (hit by hit, light by light, as the
+/// general loop does) unless the light is at or behind the ray's start; the rest is added.
 ///
 /// With `distinct` (no two paths of the wavefront share a pixel: one sample a pixel) and
 /// AVX, hits are shaded eight at a time, each lane the scalar operations in their order.
 ///
-/// Only for a [`Shading`] that spawns nothing (`sh.spawns` false).
+/// Only for a [`Shading`] with `sh.direct_pass`.
 ///
 /// # Panics
 /// If an index is outside the wavefront or a pixel outside `sum` (a programming error).
@@ -40,16 +67,20 @@ pub(super) fn shade_direct(
     w: &Wavefront<'_>,
     sum: &mut [Vec3],
     band: &mut Band<'_>,
+    mut shadows: Shadows<'_>,
     sh: &Shading,
     distinct: bool,
 ) -> usize {
     debug_assert!(
-        !sh.spawns,
-        "the direct pass shades scenes that spawn nothing"
+        sh.direct_pass,
+        "the direct pass shades scenes of point, directional and ambient lights"
     );
     let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    if distinct && std::arch::is_x86_feature_detected!("avx") {
+    if distinct
+        && sh.direct.iter().filter(|l| l.shadows()).count() <= MAX_QUEUED
+        && std::arch::is_x86_feature_detected!("avx")
+    {
         let mut lanes = Lanes::default();
         while let Some(group) = hits.get(done..done + LANES) {
             if !lanes.gather(group, w, sum, sh) {
@@ -60,11 +91,11 @@ pub(super) fn shade_direct(
             unsafe {
                 shade_lanes_avx(&mut lanes, sh)
             };
-            lanes.scatter(w, sum, band);
+            lanes.scatter(w, sum, band, &mut shadows);
             done += LANES;
         }
     }
-    done + shade_scalar(&hits[done..], w, sum, band, sh)
+    done + shade_scalar(&hits[done..], w, sum, band, &mut shadows, sh)
 }
 
 /// [`shade_direct`] one hit at a time.
@@ -74,6 +105,7 @@ fn shade_scalar(
     w: &Wavefront<'_>,
     sum: &mut [Vec3],
     band: &mut Band<'_>,
+    shadows: &mut Shadows<'_>,
     sh: &Shading,
 ) -> usize {
     let Wavefront {
@@ -106,30 +138,46 @@ fn shade_scalar(
             band.set_aov(px, res, Some((&hit, n)));
         }
         let (weight, color, d) = (path.throughput, m.color, ray.dir);
+        // Where shadow rays start (`spawns`: some light casts shadows), as the general loop
+        // places them.
+        let (offset, origin) = if sh.spawns {
+            let offset = sh.ray_offset * hit.position.length().max(1e-30);
+            (offset, hit.position + n * offset)
+        } else {
+            (0.0, hit.position)
+        };
         let mut s = sum[px] + weight * sh.ambient * color;
         for light in &sh.direct {
-            let (to_light, intensity) = match *light {
+            let (to_light, intensity, shadowed, dist) = match *light {
                 DirectLight::Point {
                     position,
                     intensity,
+                    shadows,
                 } => {
                     let v = position - hit.position;
-                    let to_light = v / v.length();
+                    let len = v.length();
+                    let to_light = v / len;
                     if !to_light.is_finite() {
                         continue;
                     }
-                    (to_light, intensity)
+                    (to_light, intensity, shadows, len - offset)
                 }
                 DirectLight::Directional {
                     to_light,
                     intensity,
-                } => (to_light, intensity),
+                    shadows,
+                } => (to_light, intensity, shadows, sh.max_distance),
             };
             let amount = phong(n, d, to_light, intensity, m.specular_exponent);
             if amount <= 0.0 {
                 continue;
             }
-            s += weight * amount * color;
+            let contribution = weight * amount * color;
+            if shadowed && dist > 0.0 {
+                shadows.push(pi, origin, to_light, dist, contribution);
+            } else {
+                s += contribution;
+            }
         }
         sum[px] = s;
     }
@@ -138,6 +186,20 @@ fn shade_scalar(
 
 /// Hits shaded together by [`shade_lanes_avx`].
 const LANES: usize = 8;
+
+/// Most lights casting shadows the lanes queue rays for (a scene with more is shaded one hit
+/// at a time).
+const MAX_QUEUED: usize = 4;
+
+/// One shadowed light's rays of eight lanes: which lanes queue one, and each lane's
+/// direction, length and pending contribution.
+#[derive(Default)]
+struct Queued {
+    lanes: u8,
+    dir: [[f32; LANES]; 3],
+    dist: [f32; LANES],
+    amount: [[f32; LANES]; 3],
+}
 
 /// Eight hits as structure of arrays: what shading reads of each (gathered from the
 /// wavefront), and the colour sums and facing normals it leaves.
@@ -156,8 +218,14 @@ struct Lanes {
     /// Specular exponent, for lanes with a bit in `specular_lanes`.
     specular: [f32; LANES],
     specular_lanes: u8,
-    /// The pixel's colour sum before shading; after, with the hit's colour added.
+    /// The pixel's colour sum before shading; after, with the hit's colour added (but for
+    /// the contributions queued behind shadow rays).
     sum: [[f32; LANES]; 3],
+    /// Where the hit's shadow rays start (set when a light casts shadows).
+    origin: [[f32; LANES]; 3],
+    /// The shadow rays of the first `queued_lights` lights that cast shadows, in their order.
+    queued: [Queued; MAX_QUEUED],
+    queued_lights: usize,
 }
 
 impl Lanes {
@@ -199,11 +267,20 @@ impl Lanes {
         true
     }
 
-    /// Writes each lane's colour sum into `sum` and, below `w.aov_paths`, its AOVs.
+    /// Writes each lane's colour sum into `sum` and, below `w.aov_paths`, its AOVs, and
+    /// queues its shadow rays, lane by lane and light by light.
     #[inline(always)]
-    fn scatter(&self, w: &Wavefront<'_>, sum: &mut [Vec3], band: &mut Band<'_>) {
+    fn scatter(
+        &self,
+        w: &Wavefront<'_>,
+        sum: &mut [Vec3],
+        band: &mut Band<'_>,
+        shadows: &mut Shadows<'_>,
+    ) {
         let [sr, sg, sb] = &self.sum;
         let [nx, ny, nz] = &self.normal;
+        let [ox, oy, oz] = &self.origin;
+        let queued = &self.queued[..self.queued_lights];
         for i in 0..LANES {
             sum[self.pixel[i]] = Vec3::new(sr[i], sg[i], sb[i]);
             if self.index[i] < w.aov_paths {
@@ -213,6 +290,19 @@ impl Lanes {
                     band.set_aov(self.pixel[i], res, Some((&hit, n)));
                 }
             }
+            for q in queued {
+                if q.lanes >> i & 1 == 1 {
+                    let [dx, dy, dz] = &q.dir;
+                    let [ar, ag, ab] = &q.amount;
+                    shadows.push(
+                        self.index[i],
+                        Vec3::new(ox[i], oy[i], oz[i]),
+                        Vec3::new(dx[i], dy[i], dz[i]),
+                        q.dist[i],
+                        Vec3::new(ar[i], ag[i], ab[i]),
+                    );
+                }
+            }
         }
     }
 }
@@ -220,7 +310,11 @@ impl Lanes {
 /// [`shade_scalar`]'s arithmetic for eight hits in AVX lanes: every lane performs the
 /// scalar code's IEEE operations in the same order (correctly rounded in any lane width, no
 /// fused multiply-add), comparisons by the same ordered or unordered predicates and
-/// `powf` per lane, so each lane's sum and normal are the scalar code's bits.
+/// `powf` per lane, so each lane's sum, normal and shadow rays are the scalar code's bits.
+/// At most [`MAX_QUEUED`] lights may cast shadows.
+///
+/// # Panics
+/// If more lights cast shadows (a programming error).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx")]
 #[allow(unsafe_code)]
@@ -266,29 +360,52 @@ fn shade_lanes_avx(l: &mut Lanes, sh: &Shading) {
         std::array::from_fn(|c| _mm256_add_ps(load(&l.sum[c]), _mm256_mul_ps(aw, color[c])));
     let neg_d = d.map(|c| _mm256_xor_ps(c, sign));
     let position = l.position.each_ref().map(load);
+    // Shadow rays' start: `offset = ray_offset * max(|p|, 1e-30)` (`max` returns its second
+    // operand for a NaN first, as `f32::max` does), `origin = p + n * offset`.
+    let offset = if sh.spawns {
+        let len = _mm256_sqrt_ps(dot(position, position));
+        let offset = _mm256_mul_ps(
+            _mm256_set1_ps(sh.ray_offset),
+            _mm256_max_ps(len, _mm256_set1_ps(1e-30)),
+        );
+        for c in 0..3 {
+            store(
+                &mut l.origin[c],
+                _mm256_add_ps(position[c], _mm256_mul_ps(n[c], offset)),
+            );
+        }
+        offset
+    } else {
+        zero
+    };
     let all = _mm256_cmp_ps::<_CMP_EQ_OQ>(zero, zero);
+    let mut queued = 0;
     for light in &sh.direct {
-        let (to_light, intensity, valid) = match *light {
+        let (to_light, intensity, shadows, dist) = match *light {
             DirectLight::Point {
                 position: at,
                 intensity,
+                shadows,
             } => {
                 let v: [__m256; 3] =
                     std::array::from_fn(|c| _mm256_sub_ps(_mm256_set1_ps(at[c]), position[c]));
                 let len = _mm256_sqrt_ps(dot(v, v));
                 let t = v.map(|c| _mm256_div_ps(c, len));
                 let valid = _mm256_and_ps(_mm256_and_ps(finite(t[0]), finite(t[1])), finite(t[2]));
-                (t, intensity, valid)
+                ((t, valid), intensity, shadows, _mm256_sub_ps(len, offset))
             }
             DirectLight::Directional {
                 to_light,
                 intensity,
+                shadows,
             } => (
-                std::array::from_fn(|c| _mm256_set1_ps(to_light[c])),
+                (std::array::from_fn(|c| _mm256_set1_ps(to_light[c])), all),
                 intensity,
-                all,
+                shadows,
+                _mm256_set1_ps(sh.max_distance),
             ),
         };
+        let (to_light, valid) = to_light;
         // `phong`: zero unless `n.l > 0`, else `intensity * n.l` plus the specular term.
         let ndl = dot(n, to_light);
         let lit = _mm256_and_ps(valid, _mm256_cmp_ps::<_CMP_GT_OQ>(ndl, zero));
@@ -310,12 +427,27 @@ fn shade_lanes_avx(l: &mut Lanes, sh: &Shading) {
             amount = load(&a);
         }
         // Added unless `amount <= 0` (a NaN amount is added, as in the scalar code).
-        let add = _mm256_and_ps(lit, _mm256_cmp_ps::<_CMP_NLE_UQ>(amount, zero));
+        let mut add = _mm256_and_ps(lit, _mm256_cmp_ps::<_CMP_NLE_UQ>(amount, zero));
         let wa = _mm256_mul_ps(weight, amount);
+        let contribution: [__m256; 3] = std::array::from_fn(|c| _mm256_mul_ps(wa, color[c]));
+        if shadows {
+            // Queued behind a shadow ray where `dist > 0`, added where not.
+            let queue = _mm256_and_ps(add, _mm256_cmp_ps::<_CMP_GT_OQ>(dist, zero));
+            add = _mm256_andnot_ps(queue, add);
+            let q = &mut l.queued[queued];
+            q.lanes = _mm256_movemask_ps(queue) as u8;
+            store(&mut q.dist, dist);
+            for c in 0..3 {
+                store(&mut q.dir[c], to_light[c]);
+                store(&mut q.amount[c], contribution[c]);
+            }
+            queued += 1;
+        }
         s = std::array::from_fn(|c| {
-            _mm256_blendv_ps(s[c], _mm256_add_ps(s[c], _mm256_mul_ps(wa, color[c])), add)
+            _mm256_blendv_ps(s[c], _mm256_add_ps(s[c], contribution[c]), add)
         });
     }
+    l.queued_lights = queued;
     for c in 0..3 {
         store(&mut l.sum[c], s[c]);
         store(&mut l.normal[c], n[c]);
@@ -328,34 +460,40 @@ mod tests {
 
     use super::super::band::Band;
     use super::super::shading::Shading;
-    use super::super::whitted::Path;
-    use super::{Wavefront, shade_direct};
+    use super::super::whitted::{Path, PendingLight};
+    use super::{Shadows, Wavefront, shade_direct};
     use crate::framebuffer::Framebuffer;
     use crate::geometry::{Hit, Ray, RayWork, TraceResult};
     use crate::sampling::Rng;
 
-    /// Eight hits a time shade the bits of one at a time, on hits built to reach every
-    /// branch: zero, tiny, huge and back-facing normals, a hit at a point light's position
-    /// (no direction to it), specular and plain materials, weights below one.
+    /// Eight hits a time shade the bits of one at a time, and queue the same shadow rays in
+    /// the same order, on hits built to reach every branch: zero, tiny, huge and back-facing
+    /// normals, a hit at a point light's position (no direction to it), specular and plain
+    /// materials, weights below one; lights with and without shadows.
     #[test]
     fn lanes_shade_the_bits_of_single_hits() {
-        let scene = marchmesh_scene::parse_scene(
-            r#"{
+        for shadows in [false, true] {
+            lanes_match_single_hits(shadows);
+        }
+    }
+
+    fn lanes_match_single_hits(shadows: bool) {
+        let json = r#"{
               "camera": {"width": 40, "height": 8},
               "lights": [{"ambient": {"intensity": 0.2}},
-                         {"point": {"position": [0.5, 0.5, 3], "intensity": 0.7, "casts_shadows": false}},
-                         {"directional": {"direction": [0.2, 1, -1], "intensity": 0.4, "casts_shadows": false}}],
+                         {"point": {"position": [0.5, 0.5, 3], "intensity": 0.7, "casts_shadows": SHADOWS}},
+                         {"directional": {"direction": [0.2, 1, -1], "intensity": 0.4, "casts_shadows": SHADOWS}},
+                         {"point": {"position": [-2, 1, 2], "intensity": 0.3, "casts_shadows": false}}],
               "objects": [
                 {"shape": {"sphere": {"radius": 1}}, "material": {"color": [0.9, 0.5, 0.1], "specular_exponent": 7}},
                 {"shape": {"sphere": {"radius": 1}}, "material": {"color": [0.2, 0.6, 0.8]}}
               ]
-            }"#,
-            "lanes",
-            std::path::Path::new("."),
-        )
-        .expect("scene");
+            }"#
+        .replace("SHADOWS", &shadows.to_string());
+        let scene =
+            marchmesh_scene::parse_scene(&json, "lanes", std::path::Path::new(".")).expect("scene");
         let sh = Shading::new(&scene);
-        assert!(!sh.spawns && sh.direct.len() == 2);
+        assert!(sh.direct_pass && sh.spawns == shadows && sh.direct.len() == 3);
         let light = Vec3::new(0.5, 0.5, 3.0);
         let mut rng = Rng::new(7);
         let mut u = move || rng.next_f32() * 2.0 - 1.0;
@@ -407,18 +545,44 @@ mod tests {
         let shade = |distinct: bool| {
             let mut fb = Framebuffer::new(40, 8);
             let mut sum = vec![Vec3::splat(0.25); n as usize];
+            let (mut rays, mut pending): (Vec<Ray>, Vec<PendingLight>) = (vec![], vec![]);
             {
                 let mut bands = Band::split(&mut fb, 8, true);
-                let done = shade_direct(&hits, &w, &mut sum, &mut bands[0], &sh, distinct);
+                let shadows = Shadows {
+                    rays: &mut rays,
+                    pending: &mut pending,
+                };
+                let done = shade_direct(&hits, &w, &mut sum, &mut bands[0], shadows, &sh, distinct);
                 assert_eq!(done, hits.len());
             }
-            (sum, fb)
+            (sum, fb, rays, pending)
         };
-        let ((a, fa), (b, fb)) = (shade(true), shade(false));
+        let ((a, fa, ra, pa), (b, fb, rb, pb)) = (shade(true), shade(false));
         let bits = |v: &[Vec3]| -> Vec<[u32; 3]> {
             v.iter().map(|c| c.to_array().map(f32::to_bits)).collect()
         };
         assert_eq!(bits(&a), bits(&b));
+        let ray_bits = |r: &[Ray]| -> Vec<[u32; 8]> {
+            r.iter()
+                .map(|r| {
+                    let [ox, oy, oz] = r.origin.to_array().map(f32::to_bits);
+                    let [dx, dy, dz] = r.dir.to_array().map(f32::to_bits);
+                    [ox, oy, oz, dx, dy, dz, r.t_min.to_bits(), r.t_max.to_bits()]
+                })
+                .collect()
+        };
+        assert_eq!(ray_bits(&ra), ray_bits(&rb));
+        assert_eq!(
+            pa.iter().map(|p| p.path).collect::<Vec<_>>(),
+            pb.iter().map(|p| p.path).collect::<Vec<_>>()
+        );
+        let amounts = |p: &[PendingLight]| bits(&p.iter().map(|p| p.amount).collect::<Vec<_>>());
+        assert_eq!(amounts(&pa), amounts(&pb));
+        assert_eq!(ra.len(), pa.len());
+        // Rays only from lights that cast shadows: some from each of them.
+        let directional = ra.iter().filter(|r| r.t_max == sh.max_distance).count();
+        assert_eq!(directional > 0, shadows);
+        assert_eq!(ra.len() > directional, shadows);
         assert_eq!(bits(&fa.normal), bits(&fb.normal));
         assert_eq!(fa.depth, fb.depth);
         assert_eq!(fa.material, fb.material);

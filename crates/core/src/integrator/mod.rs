@@ -22,7 +22,7 @@
 //! tiling; `band` the image bands workers write; `shading` Phong shading and light
 //! sampling; `wavefront` batched queries and the resolution of rays that hit nothing;
 //! `whitted` the per-tile wavefronts of the Whitted integrator; `direct` its hit pass for
-//! scenes whose shading spawns no secondary rays.
+//! scenes of point, directional and ambient lights without ambient occlusion.
 
 use std::time::{Duration, Instant};
 

@@ -37,9 +37,13 @@ pub(crate) struct Shading {
     /// `materials` converted once to the f32 values shading reads (same index).
     pub(crate) surfaces: Vec<Surface>,
     /// The point and directional lights that can light anything (positive intensity, a
-    /// finite direction), in the order of `lights`: all a shading point of a scene that
-    /// spawns nothing (`spawns` false: no shadows, area lights or ambient occlusion) reads.
+    /// finite direction), in the order of `lights`: all a shading point of a scene without
+    /// area lights or ambient occlusion (`direct_pass`) reads.
     pub(crate) direct: Vec<DirectLight>,
+    /// Whether every light is a point, directional or ambient light and there is no ambient
+    /// occlusion: a shading point then reads only `ambient` and `direct`, and spawns at most
+    /// one shadow ray per light of `direct` that casts shadows.
+    pub(crate) direct_pass: bool,
 }
 
 /// A material as shading reads it: the f32 conversions of [`Material`]'s fields (the same
@@ -61,12 +65,31 @@ impl Surface {
     }
 }
 
-/// A point or directional light that casts no shadow, as the direct-lighting pass of a
-/// scene that spawns no secondary rays reads it.
+/// A point or directional light as the direct-lighting pass of a scene without area lights
+/// or ambient occlusion reads it; `shadows`: it casts shadows.
 #[derive(Clone, Copy)]
 pub(crate) enum DirectLight {
-    Point { position: Vec3, intensity: f32 },
-    Directional { to_light: Vec3, intensity: f32 },
+    Point {
+        position: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+    Directional {
+        to_light: Vec3,
+        intensity: f32,
+        shadows: bool,
+    },
+}
+
+impl DirectLight {
+    /// Whether the light casts shadows.
+    pub(crate) fn shadows(&self) -> bool {
+        match *self {
+            DirectLight::Point { shadows, .. } | DirectLight::Directional { shadows, .. } => {
+                shadows
+            }
+        }
+    }
 }
 
 pub(crate) enum ShadingLight {
@@ -137,24 +160,27 @@ impl Shading {
                 ShadingLight::Point {
                     position,
                     intensity,
-                    ..
+                    shadows,
                 } => (intensity > 0.0).then_some(DirectLight::Point {
                     position,
                     intensity,
+                    shadows,
                 }),
                 ShadingLight::Directional {
                     to_light,
                     intensity,
-                    ..
+                    shadows,
                 } => {
                     (intensity > 0.0 && to_light.is_finite()).then_some(DirectLight::Directional {
                         to_light,
                         intensity,
+                        shadows,
                     })
                 }
                 ShadingLight::Area(_) => None,
             })
             .collect();
+        let direct_pass = !occlusion && emitters.is_empty();
         Self {
             ambient,
             lights,
@@ -175,6 +201,7 @@ impl Shading {
             keyed,
             surfaces: scene.materials.iter().map(Surface::of).collect(),
             direct,
+            direct_pass,
         }
     }
 

@@ -4,12 +4,12 @@
 use glam::Vec3;
 
 use super::band::{Band, Frame};
-use super::direct::{Wavefront, shade_direct};
+use super::direct::{Shadows, Wavefront, shade_direct};
 use super::shading::{ShadingLight, phong, rotation_of};
 use super::wavefront::{Vertex, resolve_no_hits, resolve_vertex, timed, trace_wavefront};
 use crate::camera::{Tile, sample_offset};
 use crate::geometry::{
-    Cone, Geometry, OcclusionResult, Ray, SurfacePoint, TraceResult, Visibility,
+    Cone, Geometry, OcclusionResult, Ray, SurfacePoint, Termination, TraceResult, Visibility,
 };
 use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key};
 use crate::stats::RenderStats;
@@ -26,8 +26,9 @@ pub(super) struct Path {
 
 /// A shadow ray's pending contribution: added to its path's pixel if the ray is not blocked.
 pub(super) struct PendingLight {
-    path: u32,
-    amount: Vec3,
+    /// Wavefront index of the path.
+    pub(super) path: u32,
+    pub(super) amount: Vec3,
 }
 
 /// Most shadow (or ambient-occlusion) rays one batch holds: a wavefront's rays are traced
@@ -68,13 +69,35 @@ impl OcclusionBatch<'_, '_> {
             stats.trace_time.shadow_ns += ns;
             stats.shadow_rays += rays.len() as u64;
         }
+        // The counters in locals (kept in registers; through `stats` every ray's sums waited
+        // on the previous ray's stores), the same integer sums and maxima as
+        // `RenderStats::add_work` and `add_termination` ray by ray.
+        let (mut steps, mut node_visits, mut primitive_tests) = (0u64, 0u64, 0u64);
+        let (mut max_steps, mut max_node_visits) = (0u32, 0u32);
+        let (mut max_steps_ended, mut max_distance_ended) = (0u64, 0u64);
         for (p, o) in pending.iter().zip(occlusion.iter()) {
-            stats.add_work(&o.work);
-            stats.add_termination(o.termination, true);
+            let w = o.work;
+            steps += w.steps as u64;
+            max_steps = max_steps.max(w.steps);
+            node_visits += w.node_visits as u64;
+            max_node_visits = max_node_visits.max(w.node_visits);
+            primitive_tests += w.primitive_tests as u64;
+            match o.termination {
+                Termination::MaxSteps => max_steps_ended += 1,
+                Termination::MaxDistance => max_distance_ended += 1,
+                Termination::Hit | Termination::Miss => {}
+            }
             if !o.occluded {
                 sum[paths[p.path as usize].pixel as usize] += p.amount;
             }
         }
+        stats.steps += steps;
+        stats.max_steps_seen = stats.max_steps_seen.max(max_steps);
+        stats.node_visits += node_visits;
+        stats.max_node_visits_seen = stats.max_node_visits_seen.max(max_node_visits);
+        stats.primitive_tests += primitive_tests;
+        stats.occlusion_max_steps += max_steps_ended;
+        stats.max_distance += max_distance_ended;
         rays.clear();
         pending.clear();
     }
@@ -262,9 +285,10 @@ pub(super) fn trace_tile(
                 stats,
             );
         }
-        // A scene that spawns nothing shades its plain hits in the direct pass; the loop
-        // below takes the hits it stops at, one at a time, in order.
-        let direct = !sh.spawns;
+        // A scene with only point, directional and ambient lights and no ambient occlusion
+        // shades its plain hits in the direct pass (queueing their shadow rays as the loop
+        // below would); the loop takes the hits it stops at, one at a time, in order.
+        let direct = sh.direct_pass;
         // One sample a pixel: no two paths of a wavefront share a pixel (a path spawns at
         // most one reflection), so the direct pass may shade hits eight at a time.
         let distinct = sh.spp == 1;
@@ -278,7 +302,11 @@ pub(super) fn trace_tile(
         let mut next_hit = 0;
         while next_hit < hits.len() {
             if let Some(w) = &wavefront {
-                next_hit += shade_direct(&hits[next_hit..], w, sum, band, sh, distinct);
+                let shadows = Shadows {
+                    rays: &mut *shadow_rays,
+                    pending: &mut *pending,
+                };
+                next_hit += shade_direct(&hits[next_hit..], w, sum, band, shadows, sh, distinct);
                 if next_hit == hits.len() {
                     break;
                 }
