@@ -853,6 +853,129 @@ mod tests {
         .expect("valid");
     }
 
+    /// A hit's distance, position and normal as bits, and its material.
+    type HitBits = (u32, [u32; 3], [u32; 3], MaterialId);
+
+    /// A closest-hit answer with every float as bits, so `-0.0` and `0.0` (or two NaNs)
+    /// compare as what they are.
+    fn trace_bits(r: &TraceResult) -> (Option<HitBits>, String) {
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        (
+            r.hit()
+                .map(|h| (h.t.to_bits(), bits(h.position), bits(h.normal), h.material)),
+            format!("{:?}", (r.termination(), r.work)),
+        )
+    }
+
+    #[test]
+    fn flat_ray_path_answers_every_ray_as_the_general_path() {
+        // `closest_flat` and `occluded_flat` (scenes without instances) repeat the flat part
+        // of `closest_with` and `occluded_with_instances`: for the same ray, both must give
+        // the same hit (distance, position, normal and material bit for bit), the same
+        // termination and work, and the same occlusion, on every BVH layout. Random rays
+        // around a bunny in all eight direction octants: from the camera's origin, from
+        // points around and inside the mesh's box, long and short (AO-like), a nonzero
+        // `t_min`, axis-aligned directions and empty intervals.
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+        let json = r#"{"camera": {"position": [0, 2, -5.5], "look_at": [0, 1.2, 0], "vfov_deg": 40, "width": 64, "height": 64},
+            "objects": [{"shape": {"mesh": {"path": "meshes/bunny.obj"}}, "transform": {"scale": 0.25, "rotate_deg": [0, 30, 0]}}]}"#;
+        let scene = marchmesh_scene::parse_scene(json, "bunny", &dir).expect("scene");
+        let mut s = 0x2545_f491_4f6c_dd1du64;
+        let mut unit = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut rays = Vec::new();
+        for k in 0..6000 {
+            let around = Vec3::new(unit(), unit(), unit()) * 4.0 - 2.0;
+            // The bunny sits about 5.5 units in front of the camera (render space is
+            // centred on the camera).
+            let target = Vec3::new(0.0, -0.6, 5.6) + (Vec3::new(unit(), unit(), unit()) - 0.5);
+            let origin = match k % 3 {
+                0 => Vec3::ZERO,
+                1 => target + around,
+                _ => Vec3::new(0.0, -0.6, 5.6) + around * 0.4,
+            };
+            let dir = match k % 5 {
+                4 => (Vec3::new(unit(), unit(), unit()) * 2.0 - 1.0)
+                    .try_normalize()
+                    .unwrap_or(Vec3::X),
+                _ => (target - origin).try_normalize().unwrap_or(Vec3::Z),
+            };
+            let (t_min, t_max) = match k % 7 {
+                0 => (0.0, 0.3 * unit()),
+                1 => (0.5 * unit(), 20.0),
+                2 => (1.0, 0.5),
+                _ => (0.0, f32::INFINITY),
+            };
+            rays.push(Ray {
+                origin,
+                dir,
+                t_min,
+                t_max,
+            });
+        }
+        for d in [
+            Vec3::X,
+            Vec3::NEG_X,
+            Vec3::Y,
+            Vec3::NEG_Y,
+            Vec3::Z,
+            Vec3::NEG_Z,
+        ] {
+            for origin in [
+                Vec3::ZERO,
+                Vec3::new(0.0, -0.6, 5.6),
+                Vec3::new(0.1, -0.5, 4.0),
+            ] {
+                rays.push(Ray {
+                    origin: origin - d * 3.0,
+                    dir: d,
+                    t_min: 0.0,
+                    t_max: f32::INFINITY,
+                });
+            }
+        }
+        for kind in [BvhKind::Wide, BvhKind::Bvh2, BvhKind::CwBvh] {
+            let g = build(
+                &scene,
+                &MeshOptions {
+                    bvh: Some(kind),
+                    ..MeshOptions::default()
+                },
+            )
+            .expect("build");
+            assert!(g.tlas.is_none(), "one placement: no instances");
+            let (mut hits, mut occluded, mut octants) = (0, 0, 0u32);
+            for ray in &rays {
+                let flat = g.closest_flat(ray);
+                let general = g.closest_with(ray, None);
+                assert_eq!(trace_bits(&flat), trace_bits(&general), "{kind:?} {ray:?}");
+                let (a, b) = (g.occluded_flat(ray), g.occluded_with_instances(ray));
+                assert_eq!(
+                    (a.occluded, a.termination, a.work),
+                    (b.occluded, b.termination, b.work),
+                    "{kind:?} {ray:?}"
+                );
+                hits += usize::from(flat.hit().is_some());
+                occluded += usize::from(a.occluded);
+                let neg = ray.dir.cmplt(Vec3::ZERO).bitmask();
+                octants |= 1 << neg;
+            }
+            assert!(
+                hits > 1500,
+                "{kind:?}: {hits} hits; the rays must reach the bunny"
+            );
+            assert!(
+                occluded > hits / 2,
+                "{kind:?}: {occluded} occluded of {hits}"
+            );
+            assert_eq!(octants, 0xff, "rays in every octant");
+        }
+    }
+
     #[test]
     fn ob_ray_new_is_bit_identical_to_obvhs_ray_new() {
         let eps = f32::EPSILON;

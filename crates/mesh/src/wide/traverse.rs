@@ -247,19 +247,21 @@ impl WideBvh {
                 }
                 if hits > 1 {
                     if ANY {
-                        // Lanes pushed highest first, one unconditional write each, so
-                        // the lowest entered lane ends on top and becomes `cur`: the order
-                        // of `entered_children::<true>` without a branch per lane.
+                        // The lowest entered lane is next, read from the node rather than
+                        // back from the stack (no store and reload on the way to the next
+                        // node). The others are pushed highest lane first, one
+                        // unconditional write each, so the lowest of them is popped first:
+                        // the order of `entered_children::<true>` without a branch per lane.
+                        cur = node.child[mask.trailing_zeros() as usize];
+                        let rest = mask & (mask - 1);
                         let mut top = sp;
                         for lane in (0..WIDTH).rev() {
                             if let Some(s) = stack.get_mut(top) {
                                 s.write((node.child[lane], 0.0));
                             }
-                            top += ((mask >> lane) & 1) as usize;
+                            top += ((rest >> lane) & 1) as usize;
                         }
                         sp += hits as usize - 1;
-                        // SAFETY: written just above (`sp < top`).
-                        cur = unsafe { stack[sp].assume_init() }.0;
                     } else if hits == 2 {
                         let (near, far) = two_entered(node, &dist, mask);
                         if let Some(s) = stack.get_mut(sp) {
