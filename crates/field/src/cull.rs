@@ -208,7 +208,7 @@ pub struct Restricted {
     /// compiles (shared through the field's cache, keyed by `kept`).
     jit: Option<Arc<Jit>>,
     /// The field's nodes the restriction kept, in the order copied (what determines the
-    /// restricted program).
+    /// restricted program); listed only when the field's JIT compilation is on, else empty.
     kept: Vec<u32>,
     /// Buffer of [`flatten`].
     scratch: Vec<Instr<f32>>,
@@ -255,6 +255,12 @@ impl Field {
         out.prog.instrs.clear();
         out.kept.clear();
         if !self.p32.instrs.is_empty() {
+            // The kept nodes key the JIT cache: listed only when it is read.
+            let emit = if self.jits {
+                emit::<true>
+            } else {
+                emit::<false>
+            };
             emit(
                 &self.p32.instrs,
                 0,
@@ -378,9 +384,10 @@ fn identity_frame(ins: &Instr<f32>) -> bool {
     ins.to_local.lin.is_none() && ins.to_local.trans == [0.0; 3] && ins.dscale == 1.0
 }
 
-/// Emits node `i` of `src` restricted to `cone` into `out`; false when nothing of it can
-/// be reached (then nothing is emitted).
-fn emit(
+/// Emits node `i` of `src` restricted to `cone` into `out` (with `KEEP`, each emitted
+/// node's index in `src` into `kept`, in step with `out`); false when nothing of it can be
+/// reached (then nothing is emitted).
+fn emit<const KEEP: bool>(
     src: &[Instr<f32>],
     i: usize,
     cone: &Wedge,
@@ -397,24 +404,30 @@ fn emit(
     if matches!(ins.op, Op::Union) && identity_frame(ins) {
         let at = out.len();
         out.push(ins.clone());
-        kept.push(i as u32);
+        if KEEP {
+            kept.push(i as u32);
+        }
         let mut j = i + 1;
         let mut children = 0;
         while j < end {
-            children += usize::from(emit(src, j, cone, out, kept));
+            children += usize::from(emit::<KEEP>(src, j, cone, out, kept));
             j = src[j].end as usize;
         }
         match children {
             0 => {
                 out.truncate(at);
-                kept.truncate(at);
+                if KEEP {
+                    kept.truncate(at);
+                }
                 return false;
             }
             1 => {
                 // A union of one child is that child (same frame): drop the wrapper, a box
                 // test and a dispatch per evaluation.
                 out.remove(at);
-                kept.remove(at);
+                if KEEP {
+                    kept.remove(at);
+                }
                 for n in &mut out[at..] {
                     n.end -= 1;
                 }
@@ -425,7 +438,9 @@ fn emit(
     }
     // Kept whole: copy the subtree with its end indices moved to the new position.
     let shift = out.len() as i64 - i as i64;
-    kept.extend(i as u32..end as u32);
+    if KEEP {
+        kept.extend(i as u32..end as u32);
+    }
     out.extend(src[i..end].iter().map(|n| {
         let mut n = n.clone();
         n.end = (i64::from(n.end) + shift) as u32;
