@@ -563,6 +563,25 @@ impl Field {
     /// `None` when the field is unbounded, has mesh grids or was built
     /// [`Field::without_bounds`].
     pub fn build_cells(&mut self, depth: u32, max_error_rel: f64) -> Option<prune::CellStats> {
+        let work = prune::Cells::max_work(self.p64.instrs.len());
+        self.build_cells_within(depth, max_error_rel, work, false)
+    }
+
+    /// [`Field::build_cells`] with a work budget of `work` ([`prune::Cells::build_within`])
+    /// instead of [`prune::Cells::max_work`]. `0` settles the octree's root: one cell over
+    /// the whole box (for a root smooth union, its children as one [`prune::Cell::Subset`]
+    /// whose folds skip far children eight at a time), built in about one pass over the
+    /// program. With `root_if_cut`, an octree whose refinement the budget cut short
+    /// ([`prune::CellStats::budget_cut`]) is replaced by that one cell (so at most `work`
+    /// is spent on an octree that is kept only when complete). Returns `None` as
+    /// [`Field::build_cells`] does.
+    pub fn build_cells_within(
+        &mut self,
+        depth: u32,
+        max_error_rel: f64,
+        work: usize,
+        root_if_cut: bool,
+    ) -> Option<prune::CellStats> {
         let (lo, hi) = self.bounds?;
         let max_error = max_error_rel * (hi - lo).max_element();
         let t0 = Instant::now();
@@ -573,15 +592,24 @@ impl Field {
         let depth = depth.min(8);
         // Half a finest cell of margin around the surfaces' box.
         let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
-        let cells = prune::Cells::build(
-            &self.p64,
-            index,
-            &self.grids,
-            (lo, hi),
-            pad,
-            depth,
-            max_error,
-        )?;
+        let build = |depth: u32, work: usize| {
+            prune::Cells::build_within(
+                &self.p64,
+                index,
+                &self.grids,
+                (lo, hi),
+                pad,
+                // A lone root cell needs no index of finest cells.
+                if work == 0 { 0 } else { depth },
+                max_error,
+                work,
+            )
+        };
+        let mut cells = build(depth, work)?;
+        let fell_back = root_if_cut && work > 0 && cells.stats().budget_cut;
+        if fell_back {
+            cells = build(0, 0)?;
+        }
         let stats = cells.stats();
         self.report
             .phases_ms
@@ -599,6 +627,7 @@ impl Field {
             ),
             ("prune_whole_cells".into(), stats.whole_cells as f64),
             ("prune_subset_cells".into(), stats.subset_cells as f64),
+            ("prune_root_fallback".into(), f64::from(u8::from(fell_back))),
         ]);
         self.cells = Some(cells);
         Some(stats)

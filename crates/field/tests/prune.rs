@@ -605,3 +605,102 @@ fn a_fold_scanning_blocks_is_the_fold_child_by_child() {
     }
     assert!(far_children > 10_000, "{far_children} far children");
 }
+
+#[test]
+fn a_lone_root_cell_lists_every_child_and_gives_the_whole_values() {
+    // A work budget of 0 settles the octree's root: one subset cell over the whole box,
+    // no far cells, no index of finest cells.
+    let mol = molecule(300, 11, 0.026);
+    let whole = compile(&mol);
+    let mut cells = compile(&mol);
+    let stats = cells
+        .build_cells_within(6, 0.0, 0, false)
+        .expect("a molecule is bounded");
+    assert_eq!(
+        (stats.program_cells, stats.subset_cells, stats.far_cells),
+        (1, 1, 0),
+        "{stats:?}"
+    );
+    assert!(stats.subset_children <= 300 && stats.subset_children > 0);
+    let (lo, hi) = whole.bounds().expect("bounded");
+    let mut inside = 0;
+    for p in probes(16) {
+        let (w, c) = (whole.distance(p.as_vec3()), cells.distance(p.as_vec3()));
+        assert_eq!(
+            whole.distance_f64(p).to_bits(),
+            cells.distance_f64(p).to_bits(),
+            "{p}"
+        );
+        if p.cmpge(lo).all() && p.cmple(hi).all() {
+            // In the cell: the subset's fold is the whole fold, bit for bit.
+            inside += 1;
+            assert_eq!(w.to_bits(), c.to_bits(), "{p}: cells {c}, whole {w}");
+        } else {
+            // Outside the box: a positive bound of the distance.
+            assert!(c > 0.0 && w > 0.0, "{p}: cells {c}, whole {w}");
+        }
+    }
+    assert!(inside > 0);
+    // Eight lanes agree with single queries.
+    let pts: Vec<Vec3> = probes(8).iter().map(|p| p.as_vec3()).collect();
+    for chunk in pts.chunks_exact(8) {
+        let p: [Vec3; 8] = std::array::from_fn(|i| chunk[i]);
+        let lanes = cells.distance_x8(p);
+        for i in 0..8 {
+            assert_eq!(lanes[i].to_bits(), cells.distance(p[i]).to_bits());
+        }
+    }
+    // The octree with its budget holds more cells than the lone root.
+    let mut octree = compile(&mol);
+    let full = octree.build_cells(6, 0.0).expect("bounded");
+    assert!(full.program_cells + full.far_cells > 1, "{full:?}");
+}
+
+#[test]
+fn an_octree_cut_short_by_its_budget_falls_back_to_one_cell_when_asked() {
+    // 300 blended spheres: a few thousand units of work cannot refine the crowded octree.
+    let mol = molecule(300, 5, 0.026);
+    let mut cut = compile(&mol);
+    let stats = cut
+        .build_cells_within(6, 0.0, 1 << 12, false)
+        .expect("bounded");
+    assert!(stats.budget_cut, "{stats:?}");
+    let mut fallen = compile(&mol);
+    let stats = fallen
+        .build_cells_within(6, 0.0, 1 << 12, true)
+        .expect("bounded");
+    assert_eq!((stats.program_cells, stats.far_cells), (1, 0), "{stats:?}");
+    // The full budget refines it further.
+    let mut full = compile(&mol);
+    let refined = full.build_cells(6, 0.0).expect("bounded");
+    let cut_cells = cut
+        .build_cells_within(6, 0.0, 1 << 12, false)
+        .expect("bounded");
+    assert!(
+        refined.program_cells + refined.far_cells > cut_cells.program_cells + cut_cells.far_cells,
+        "{refined:?} vs {cut_cells:?}"
+    );
+    // Twenty blended spheres apart on a ring finish their octree within a small budget:
+    // kept.
+    let ring = node(
+        NodeKind::Smooth {
+            op: SmoothOp::Union,
+            children: (0..20)
+                .map(|i| {
+                    let a = f64::from(i) * std::f64::consts::TAU / 20.0;
+                    sphere(0.03, DVec3::new(0.4 * a.cos(), 0.4 * a.sin(), 0.0))
+                })
+                .collect(),
+            blend_radius: 0.02,
+        },
+        DVec3::ZERO,
+    );
+    let mut small = compile(&ring);
+    let stats = small
+        .build_cells_within(6, 0.0, 1 << 18, true)
+        .expect("bounded");
+    assert!(
+        !stats.budget_cut && stats.program_cells + stats.far_cells > 1,
+        "{stats:?}"
+    );
+}

@@ -148,6 +148,9 @@ pub struct CellStats {
     pub subset_cells: usize,
     /// Children listed by all subset cells.
     pub subset_children: usize,
+    /// The work budget stopped the refinement: some cells settled where they would have
+    /// been split further (at a coarser level than `depth`).
+    pub budget_cut: bool,
 }
 
 /// Cells with at most this many nodes are not subdivided further.
@@ -254,6 +257,7 @@ impl Cells {
             let per_cell = (work_before - cells.work_left) / level.len().max(1);
             let next = crowded.len() * 8;
             if next.saturating_mul(per_cell.max(1)) > cells.work_left {
+                cells.stats.budget_cut = true;
                 for &region in &crowded {
                     cells.settle(prog, index, grids, region, false, budget, max_error);
                 }
@@ -305,6 +309,8 @@ impl Cells {
         max_error: f64,
     ) -> bool {
         let Region { lo, hi, at, span } = region;
+        // Unrefined for want of work (not for depth): a crowded cell settling marks the cut.
+        let starved = !refine && span > 1 && self.work_left == 0;
         let refine = refine && span > 1;
         let radius = 0.5 * (hi - lo).length();
         let centre = 0.5 * (lo + hi);
@@ -319,6 +325,7 @@ impl Cells {
             if crowded && refine {
                 return false;
             }
+            self.stats.budget_cut |= crowded && starved;
         }
         let pruned = prune_indexed(prog, index, grids, centre, radius, max_error);
         self.spend(pruned.work);
@@ -336,6 +343,7 @@ impl Cells {
         if refine && nodes > LEAF_NODES {
             return false;
         }
+        self.stats.budget_cut |= starved && nodes > LEAF_NODES;
         let id = if let Some(&id) = self.by_source.get(&pruned.source) {
             self.stats.shared_cells += 1;
             id
