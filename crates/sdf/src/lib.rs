@@ -47,6 +47,7 @@ use marchmesh_core::{
     Cone, FarFrame, FrameEntry, Geometry, GeometryReport, Hit, NoHit, OcclusionResult,
     PrimarySamples, Ray, RayWork, Shortcuts, SurfacePoint, Termination, TraceResult, Visibility,
 };
+use marchmesh_field::prune::Cells;
 use marchmesh_field::{F32x8, Field, FieldError, FieldOptions, MeshGrid, RayCone, Restricted, V3};
 use marchmesh_scene::{MaterialId, Scene};
 
@@ -55,7 +56,7 @@ use inside::Inside;
 use march::{Lanes8, March, Next, Params};
 /// The types of [`SdfOptions::quantize`] and [`SdfOptions::recon`].
 pub use marchmesh_field::bake::{Quantization, Reconstruction};
-pub use options::{GridKind, HitEpsilon, SdfOptions};
+pub use options::{GridKind, HitEpsilon, PruneCells, SdfOptions};
 pub use settings::SdfBackend;
 
 /// Why the SDF backend could not build a scene.
@@ -112,6 +113,21 @@ pub const PRUNE_MIN_NODES: usize = 16;
 /// Largest change pruning per region may make to the field, as a fraction of the field's
 /// box: 2^-24, below the f32 rounding of a point in the box, so the tracer cannot tell.
 pub const PRUNE_MAX_ERROR_REL: f64 = 1.0 / 16_777_216.0;
+
+/// From this many camera samples times field nodes on, [`PruneCells::Auto`] gives the
+/// octree its whole work budget (up to about 0.7 s of build). Below it the octree gets
+/// [`PRUNE_TRIAL_WORK`], and a field whose refinement that cuts short is pruned as one cell
+/// over its box instead (a root smooth union's children in fold order, skipped eight at a
+/// time where far): on so few samples a long build costs more than it saves. 2^27: the
+/// crossover measured between 1000 blended spheres at 256x256 (one cell wins) and at
+/// 512x512, or 10^4 spheres at 128x128 (the octree wins); see
+/// `docs/decisions/0030-prune-cells-by-image-size.md`.
+pub const PRUNE_OCTREE_MIN_SAMPLE_NODES: u64 = 1 << 27;
+
+/// Work ([`marchmesh_field::prune::Cells::build_within`]) [`PruneCells::Auto`] lets an
+/// octree spend below [`PRUNE_OCTREE_MIN_SAMPLE_NODES`]: 2^18, about 10-20 ms, enough to
+/// finish the octree of a small carved part.
+pub const PRUNE_TRIAL_WORK: usize = 1 << 18;
 
 /// Deepest octree [`SdfOptions::prune_depth`] accepts (`2^8` finest cells per axis: a 64 MiB
 /// index).
@@ -337,6 +353,16 @@ fn far_frames(scene: &Scene) -> Vec<Option<FarFrame>> {
         .collect()
 }
 
+/// Whether `field` (to be pruned per region) is worth the octree's whole work budget on
+/// `scene`'s image ([`PruneCells::Auto`]): its camera samples times its nodes reach
+/// [`PRUNE_OCTREE_MIN_SAMPLE_NODES`].
+fn octree_pays(scene: &Scene, field: &Field) -> bool {
+    let samples = u64::from(scene.camera.width)
+        * u64::from(scene.camera.height)
+        * u64::from(scene.render.samples_per_pixel.max(1));
+    samples.saturating_mul(field.node_count() as u64) >= PRUNE_OCTREE_MIN_SAMPLE_NODES
+}
+
 /// One traced part built from its compiled `field`: the render-space field of `scene`'s
 /// objects (`frame` `None`), or a far object's field in the frame centred on `frame`, whose
 /// hit epsilon and normal step count the path from the camera to the frame. Errors: the
@@ -366,7 +392,15 @@ fn build_part(
     field.set_kernels(opts.kernels);
     field.set_jit(opts.jit);
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
-        field.build_cells(opts.prune_depth, PRUNE_MAX_ERROR_REL);
+        let (work, root_if_cut) = match opts.prune_cells {
+            PruneCells::Octree => (Cells::max_work(field.node_count()), false),
+            PruneCells::Root => (0, false),
+            PruneCells::Auto if octree_pays(scene, &field) => {
+                (Cells::max_work(field.node_count()), false)
+            }
+            PruneCells::Auto => (PRUNE_TRIAL_WORK, true),
+        };
+        field.build_cells_within(opts.prune_depth, PRUNE_MAX_ERROR_REL, work, root_if_cut);
     }
     let inside = match frame {
         None => Inside::build(scene, &field, &field_opts)?,

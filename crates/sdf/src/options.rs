@@ -40,6 +40,21 @@ pub enum GridKind {
     Sparse,
 }
 
+/// `prune_cells=` values: how a field pruned per region is divided into cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum PruneCells {
+    /// The octree where it pays for one image, else one cell (see
+    /// [`SdfOptions::prune_cells`]).
+    Auto,
+    /// The octree, refined while its work budget lasts (best per ray; up to about 0.7 s of
+    /// build).
+    Octree,
+    /// One cell over the field's box (no octree build; a root smooth union's folds still
+    /// skip far children eight at a time).
+    Root,
+}
+
 /// Options of [`crate::build`], and the sdf backend's `key=value` options (unknown keys are
 /// refused).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -124,6 +139,16 @@ pub struct SdfOptions {
     /// queries read their cell's program (the whole program's value bit for bit) and bundles
     /// are not culled ([`SdfOptions::cull`]).
     pub prune_depth: u32,
+    /// Cells of the pruning per region: auto (default), octree or root.
+    ///
+    /// `auto` gives the octree its whole work budget when the camera's samples times the
+    /// field's nodes reach [`crate::PRUNE_OCTREE_MIN_SAMPLE_NODES`]; below, a small budget
+    /// ([`crate::PRUNE_TRIAL_WORK`]), and one cell over the whole box where that does not
+    /// finish the octree: the whole budget's build (up to about 0.7 s) would cost more
+    /// than it saves on one image that small. `octree` is the fastest per ray, for renders
+    /// that reuse one build (benchmark repeats, the viewer); `root` never refines. Measured:
+    /// `docs/decisions/0030`.
+    pub prune_cells: PruneCells,
     /// In lockstep batches, march one cone per run of four camera rays and start the rays
     /// where it stops (false: every ray from its origin).
     ///
@@ -264,6 +289,7 @@ impl SdfOptions {
         lockstep: true,
         cull: true,
         prune_depth: 6,
+        prune_cells: PruneCells::Auto,
         beams: true,
         recede: true,
         kernels: true,

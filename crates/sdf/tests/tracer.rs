@@ -996,3 +996,75 @@ fn far_spheres_are_hit_like_the_analytic_sphere() {
         assert!(checked > 500, "{distance}: only {checked} hits checked");
     }
 }
+
+/// A smooth union of 24 spheres of radius 0.2 in a ring before the camera, seen at
+/// `width x height` (the camera of [`scene`]).
+fn blended_ring(width: u32, height: u32) -> Scene {
+    let children: Vec<String> = (0..24)
+        .map(|i| {
+            let a = i as f64 * std::f64::consts::TAU / 24.0;
+            let (x, y) = (1.2 * a.cos(), 1.2 * a.sin());
+            format!(
+                r#"{{"shape": {{"sphere": {{"radius": 0.2}}}}, "transform": {{"translate": [{x}, {y}, {}]}}}}"#,
+                0.1 * (i % 3) as f64
+            )
+        })
+        .collect();
+    let json = format!(
+        r#"{{"camera": {{"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "width": {width}, "height": {height}}},
+            "objects": [{{"shape": {{"smooth_union": {{"blend_radius": 0.15, "children": [{}]}}}}}}]}}"#,
+        children.join(",")
+    );
+    parse_scene(&json, "test", std::path::Path::new(".")).expect("valid test scene")
+}
+
+fn counter(g: &marchmesh_sdf::SdfGeometry, name: &str) -> Option<f64> {
+    g.report()
+        .counters
+        .iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, v)| *v)
+}
+
+#[test]
+fn every_kind_of_pruning_cells_finds_the_same_hits() {
+    use marchmesh_sdf::PruneCells;
+    let with = |width: u32, height: u32, prune_cells: PruneCells, prune_depth: u32| {
+        build(
+            &blended_ring(width, height),
+            &SdfOptions {
+                prune_cells,
+                prune_depth,
+                ..SdfOptions::DEFAULT
+            },
+        )
+        .expect("build")
+    };
+    let cells = |g: &marchmesh_sdf::SdfGeometry| {
+        counter(g, "prune_program_cells").expect("pruned")
+            + counter(g, "prune_far_cells").expect("pruned")
+    };
+    let whole = with(64, 64, PruneCells::Auto, 0);
+    assert_eq!(counter(&whole, "prune_program_cells"), None);
+    let reference = camera_rows(&whole);
+    // One cell over the box (a copy of the ring's 25 nodes: small programs are copied).
+    let root = with(64, 64, PruneCells::Root, 6);
+    assert_eq!(counter(&root, "prune_program_cells"), Some(1.0));
+    assert_eq!(counter(&root, "prune_far_cells"), Some(0.0));
+    let (_, _, hits) = agree_to_refinement(&camera_rows(&root), &reference);
+    assert!(hits > 300, "{hits} hits");
+    // The octree, refined.
+    let octree = with(64, 64, PruneCells::Octree, 6);
+    assert!(cells(&octree) > 1.0);
+    agree_to_refinement(&camera_rows(&octree), &reference);
+    // Auto on a small image: the trial octree, or one cell where the trial was cut short.
+    let small = with(64, 64, PruneCells::Auto, 6);
+    let fell_back = counter(&small, "prune_root_fallback").expect("pruned");
+    assert!(fell_back == 0.0 || cells(&small) == 1.0);
+    agree_to_refinement(&camera_rows(&small), &reference);
+    // Auto on a large image (samples times nodes past the threshold): the whole octree.
+    let large = with(4096, 2048, PruneCells::Auto, 6);
+    assert_eq!(counter(&large, "prune_root_fallback"), Some(0.0));
+    assert_eq!(cells(&large), cells(&octree));
+    agree_to_refinement(&camera_rows(&large), &reference);
+}
