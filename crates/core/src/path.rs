@@ -30,7 +30,7 @@ use glam::Vec3;
 use crate::camera::{Tile, sample_offset};
 use crate::geometry::{OcclusionResult, Ray, TraceResult};
 use crate::integrator::{
-    Band, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
+    Band, DirectLight, Frame, ShadingLight, Vertex, resolve_vertex, timed, trace_wavefront,
 };
 use crate::sampling::{cosine_hemisphere, halton_dim, sample_key};
 use crate::stats::RenderStats;
@@ -196,11 +196,11 @@ fn trace_tile(
                     let u = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32);
                     let v = sample(DIMS_PER_BOUNCE_FIXED + 2 * li as u32 + 1);
                     let (dir, dist, radiance_over_pdf, shadows) = match *light {
-                        ShadingLight::Point {
+                        ShadingLight::Direct(DirectLight::Point {
                             position,
                             intensity,
                             shadows,
-                        } => {
+                        }) => {
                             let to = position - hit.position;
                             let dist = to.length();
                             (
@@ -210,11 +210,11 @@ fn trace_tile(
                                 shadows,
                             )
                         }
-                        ShadingLight::Directional {
+                        ShadingLight::Direct(DirectLight::Directional {
                             to_light,
                             intensity,
                             shadows,
-                        } => (to_light, f32::INFINITY, Vec3::splat(intensity), shadows),
+                        }) => (to_light, f32::INFINITY, Vec3::splat(intensity), shadows),
                         ShadingLight::Area(e) => match e.sample(hit.position, u, v) {
                             Some(s) => (
                                 s.dir,

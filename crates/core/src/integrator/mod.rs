@@ -45,7 +45,7 @@ mod whitted;
 use band::Planes;
 pub(crate) use band::{Band, Frame};
 use shading::Shading;
-pub(crate) use shading::ShadingLight;
+pub(crate) use shading::{DirectLight, ShadingLight};
 pub(crate) use wavefront::{Vertex, resolve_vertex, timed, trace_wavefront};
 use whitted::trace_band;
 pub(crate) use whitted::zero_sums;

@@ -82,6 +82,20 @@ pub(crate) enum DirectLight {
 }
 
 impl DirectLight {
+    /// Whether the Whitted loop shades anything from this light (a positive intensity and,
+    /// for a directional light, a finite direction; a point light's direction depends on
+    /// the point).
+    fn lights_some_point(&self) -> bool {
+        match *self {
+            DirectLight::Point { intensity, .. } => intensity > 0.0,
+            DirectLight::Directional {
+                to_light,
+                intensity,
+                ..
+            } => intensity > 0.0 && to_light.is_finite(),
+        }
+    }
+
     /// Whether the light casts shadows.
     pub(crate) fn shadows(&self) -> bool {
         match *self {
@@ -92,17 +106,9 @@ impl DirectLight {
     }
 }
 
+/// A light as the shading loops read it: a point or directional light, or an area light.
 pub(crate) enum ShadingLight {
-    Point {
-        position: Vec3,
-        intensity: f32,
-        shadows: bool,
-    },
-    Directional {
-        to_light: Vec3,
-        intensity: f32,
-        shadows: bool,
-    },
+    Direct(DirectLight),
     Area(Emitter),
 }
 
@@ -125,20 +131,20 @@ impl Shading {
                     position,
                     intensity,
                     casts_shadows,
-                } => lights.push(ShadingLight::Point {
+                } => lights.push(ShadingLight::Direct(DirectLight::Point {
                     position: (position - origin).as_vec3(),
                     intensity: intensity as f32,
                     shadows: casts_shadows,
-                }),
+                })),
                 Light::Directional {
                     direction,
                     intensity,
                     casts_shadows,
-                } => lights.push(ShadingLight::Directional {
+                } => lights.push(ShadingLight::Direct(DirectLight::Directional {
                     to_light: direction.as_vec3().normalize(),
                     intensity: intensity as f32,
                     shadows: casts_shadows,
-                }),
+                })),
                 Light::Sphere { .. } | Light::Rectangle { .. } => {}
             }
         }
@@ -146,37 +152,15 @@ impl Shading {
         let occlusion = r.ambient_occlusion.is_some() && ambient > 0.0;
         let spawns = occlusion
             || lights.iter().any(|l| match l {
-                ShadingLight::Point { shadows, .. } | ShadingLight::Directional { shadows, .. } => {
-                    *shadows
-                }
+                ShadingLight::Direct(d) => d.shadows(),
                 ShadingLight::Area(_) => true,
             });
         let keyed = occlusion || !emitters.is_empty();
-        // Lights the Whitted loop would skip for every point (non-positive intensity, or a
-        // non-finite direction) are left out; a point light's direction depends on the point.
+        // Lights the Whitted loop would skip for every point are left out.
         let direct = lights
             .iter()
             .filter_map(|l| match *l {
-                ShadingLight::Point {
-                    position,
-                    intensity,
-                    shadows,
-                } => (intensity > 0.0).then_some(DirectLight::Point {
-                    position,
-                    intensity,
-                    shadows,
-                }),
-                ShadingLight::Directional {
-                    to_light,
-                    intensity,
-                    shadows,
-                } => {
-                    (intensity > 0.0 && to_light.is_finite()).then_some(DirectLight::Directional {
-                        to_light,
-                        intensity,
-                        shadows,
-                    })
-                }
+                ShadingLight::Direct(d) => d.lights_some_point().then_some(d),
                 ShadingLight::Area(_) => None,
             })
             .collect();

@@ -5,7 +5,7 @@ use glam::Vec3;
 
 use super::band::{Band, Frame};
 use super::direct::{Shadows, Wavefront, shade_direct};
-use super::shading::{ShadingLight, phong, rotation_of};
+use super::shading::{DirectLight, ShadingLight, phong, rotation_of};
 use super::wavefront::{Vertex, resolve_no_hits, resolve_vertex, timed, trace_wavefront};
 use crate::camera::{Tile, sample_offset};
 use crate::geometry::{
@@ -381,20 +381,20 @@ pub(super) fn trace_tile(
             }
             for (li, light) in sh.lights.iter().enumerate() {
                 let (to_light, intensity, shadows, dist) = match *light {
-                    ShadingLight::Point {
+                    ShadingLight::Direct(DirectLight::Point {
                         position,
                         intensity,
                         shadows,
-                    } => {
+                    }) => {
                         let v = position - hit.position;
                         let len = v.length();
                         (v / len, intensity, shadows, len - offset)
                     }
-                    ShadingLight::Directional {
+                    ShadingLight::Direct(DirectLight::Directional {
                         to_light,
                         intensity,
                         shadows,
-                    } => (to_light, intensity, shadows, sh.max_distance),
+                    }) => (to_light, intensity, shadows, sh.max_distance),
                     ShadingLight::Area(emitter)
                         if emitter.casts_shadows() && shortcuts.cone_shadows =>
                     {
