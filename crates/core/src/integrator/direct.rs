@@ -30,10 +30,16 @@ pub(super) struct Shadows<'a> {
     pub(super) pending: &'a mut Vec<PendingLight>,
 }
 
-impl Shadows<'_> {
+impl<'a> Shadows<'a> {
+    /// The queue held in `rays` and `pending`.
+    #[inline(always)]
+    pub(super) fn of(rays: &'a mut Vec<Ray>, pending: &'a mut Vec<PendingLight>) -> Self {
+        Shadows { rays, pending }
+    }
+
     /// Queues a shadow ray from `origin` towards `dir` up to `t_max` for path `path`.
     #[inline(always)]
-    fn push(&mut self, path: usize, origin: Vec3, dir: Vec3, t_max: f32, amount: Vec3) {
+    pub(super) fn push(&mut self, path: usize, origin: Vec3, dir: Vec3, t_max: f32, amount: Vec3) {
         self.rays.push(Ray {
             origin,
             dir,

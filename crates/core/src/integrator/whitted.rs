@@ -9,7 +9,7 @@ use super::shading::{DirectLight, ShadingLight, phong, rotation_of};
 use super::wavefront::{Vertex, resolve_no_hits, resolve_vertex, timed, trace_wavefront};
 use crate::camera::{Tile, sample_offset};
 use crate::geometry::{
-    Cone, Geometry, OcclusionResult, Ray, SurfacePoint, Termination, TraceResult, Visibility,
+    Cone, Geometry, OcclusionResult, Ray, SurfacePoint, TraceResult, Visibility,
 };
 use crate::sampling::{cosine_hemisphere, hammersley, mix64, sample_key};
 use crate::stats::RenderStats;
@@ -69,35 +69,17 @@ impl OcclusionBatch<'_, '_> {
             stats.trace_time.shadow_ns += ns;
             stats.shadow_rays += rays.len() as u64;
         }
-        // The counters in locals (kept in registers; through `stats` every ray's sums waited
-        // on the previous ray's stores), the same integer sums and maxima as
-        // `RenderStats::add_work` and `add_termination` ray by ray.
-        let (mut steps, mut node_visits, mut primitive_tests) = (0u64, 0u64, 0u64);
-        let (mut max_steps, mut max_node_visits) = (0u32, 0u32);
-        let (mut max_steps_ended, mut max_distance_ended) = (0u64, 0u64);
+        // The counters tallied in a local (kept in registers; through `stats` every ray's
+        // sums waited on the previous ray's stores), then merged: the same sums and maxima.
+        let mut tally = RenderStats::default();
         for (p, o) in pending.iter().zip(occlusion.iter()) {
-            let w = o.work;
-            steps += w.steps as u64;
-            max_steps = max_steps.max(w.steps);
-            node_visits += w.node_visits as u64;
-            max_node_visits = max_node_visits.max(w.node_visits);
-            primitive_tests += w.primitive_tests as u64;
-            match o.termination {
-                Termination::MaxSteps => max_steps_ended += 1,
-                Termination::MaxDistance => max_distance_ended += 1,
-                Termination::Hit | Termination::Miss => {}
-            }
+            tally.add_work(&o.work);
+            tally.add_termination(o.termination, true);
             if !o.occluded {
                 sum[paths[p.path as usize].pixel as usize] += p.amount;
             }
         }
-        stats.steps += steps;
-        stats.max_steps_seen = stats.max_steps_seen.max(max_steps);
-        stats.node_visits += node_visits;
-        stats.max_node_visits_seen = stats.max_node_visits_seen.max(max_node_visits);
-        stats.primitive_tests += primitive_tests;
-        stats.occlusion_max_steps += max_steps_ended;
-        stats.max_distance += max_distance_ended;
+        stats.merge(&tally);
         rays.clear();
         pending.clear();
     }
@@ -302,10 +284,7 @@ pub(super) fn trace_tile(
         let mut next_hit = 0;
         while next_hit < hits.len() {
             if let Some(w) = &wavefront {
-                let shadows = Shadows {
-                    rays: &mut *shadow_rays,
-                    pending: &mut *pending,
-                };
+                let shadows = Shadows::of(shadow_rays, pending);
                 next_hit += shade_direct(&hits[next_hit..], w, sum, band, shadows, sh, distinct);
                 if next_hit == hits.len() {
                     break;
@@ -445,16 +424,13 @@ pub(super) fn trace_tile(
                             let contribution = share * amount * color * emitter.emission();
                             let dist = s.dist - offset;
                             if emitter.casts_shadows() && dist > 0.0 {
-                                shadow_rays.push(Ray {
+                                Shadows::of(shadow_rays, pending).push(
+                                    pi,
                                     origin,
-                                    dir: s.dir,
-                                    t_min: 0.0,
-                                    t_max: dist,
-                                });
-                                pending.push(PendingLight {
-                                    path: pi as u32,
-                                    amount: contribution,
-                                });
+                                    s.dir,
+                                    dist,
+                                    contribution,
+                                );
                             } else {
                                 sum[px] += contribution;
                             }
@@ -472,16 +448,13 @@ pub(super) fn trace_tile(
                 }
                 let contribution = local_weight * amount * color;
                 if shadows && dist > 0.0 {
-                    shadow_rays.push(Ray {
+                    Shadows::of(shadow_rays, pending).push(
+                        pi,
                         origin,
-                        dir: to_light,
-                        t_min: 0.0,
-                        t_max: dist,
-                    });
-                    pending.push(PendingLight {
-                        path: pi as u32,
-                        amount: contribution,
-                    });
+                        to_light,
+                        dist,
+                        contribution,
+                    );
                 } else {
                     sum[px] += contribution;
                 }
