@@ -592,7 +592,7 @@ impl Field {
         let depth = depth.min(8);
         // Half a finest cell of margin around the surfaces' box.
         let pad = 0.5 * (hi - lo).max_element() / f64::from(1u32 << depth) + 1e-9;
-        let build = |depth: u32, work: usize| {
+        let build = |work: usize| {
             prune::Cells::build_within(
                 &self.p64,
                 index,
@@ -605,10 +605,10 @@ impl Field {
                 work,
             )
         };
-        let mut cells = build(depth, work)?;
+        let mut cells = build(work)?;
         let fell_back = root_if_cut && work > 0 && cells.stats().budget_cut;
         if fell_back {
-            cells = build(0, 0)?;
+            cells = build(0)?;
         }
         let stats = cells.stats();
         self.report

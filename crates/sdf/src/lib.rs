@@ -392,12 +392,11 @@ fn build_part(
     field.set_kernels(opts.kernels);
     field.set_jit(opts.jit);
     if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
+        let whole = Cells::max_work(field.node_count());
         let (work, root_if_cut) = match opts.prune_cells {
-            PruneCells::Octree => (Cells::max_work(field.node_count()), false),
+            PruneCells::Octree => (whole, false),
             PruneCells::Root => (0, false),
-            PruneCells::Auto if octree_pays(scene, &field) => {
-                (Cells::max_work(field.node_count()), false)
-            }
+            PruneCells::Auto if octree_pays(scene, &field) => (whole, false),
             PruneCells::Auto => (PRUNE_TRIAL_WORK, true),
         };
         field.build_cells_within(opts.prune_depth, PRUNE_MAX_ERROR_REL, work, root_if_cut);

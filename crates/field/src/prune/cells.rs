@@ -310,7 +310,7 @@ impl Cells {
     ) -> bool {
         let Region { lo, hi, at, span } = region;
         // Unrefined for want of work (not for depth): a crowded cell settling marks the cut.
-        let starved = !refine && span > 1 && self.work_left == 0;
+        let starved = !refine && span > 1;
         let refine = refine && span > 1;
         let radius = 0.5 * (hi - lo).length();
         let centre = 0.5 * (lo + hi);
