@@ -361,6 +361,18 @@ fn bad_backend_options_are_refused_naming_the_key_typed_and_its_range() {
             "sdf option grid_res: must be in 4..=512",
             "mesh_grid_resolution",
         ),
+        (
+            "sdf",
+            &["prune_cells=everywhere"][..],
+            "option `prune_cells`: unknown variant `everywhere`, expected one of `auto`, `octree`, `root`",
+            "PruneCells",
+        ),
+        (
+            "sdf",
+            &["prune_depth=9"][..],
+            "sdf option prune_depth: must be in 0..=8",
+            "SdfOptions",
+        ),
     ] {
         let mut args = vec!["render", "s.json", "--backend", backend, "-o", "o.png"];
         for o in options {

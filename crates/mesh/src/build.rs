@@ -214,21 +214,41 @@ fn may_show_inner_faces(node: &Node, ctx: &Ctx) -> bool {
 /// repetition of analytic solids whose parent-to-render transform is `parent`. Nodes holding
 /// a plane, a mesh, a triangle or an infinite repetition are never extracted here (false).
 fn camera_inside_solid(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
-    fn analytic_solids(n: &Node) -> bool {
-        match &n.kind {
-            NodeKind::Leaf(shape) => shape.is_analytic_solid(),
-            NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
-                c.iter().all(analytic_solids)
-            }
-            NodeKind::Smooth { children, .. } => children.iter().all(analytic_solids),
-            NodeKind::Repeat { child, .. } => analytic_solids(child),
-        }
-    }
     if !analytic_solids(node) || node_bounds(node, ctx.mesh_bounds).is_none() {
         return false;
     }
     marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
         .is_ok_and(|f| f.distance_f64(DVec3::ZERO) < 0.0)
+}
+
+/// Whether every leaf under `n` is an analytic solid (no plane, mesh or triangle), so its
+/// distance field compiles without baking anything.
+fn analytic_solids(n: &Node) -> bool {
+    match &n.kind {
+        NodeKind::Leaf(shape) => shape.is_analytic_solid(),
+        NodeKind::Union(c) | NodeKind::Intersection(c) | NodeKind::Subtraction(c) => {
+            c.iter().all(analytic_solids)
+        }
+        NodeKind::Smooth { children, .. } => children.iter().all(analytic_solids),
+        NodeKind::Repeat { child, .. } => analytic_solids(child),
+    }
+}
+
+/// A lower bound of the distance in render units from the camera (the render-space origin)
+/// to the surface of `node`, an analytic composite placed by `to_render` (its own transform
+/// included): the magnitude of its distance field at the camera. The field is 1-Lipschitz
+/// (every backend sphere-traces it), so no surface point is nearer than its value. `None`
+/// when the node holds a plane, mesh or triangle (its field would need a bake) or its field
+/// does not compile; the caller then keeps its own estimate.
+pub(crate) fn camera_surface_distance(node: &Node, to_render: DAffine3) -> Option<f64> {
+    if !analytic_solids(node) {
+        return None;
+    }
+    let parent = to_render * node.transform.inverse();
+    marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
+        .ok()
+        .map(|f| f.distance_f64(DVec3::ZERO).abs())
+        .filter(|d| d.is_finite())
 }
 
 /// Cell offsets (repeat node's frame) of a repetition: all cells of finite axes; on infinite

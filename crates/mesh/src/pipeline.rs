@@ -323,9 +323,17 @@ impl ShapeInputs<'_> {
             .map(|p| {
                 let world = build::transform_bounds(&p.to_render, local);
                 let size = (world.1 - world.0).max_element();
-                // A camera on or inside the bounds sees it at most a thousandth of its size
-                // away (as the tessellation's screen budget assumes).
-                let distance = build::distance_to_box(world).max(1e-3 * size);
+                // A camera near or inside the bounds: the box says little (nothing inside
+                // it), the field at the camera bounds the nearest surface point's distance
+                // from below. On the surface (or holding a mesh) a thousandth of the size,
+                // as the tessellation's screen budget assumes.
+                let mut distance = build::distance_to_box(world);
+                if distance < size
+                    && let Some(d) = build::camera_surface_distance(p.node, p.to_render)
+                {
+                    distance = distance.max(d);
+                }
+                let distance = distance.max(1e-3 * size);
                 size / (cell_per_distance * distance)
             })
             .fold(0.0f64, f64::max);

@@ -153,3 +153,42 @@ fn tiny_scenes_render_with_a_cwbvh_request() {
     assert!(out.stats.hits > 8, "only {} hits", out.stats.hits);
     assert!(g.report().notes.iter().any(|n| n.contains("built as Bvh2")));
 }
+
+/// The extraction grid's cells along the longest side, from the build's note.
+fn extraction_resolution(g: &impl Geometry) -> u32 {
+    let notes = g.report().notes;
+    notes
+        .iter()
+        .find_map(|n| n.split("at resolution ").nth(1)?.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no extraction note in {notes:?}"))
+}
+
+#[test]
+fn a_camera_inside_a_union_sizes_the_extraction_grid_from_the_nearest_surface() {
+    // The camera sits inside the first sphere, `depth` from its surface: the grid's cells must
+    // be small on screen at that distance (finer the nearer the surface), not at the bounding
+    // box's distance (zero from inside, which asked for the largest grid whatever the image).
+    let at = |depth: f64| {
+        let z = 0.5 - (2.0 - depth);
+        let scene = common::scene(&format!(
+            r#"{{"camera": {{"position": [0, 0, {z}], "look_at": [0, 0, 1], "vfov_deg": 70, "width": 64, "height": 64}},
+                "objects": [{{"shape": {{"union": {{"children": [
+                    {{"shape": {{"sphere": {{"radius": 2}}}}, "transform": {{"translate": [0, 0, 0.5]}}}},
+                    {{"shape": {{"sphere": {{"radius": 2}}}}, "transform": {{"translate": [1.5, 0, 1.5]}}}}]}}}}}}]}}"#
+        ));
+        let g = build(&scene, &MeshOptions::default()).expect("build");
+        let notes = g.report().notes.join("\n");
+        assert!(notes.contains("the camera is inside this union"), "{notes}");
+        extraction_resolution(&g)
+    };
+    let (far, near) = (at(1.5), at(0.3));
+    // The screen budget at 1.5 units: about 7 units of box over 2 px * 0.019 rad * 1.5.
+    assert!(
+        (100..=200).contains(&far),
+        "1.5 units from the surface: {far} cells"
+    );
+    assert!(
+        near > 2 * far,
+        "0.3 units from the surface: {near} against {far} cells"
+    );
+}
