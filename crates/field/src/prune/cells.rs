@@ -86,8 +86,67 @@ pub struct Cells {
 
 thread_local! {
     /// The merged kept children of an 8-lane query over several subset cells.
-    static MERGED: std::cell::RefCell<(Vec<u32>, Vec<u32>)> =
-        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    static MERGED: std::cell::RefCell<MergedKids> =
+        const { std::cell::RefCell::new(MergedKids::new()) };
+}
+
+/// The kept children of an 8-lane query whose lanes lie in several subset cells, merged
+/// into one list with its blocks, in buffers reused from query to query (one per thread in
+/// [`Cells::eval_x8`]), so the merged fold also scans eight children at a time.
+#[derive(Debug, Default)]
+pub struct MergedKids {
+    /// The union of the merged lists, in fold order.
+    pub kids: Vec<u32>,
+    /// [`KidBlock::table`] of `kids` when the last [`MergedKids::merge`] returned `true`.
+    pub blocks: Vec<KidBlock>,
+    spare: Vec<u32>,
+}
+
+impl MergedKids {
+    /// Empty buffers.
+    pub const fn new() -> Self {
+        MergedKids {
+            kids: Vec::new(),
+            blocks: Vec::new(),
+            spare: Vec::new(),
+        }
+    }
+
+    /// Sets `kids` to the union of `lists` (node indices, each ascending: fold order), in
+    /// fold order. When the union is shorter than the lists together (one fold over it
+    /// reads fewer children than one fold per list), also sets `blocks` to its
+    /// [`KidBlock::table`] over `spheres` (an f32 [`Program::sphere_table`]) and returns
+    /// `true`; otherwise returns `false` and leaves `blocks` as they were.
+    pub fn merge(&mut self, lists: &[&[u32]], spheres: &[[f32; 4]]) -> bool {
+        let Some((first, rest)) = lists.split_first() else {
+            self.kids.clear();
+            return false;
+        };
+        // Merged pairwise in linear time.
+        let (merged, spare) = (&mut self.kids, &mut self.spare);
+        merged.clear();
+        merged.extend_from_slice(first);
+        let mut separate = first.len();
+        for kids in rest {
+            separate += kids.len();
+            spare.clear();
+            let (mut a, mut b) = (0, 0);
+            while a < merged.len() && b < kids.len() {
+                let (x, y) = (merged[a], kids[b]);
+                spare.push(x.min(y));
+                a += usize::from(x <= y);
+                b += usize::from(y <= x);
+            }
+            spare.extend_from_slice(&merged[a..]);
+            spare.extend_from_slice(&kids[b..]);
+            std::mem::swap(merged, spare);
+        }
+        if merged.len() >= separate {
+            return false;
+        }
+        KidBlock::table_into(spheres, merged, &mut self.blocks);
+        true
+    }
 }
 
 /// A cell of the octree being built: its box and its block of finest cells.
@@ -546,34 +605,21 @@ impl Cells {
             }
         }
         if n_subsets > 1 {
-            MERGED.with_borrow_mut(|(merged, spare)| {
-                // The lists are in fold order (ascending): merged pairwise in linear time.
-                merged.clear();
-                merged.extend_from_slice(subsets[0]);
-                let mut separate = subsets[0].len();
-                for kids in &subsets[1..n_subsets] {
-                    separate += kids.len();
-                    spare.clear();
-                    let (mut a, mut b) = (0, 0);
-                    while a < merged.len() && b < kids.len() {
-                        let (x, y) = (merged[a], kids[b]);
-                        spare.push(x.min(y));
-                        a += usize::from(x <= y);
-                        b += usize::from(y <= x);
-                    }
-                    spare.extend_from_slice(&merged[a..]);
-                    spare.extend_from_slice(&kids[b..]);
-                    std::mem::swap(merged, spare);
-                }
+            MERGED.with_borrow_mut(|m| {
                 // One evaluation over the union only when it reads fewer children than one
-                // per cell would.
-                if merged.len() < separate {
-                    let (d, m) =
-                        whole.eval_root_subset::<F32x8, M>(merged, &self.spheres32, &[], p, grids);
+                // per cell would; its blocks skip far children eight at a time.
+                if m.merge(&subsets[..n_subsets], &self.spheres32) {
+                    let (d, dm) = whole.eval_root_subset::<F32x8, M>(
+                        &m.kids,
+                        &self.spheres32,
+                        &m.blocks,
+                        p,
+                        grids,
+                    );
                     for l in 0..8 {
                         if (done >> l) & 1 == 0 && matches!(cells[l], Some(Cell::Subset { .. })) {
                             out.0[l] = d.0[l];
-                            mat[l] = m[l];
+                            mat[l] = dm[l];
                             done |= 1 << l;
                         }
                     }
