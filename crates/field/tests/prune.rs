@@ -704,3 +704,113 @@ fn an_octree_cut_short_by_its_budget_falls_back_to_one_cell_when_asked() {
         "{stats:?}"
     );
 }
+
+/// An 8-lane query whose lanes lie in several subset cells folds the union of their kept
+/// children once (`MergedKids`), scanning that union's blocks: the union in fold order,
+/// its blocks those of the union (not of one cell's list), the fold over them bit for bit
+/// the fold child by child, and eight lanes per lane what one query gives. On octrees
+/// that small budgets cut short (coarse cells that split a bundle) and the whole octree.
+#[test]
+fn a_fold_over_several_cells_scans_the_blocks_of_their_union() {
+    use marchmesh_field::V3;
+    use marchmesh_field::lane::F32x8;
+    use marchmesh_field::program::{FOLD_BLOCK, KidBlock};
+    use marchmesh_field::prune::{Cell, Cells, MergedKids, PruneIndex};
+    use std::collections::BTreeSet;
+    let mut mol = molecule(400, 13, 0.026);
+    if let NodeKind::Smooth { children, .. } = &mut mol.kind {
+        for (i, c) in children.iter_mut().enumerate() {
+            c.material = (i % 3) as u32;
+        }
+    }
+    let whole = whole_program(&mol);
+    let p32 = whole.cast::<f32>();
+    let spheres = whole.sphere_table::<f32>();
+    let (lo, hi) = compile(&mol).bounds().expect("bounded");
+    let index = PruneIndex::build(&whole);
+    let mut rng = 3u64;
+    let mut next = move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut merged = MergedKids::new();
+    let (mut with_blocks, mut far_children) = (0usize, 0usize);
+    for budget in [
+        1 << 12,
+        1 << 14,
+        1 << 16,
+        Cells::max_work(whole.instrs.len()),
+    ] {
+        let cells = Cells::build_within(&whole, &index, &[], (lo, hi), 0.01, 6, 0.0, budget)
+            .expect("built");
+        assert!(cells.stats().subset_cells > 1, "{:?}", cells.stats());
+        for _ in 0..600 {
+            // Bundles near the walk (within 0.35 of the origin), spread across cells.
+            let centre = [next(), next(), next()].map(|v| (2.0 * v - 1.0) * 0.4);
+            let gap = [0.01f32, 0.05, 0.15][(next() * 3.0) as usize % 3];
+            let lanes: [[f32; 3]; 8] =
+                std::array::from_fn(|_| centre.map(|v| v + (2.0 * next() - 1.0) * gap));
+            let v8 = V3::new(
+                F32x8(lanes.map(|l| l[0])),
+                F32x8(lanes.map(|l| l[1])),
+                F32x8(lanes.map(|l| l[2])),
+            );
+            // Eight lanes against one query per lane, value and material.
+            let (d, m) = cells.eval_x8::<true>(v8, &p32, &[]);
+            let d_only = cells.eval_x8::<false>(v8, &p32, &[]).0;
+            for (i, l) in lanes.iter().enumerate() {
+                let one = cells.eval::<true>(Vec3::from_array(*l), &p32, &[]);
+                assert_eq!((d.0[i].to_bits(), m[i]), (one.0.to_bits(), one.1), "{l:?}");
+                let one = cells.eval::<false>(Vec3::from_array(*l), &p32, &[]);
+                assert_eq!(d_only.0[i].to_bits(), one.0.to_bits(), "{l:?}");
+            }
+            // The lanes' distinct subset cells, merged as the query merges them.
+            let mut lists: Vec<&[u32]> = Vec::new();
+            for l in &lanes {
+                if let Some(Cell::Subset { kids, .. }) = cells.locate(*l)
+                    && !lists.iter().any(|k| std::ptr::eq(*k, &**kids))
+                {
+                    lists.push(kids);
+                }
+            }
+            if lists.len() < 2 {
+                continue;
+            }
+            let scanned = merged.merge(&lists, &spheres);
+            let union: BTreeSet<u32> = lists.iter().flat_map(|k| k.iter().copied()).collect();
+            assert_eq!(merged.kids, union.into_iter().collect::<Vec<_>>());
+            assert_eq!(
+                scanned,
+                merged.kids.len() < lists.iter().map(|k| k.len()).sum::<usize>()
+            );
+            if !scanned {
+                continue;
+            }
+            with_blocks += 1;
+            assert_eq!(merged.blocks.len(), merged.kids.len().div_ceil(FOLD_BLOCK));
+            assert_eq!(merged.blocks, KidBlock::table(&spheres, &merged.kids));
+            let kids = &merged.kids;
+            let a = p32.eval_root_subset::<F32x8, true>(kids, &spheres, &merged.blocks, v8, &[]);
+            let b = p32.eval_root_subset::<F32x8, true>(kids, &spheres, &[], v8, &[]);
+            assert_eq!(a.0.0.map(f32::to_bits), b.0.0.map(f32::to_bits));
+            assert_eq!(a.1, b.1);
+            let a = p32.eval_root_subset::<F32x8, false>(kids, &spheres, &merged.blocks, v8, &[]);
+            assert_eq!(a.0.0.map(f32::to_bits), b.0.0.map(f32::to_bits));
+            // The union is what the subset lanes take from the eight-lane query.
+            for (i, l) in lanes.iter().enumerate() {
+                if matches!(cells.locate(*l), Some(Cell::Subset { .. })) {
+                    assert_eq!(d.0[i].to_bits(), b.0.0[i].to_bits(), "{l:?}");
+                }
+            }
+            let v = V3::new(lanes[0][0], lanes[0][1], lanes[0][2]);
+            let best = p32.eval::<f32, false>(v, &[]).0;
+            for blk in &merged.blocks {
+                far_children += blk.near(lanes[0], 0.0, best + 0.1, 0.026).count_zeros() as usize;
+            }
+        }
+    }
+    assert!(with_blocks > 100, "{with_blocks} merged queries");
+    assert!(far_children > 1000, "{far_children} far children");
+}

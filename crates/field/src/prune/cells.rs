@@ -82,12 +82,91 @@ pub struct Cells {
     /// The whole program's [`Program::sphere_table`] in f32 when some cell is a
     /// [`Cell::Subset`] (empty otherwise): subset folds rule far spheres out from it.
     spheres32: Vec<[f32; 4]>,
+    /// Names these cells in the merged lists cached per thread ([`MergeCache`]).
+    id: CellsId,
 }
 
 thread_local! {
-    /// The merged kept children of an 8-lane query over several subset cells.
-    static MERGED: std::cell::RefCell<MergedKids> =
-        const { std::cell::RefCell::new(MergedKids::new()) };
+    /// The merged kept children of the last 8-lane queries over several subset cells.
+    static MERGED: std::cell::RefCell<MergeCache> =
+        const { std::cell::RefCell::new(MergeCache { slots: Vec::new(), next: 0 }) };
+}
+
+/// A number no other [`Cells`] holds, fresh on every build and clone: with the addresses
+/// of their kept children it names a set of subset cells in [`MergeCache`].
+#[derive(Debug)]
+struct CellsId(u64);
+
+impl CellsId {
+    fn fresh() -> Self {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+        CellsId(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
+    }
+}
+
+impl Clone for CellsId {
+    fn clone(&self) -> Self {
+        Self::fresh()
+    }
+}
+
+/// Merged children per set of subset cells, for the last few sets a thread's 8-lane
+/// queries met (a bundle's steps mostly stay among the same cells): a query over a set
+/// seen recently reads its union and blocks without merging or building them again.
+#[derive(Debug)]
+struct MergeCache {
+    slots: Vec<MergeSlot>,
+    /// The slot the next new set replaces, round robin.
+    next: usize,
+}
+
+#[derive(Debug)]
+struct MergeSlot {
+    /// The [`Cells`] and the sorted addresses of its cells' kept children (0 past them).
+    id: u64,
+    key: [usize; 8],
+    /// What [`MergedKids::merge`] returned.
+    shorter: bool,
+    merged: MergedKids,
+}
+
+/// Sets of subset cells [`MergeCache`] remembers per thread.
+const MERGE_SLOTS: usize = 4;
+
+impl MergeCache {
+    /// The union of `lists` (the kept children of distinct subset cells of the [`Cells`]
+    /// numbered `id`) with its blocks, when it is shorter than the lists together.
+    fn get(&mut self, id: u64, lists: &[&[u32]], spheres: &[[f32; 4]]) -> Option<&MergedKids> {
+        let mut key = [0usize; 8];
+        for (k, l) in key.iter_mut().zip(lists) {
+            *k = l.as_ptr() as usize;
+        }
+        key[..lists.len()].sort_unstable();
+        let at = match self.slots.iter().position(|s| s.id == id && s.key == key) {
+            Some(at) => at,
+            None => {
+                let at = if self.slots.len() < MERGE_SLOTS {
+                    self.slots.push(MergeSlot {
+                        id,
+                        key,
+                        shorter: false,
+                        merged: MergedKids::new(),
+                    });
+                    self.slots.len() - 1
+                } else {
+                    let at = self.next;
+                    self.next = (at + 1) % MERGE_SLOTS;
+                    at
+                };
+                let slot = &mut self.slots[at];
+                (slot.id, slot.key) = (id, key);
+                slot.shorter = slot.merged.merge(lists, spheres);
+                at
+            }
+        };
+        let slot = &self.slots[at];
+        slot.shorter.then_some(&slot.merged)
+    }
 }
 
 /// The kept children of an 8-lane query whose lanes lie in several subset cells, merged
@@ -293,6 +372,7 @@ impl Cells {
             by_source: super::FastMap::default(),
             work_left: work,
             spheres32: Vec::new(),
+            id: CellsId::fresh(),
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let mut level = vec![Region {
@@ -333,6 +413,8 @@ impl Cells {
                 }
             }
         }
+        // Built: the cells' lists no longer move.
+        cells.id = CellsId::fresh();
         Some(cells)
     }
 
@@ -605,10 +687,10 @@ impl Cells {
             }
         }
         if n_subsets > 1 {
-            MERGED.with_borrow_mut(|m| {
+            MERGED.with_borrow_mut(|cache| {
                 // One evaluation over the union only when it reads fewer children than one
                 // per cell would; its blocks skip far children eight at a time.
-                if m.merge(&subsets[..n_subsets], &self.spheres32) {
+                if let Some(m) = cache.get(self.id.0, &subsets[..n_subsets], &self.spheres32) {
                     let (d, dm) = whole.eval_root_subset::<F32x8, M>(
                         &m.kids,
                         &self.spheres32,
