@@ -879,27 +879,21 @@ impl KidBlock {
     /// [`Program::sphere_table`]), eight children each in order; an index outside `spheres`
     /// counts as a child that is not a sphere.
     pub fn table(spheres: &[[f32; 4]], kids: &[u32]) -> Vec<KidBlock> {
-        let mut out = Vec::new();
-        Self::table_into(spheres, kids, &mut out);
-        out
-    }
-
-    /// [`KidBlock::table`] into `out` (cleared first), reusing its allocation.
-    pub fn table_into(spheres: &[[f32; 4]], kids: &[u32], out: &mut Vec<KidBlock>) {
-        out.clear();
-        out.extend(kids.chunks(FOLD_BLOCK).map(|run| {
-            let mut b = KidBlock {
-                x: [f32::INFINITY; FOLD_BLOCK],
-                y: [f32::INFINITY; FOLD_BLOCK],
-                z: [f32::INFINITY; FOLD_BLOCK],
-                r: [0.0; FOLD_BLOCK],
-            };
-            for (i, &j) in run.iter().enumerate() {
-                let e = spheres.get(j as usize).copied().unwrap_or([f32::NAN; 4]);
-                (b.x[i], b.y[i], b.z[i], b.r[i]) = (e[0], e[1], e[2], e[3]);
-            }
-            b
-        }));
+        kids.chunks(FOLD_BLOCK)
+            .map(|run| {
+                let mut b = KidBlock {
+                    x: [f32::INFINITY; FOLD_BLOCK],
+                    y: [f32::INFINITY; FOLD_BLOCK],
+                    z: [f32::INFINITY; FOLD_BLOCK],
+                    r: [0.0; FOLD_BLOCK],
+                };
+                for (i, &j) in run.iter().enumerate() {
+                    let e = spheres.get(j as usize).copied().unwrap_or([f32::NAN; 4]);
+                    (b.x[i], b.y[i], b.z[i], b.r[i]) = (e[0], e[1], e[2], e[3]);
+                }
+                b
+            })
+            .collect()
     }
 
     /// A bit per child (bit `i` for child `i`) that may change a fold whose running value

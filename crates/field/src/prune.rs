@@ -85,7 +85,7 @@ impl std::hash::Hasher for FxHasher {
     }
 }
 
-pub use cells::{Cell, CellStats, Cells, MergedKids};
+pub use cells::{Cell, CellStats, Cells};
 pub use index::PruneIndex;
 use index::{ChildTree, TreeNode};
 

@@ -82,150 +82,12 @@ pub struct Cells {
     /// The whole program's [`Program::sphere_table`] in f32 when some cell is a
     /// [`Cell::Subset`] (empty otherwise): subset folds rule far spheres out from it.
     spheres32: Vec<[f32; 4]>,
-    /// Names these cells in the merged lists cached per thread ([`MergeCache`]).
-    id: CellsId,
 }
 
 thread_local! {
-    /// The merged kept children of the last 8-lane queries over several subset cells.
-    static MERGED: std::cell::RefCell<MergeCache> =
-        const { std::cell::RefCell::new(MergeCache { slots: Vec::new(), next: 0 }) };
-}
-
-/// A number no other [`Cells`] holds, fresh on every build and clone: with the addresses
-/// of their kept children it names a set of subset cells in [`MergeCache`].
-#[derive(Debug)]
-struct CellsId(u64);
-
-impl CellsId {
-    fn fresh() -> Self {
-        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
-        CellsId(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed))
-    }
-}
-
-impl Clone for CellsId {
-    fn clone(&self) -> Self {
-        Self::fresh()
-    }
-}
-
-/// Merged children per set of subset cells, for the last few sets a thread's 8-lane
-/// queries met (a bundle's steps mostly stay among the same cells): a query over a set
-/// seen recently reads its union and blocks without merging or building them again.
-#[derive(Debug)]
-struct MergeCache {
-    slots: Vec<MergeSlot>,
-    /// The slot the next new set replaces, round robin.
-    next: usize,
-}
-
-#[derive(Debug)]
-struct MergeSlot {
-    /// The [`Cells`] and the sorted addresses of its cells' kept children (0 past them).
-    id: u64,
-    key: [usize; 8],
-    /// What [`MergedKids::merge`] returned.
-    shorter: bool,
-    merged: MergedKids,
-}
-
-/// Sets of subset cells [`MergeCache`] remembers per thread.
-const MERGE_SLOTS: usize = 4;
-
-impl MergeCache {
-    /// The union of `lists` (the kept children of distinct subset cells of the [`Cells`]
-    /// numbered `id`) with its blocks, when it is shorter than the lists together.
-    fn get(&mut self, id: u64, lists: &[&[u32]], spheres: &[[f32; 4]]) -> Option<&MergedKids> {
-        let mut key = [0usize; 8];
-        for (k, l) in key.iter_mut().zip(lists) {
-            *k = l.as_ptr() as usize;
-        }
-        key[..lists.len()].sort_unstable();
-        let at = match self.slots.iter().position(|s| s.id == id && s.key == key) {
-            Some(at) => at,
-            None => {
-                let at = if self.slots.len() < MERGE_SLOTS {
-                    self.slots.push(MergeSlot {
-                        id,
-                        key,
-                        shorter: false,
-                        merged: MergedKids::new(),
-                    });
-                    self.slots.len() - 1
-                } else {
-                    let at = self.next;
-                    self.next = (at + 1) % MERGE_SLOTS;
-                    at
-                };
-                let slot = &mut self.slots[at];
-                (slot.id, slot.key) = (id, key);
-                slot.shorter = slot.merged.merge(lists, spheres);
-                at
-            }
-        };
-        let slot = &self.slots[at];
-        slot.shorter.then_some(&slot.merged)
-    }
-}
-
-/// The kept children of an 8-lane query whose lanes lie in several subset cells, merged
-/// into one list with its blocks, in buffers reused from query to query (one per thread in
-/// [`Cells::eval_x8`]), so the merged fold also scans eight children at a time.
-#[derive(Debug, Default)]
-pub struct MergedKids {
-    /// The union of the merged lists, in fold order.
-    pub kids: Vec<u32>,
-    /// [`KidBlock::table`] of `kids` when the last [`MergedKids::merge`] returned `true`.
-    pub blocks: Vec<KidBlock>,
-    spare: Vec<u32>,
-}
-
-impl MergedKids {
-    /// Empty buffers.
-    pub const fn new() -> Self {
-        MergedKids {
-            kids: Vec::new(),
-            blocks: Vec::new(),
-            spare: Vec::new(),
-        }
-    }
-
-    /// Sets `kids` to the union of `lists` (node indices, each ascending: fold order), in
-    /// fold order. When the union is shorter than the lists together (one fold over it
-    /// reads fewer children than one fold per list), also sets `blocks` to its
-    /// [`KidBlock::table`] over `spheres` (an f32 [`Program::sphere_table`]) and returns
-    /// `true`; otherwise returns `false` and leaves `blocks` as they were.
-    pub fn merge(&mut self, lists: &[&[u32]], spheres: &[[f32; 4]]) -> bool {
-        let Some((first, rest)) = lists.split_first() else {
-            self.kids.clear();
-            return false;
-        };
-        // Merged pairwise in linear time.
-        let (merged, spare) = (&mut self.kids, &mut self.spare);
-        merged.clear();
-        merged.extend_from_slice(first);
-        let mut separate = first.len();
-        for kids in rest {
-            separate += kids.len();
-            spare.clear();
-            let (mut a, mut b) = (0, 0);
-            while a < merged.len() && b < kids.len() {
-                let (x, y) = (merged[a], kids[b]);
-                spare.push(x.min(y));
-                a += usize::from(x <= y);
-                b += usize::from(y <= x);
-            }
-            spare.extend_from_slice(&merged[a..]);
-            spare.extend_from_slice(&kids[b..]);
-            std::mem::swap(merged, spare);
-        }
-        if merged.len() >= separate {
-            return false;
-        }
-        KidBlock::table_into(spheres, merged, &mut self.blocks);
-        true
-    }
+    /// The merged kept children of an 8-lane query over several subset cells.
+    static MERGED: std::cell::RefCell<(Vec<u32>, Vec<u32>)> =
+        const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// A cell of the octree being built: its box and its block of finest cells.
@@ -372,7 +234,6 @@ impl Cells {
             by_source: super::FastMap::default(),
             work_left: work,
             spheres32: Vec::new(),
-            id: CellsId::fresh(),
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let mut level = vec![Region {
@@ -413,8 +274,6 @@ impl Cells {
                 }
             }
         }
-        // Built: the cells' lists no longer move.
-        cells.id = CellsId::fresh();
         Some(cells)
     }
 
@@ -687,21 +546,34 @@ impl Cells {
             }
         }
         if n_subsets > 1 {
-            MERGED.with_borrow_mut(|cache| {
+            MERGED.with_borrow_mut(|(merged, spare)| {
+                // The lists are in fold order (ascending): merged pairwise in linear time.
+                merged.clear();
+                merged.extend_from_slice(subsets[0]);
+                let mut separate = subsets[0].len();
+                for kids in &subsets[1..n_subsets] {
+                    separate += kids.len();
+                    spare.clear();
+                    let (mut a, mut b) = (0, 0);
+                    while a < merged.len() && b < kids.len() {
+                        let (x, y) = (merged[a], kids[b]);
+                        spare.push(x.min(y));
+                        a += usize::from(x <= y);
+                        b += usize::from(y <= x);
+                    }
+                    spare.extend_from_slice(&merged[a..]);
+                    spare.extend_from_slice(&kids[b..]);
+                    std::mem::swap(merged, spare);
+                }
                 // One evaluation over the union only when it reads fewer children than one
-                // per cell would; its blocks skip far children eight at a time.
-                if let Some(m) = cache.get(self.id.0, &subsets[..n_subsets], &self.spheres32) {
-                    let (d, dm) = whole.eval_root_subset::<F32x8, M>(
-                        &m.kids,
-                        &self.spheres32,
-                        &m.blocks,
-                        p,
-                        grids,
-                    );
+                // per cell would.
+                if merged.len() < separate {
+                    let (d, m) =
+                        whole.eval_root_subset::<F32x8, M>(merged, &self.spheres32, &[], p, grids);
                     for l in 0..8 {
                         if (done >> l) & 1 == 0 && matches!(cells[l], Some(Cell::Subset { .. })) {
                             out.0[l] = d.0[l];
-                            mat[l] = dm[l];
+                            mat[l] = m[l];
                             done |= 1 << l;
                         }
                     }
