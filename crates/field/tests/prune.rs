@@ -704,3 +704,96 @@ fn an_octree_cut_short_by_its_budget_falls_back_to_one_cell_when_asked() {
         "{stats:?}"
     );
 }
+
+/// An 8-lane query whose lanes lie in several subset cells folds the union of their kept
+/// children once when it is shorter than their lists together: the subset lanes take that
+/// fold's bits, and every lane what one query gives. On octrees that small budgets cut short
+/// (coarse cells that split a bundle, the case the merged fold is for) and the whole octree.
+#[test]
+fn eight_lanes_over_several_cells_fold_the_union_of_their_children() {
+    use marchmesh_field::V3;
+    use marchmesh_field::lane::F32x8;
+    use marchmesh_field::prune::{Cell, Cells, PruneIndex};
+    use std::collections::BTreeSet;
+    let mut mol = molecule(400, 13, 0.026);
+    if let NodeKind::Smooth { children, .. } = &mut mol.kind {
+        for (i, c) in children.iter_mut().enumerate() {
+            c.material = (i % 3) as u32;
+        }
+    }
+    let whole = whole_program(&mol);
+    let p32 = whole.cast::<f32>();
+    let spheres = whole.sphere_table::<f32>();
+    let (lo, hi) = compile(&mol).bounds().expect("bounded");
+    let index = PruneIndex::build(&whole);
+    let mut rng = 3u64;
+    let mut next = move || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut merged = 0usize;
+    for budget in [
+        1 << 12,
+        1 << 14,
+        1 << 16,
+        Cells::max_work(whole.instrs.len()),
+    ] {
+        let cells = Cells::build_within(&whole, &index, &[], (lo, hi), 0.01, 6, 0.0, budget)
+            .expect("built");
+        assert!(cells.stats().subset_cells > 1, "{:?}", cells.stats());
+        for _ in 0..600 {
+            // Bundles near the walk (within 0.35 of the origin), spread across cells.
+            let centre = [next(), next(), next()].map(|v| (2.0 * v - 1.0) * 0.4);
+            let gap = [0.01f32, 0.05, 0.15][(next() * 3.0) as usize % 3];
+            let lanes: [[f32; 3]; 8] =
+                std::array::from_fn(|_| centre.map(|v| v + (2.0 * next() - 1.0) * gap));
+            let v8 = V3::new(
+                F32x8(lanes.map(|l| l[0])),
+                F32x8(lanes.map(|l| l[1])),
+                F32x8(lanes.map(|l| l[2])),
+            );
+            // Eight lanes against one query per lane, value and material.
+            let (d, m) = cells.eval_x8::<true>(v8, &p32, &[]);
+            let d_only = cells.eval_x8::<false>(v8, &p32, &[]).0;
+            for (i, l) in lanes.iter().enumerate() {
+                let one = cells.eval::<true>(Vec3::from_array(*l), &p32, &[]);
+                assert_eq!((d.0[i].to_bits(), m[i]), (one.0.to_bits(), one.1), "{l:?}");
+                let one = cells.eval::<false>(Vec3::from_array(*l), &p32, &[]);
+                assert_eq!(d_only.0[i].to_bits(), one.0.to_bits(), "{l:?}");
+            }
+            // The lanes' distinct subset cells: when the union of their lists is shorter
+            // than the lists, the subset lanes hold the fold over that union.
+            let mut lists: Vec<&[u32]> = Vec::new();
+            for l in &lanes {
+                if let Some(Cell::Subset { kids, .. }) = cells.locate(*l)
+                    && !lists.iter().any(|k| std::ptr::eq(*k, &**kids))
+                {
+                    lists.push(kids);
+                }
+            }
+            let union: Vec<u32> = lists
+                .iter()
+                .flat_map(|k| k.iter().copied())
+                .collect::<BTreeSet<_>>()
+                .into_iter()
+                .collect();
+            if lists.len() < 2 || union.len() >= lists.iter().map(|k| k.len()).sum::<usize>() {
+                continue;
+            }
+            merged += 1;
+            let b = p32.eval_root_subset::<F32x8, true>(&union, &spheres, &[], v8, &[]);
+            for (i, l) in lanes.iter().enumerate() {
+                if matches!(cells.locate(*l), Some(Cell::Subset { .. })) {
+                    assert_eq!(
+                        (d.0[i].to_bits(), m[i]),
+                        (b.0.0[i].to_bits(), b.1[i]),
+                        "{l:?}"
+                    );
+                }
+            }
+        }
+    }
+    assert!(merged > 100, "{merged} merged queries");
+}
