@@ -77,8 +77,10 @@ pub enum Extraction {
     /// An extraction cell, projected on screen from the object's nearest distance to the
     /// camera, spans at most `pixels` pixels: cell `pixels * camera.pixel_angle() * distance`
     /// (the grid at least `128 / pixels` and at most [`crate::MAX_SURFACE_RESOLUTION`]
-    /// cells on the longest side). Features thinner than a cell can vanish, so this is what keeps blended content
-    /// right on screen. `pixels` must be > 0.
+    /// cells on the longest side). The distance is the larger of two lower bounds: the
+    /// distance to the object's bounds and, for a camera near or inside them, the magnitude of
+    /// the object's distance field at the camera. Features thinner than a cell can vanish, so
+    /// this is what keeps blended content right on screen. `pixels` must be > 0.
     ScreenCell {
         /// Cell size on screen in pixels (e.g. 1).
         pixels: f64,
