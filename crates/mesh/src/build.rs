@@ -214,11 +214,20 @@ fn may_show_inner_faces(node: &Node, ctx: &Ctx) -> bool {
 /// repetition of analytic solids whose parent-to-render transform is `parent`. Nodes holding
 /// a plane, a mesh, a triangle or an infinite repetition are never extracted here (false).
 fn camera_inside_solid(node: &Node, parent: DAffine3, ctx: &Ctx) -> bool {
-    if !analytic_solids(node) || node_bounds(node, ctx.mesh_bounds).is_none() {
-        return false;
+    node_bounds(node, ctx.mesh_bounds).is_some()
+        && camera_field_value(node, parent).is_some_and(|d| d < 0.0)
+}
+
+/// The distance field of `node` (its parent-to-render transform `parent`) at the camera, the
+/// render-space origin; `None` when the node is not all analytic solids (its field would
+/// need a bake) or its field does not compile.
+fn camera_field_value(node: &Node, parent: DAffine3) -> Option<f64> {
+    if !analytic_solids(node) {
+        return None;
     }
     marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
-        .is_ok_and(|f| f.distance_f64(DVec3::ZERO) < 0.0)
+        .ok()
+        .map(|f| f.distance_f64(DVec3::ZERO))
 }
 
 /// Whether every leaf under `n` is an analytic solid (no plane, mesh or triangle), so its
@@ -241,13 +250,8 @@ fn analytic_solids(n: &Node) -> bool {
 /// when the node holds a plane, mesh or triangle (its field would need a bake) or its field
 /// does not compile; the caller then keeps its own estimate.
 pub(crate) fn camera_surface_distance(node: &Node, to_render: DAffine3) -> Option<f64> {
-    if !analytic_solids(node) {
-        return None;
-    }
-    let parent = to_render * node.transform.inverse();
-    marchmesh_field::Field::compile_node(node, parent, &marchmesh_field::FieldOptions::default())
-        .ok()
-        .map(|f| f.distance_f64(DVec3::ZERO).abs())
+    camera_field_value(node, to_render * node.transform.inverse())
+        .map(f64::abs)
         .filter(|d| d.is_finite())
 }
 

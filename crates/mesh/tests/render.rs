@@ -182,7 +182,8 @@ fn a_camera_inside_a_union_sizes_the_extraction_grid_from_the_nearest_surface() 
         extraction_resolution(&g)
     };
     let (far, near) = (at(1.5), at(0.3));
-    // The screen budget at 1.5 units: about 7 units of box over 2 px * 0.019 rad * 1.5.
+    // The screen budget at 1.5 units: the box's 5.5-unit side over 1 px (the default cell) *
+    // 0.022 rad (a pixel at 70 degrees over 64 px) * 1.5 units, about 168 cells.
     assert!(
         (100..=200).contains(&far),
         "1.5 units from the surface: {far} cells"
