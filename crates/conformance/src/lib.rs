@@ -169,6 +169,15 @@ cases! {
                 {"shape": {"sphere": {"radius": 0.7}}, "transform": {"translate": [0, 0.6, -0.6]}, "material": {"color": [1, 0, 0]}},
                 {"shape": {"capsule": {"radius": 0.25, "height": 1.2}}, "transform": {"translate": [0.7, 0, -0.7], "rotate_deg": [0, 0, 90]}}]}}, "transform": {"rotate_deg": [0, -25, 0]}}]}"#
         ),
+    blend => concat!(
+            "{",
+            cam!(),
+            r#", "objects": [{"shape": {"blend": {"blend_radius": 0.45, "children": [
+                {"shape": {"sphere": {"radius": 0.55}}, "transform": {"translate": [-0.55, -0.1, 0]}},
+                {"shape": {"sphere": {"radius": 0.5}}, "transform": {"translate": [0.45, 0.05, 0]}, "material": {"color": [1, 0, 0]}},
+                {"shape": {"sphere": {"radius": 0.4}}, "transform": {"translate": [0, 0.6, 0.1]}},
+                {"shape": {"capsule": {"radius": 0.18, "height": 1.4}}, "transform": {"translate": [0, -0.3, -0.3], "rotate_deg": [0, 0, 90]}}]}}, "transform": {"rotate_deg": [0, 20, 0]}}]}"#
+        ),
     rounded_box => concat!(
             "{",
             cam!(),
@@ -402,7 +411,7 @@ macro_rules! conformance_suite {
         $crate::conformance_suite!(@all $tol, [$($inside)?], [$($flat)?];
             [sphere, box_rotated, ellipsoid, cylinder, torus, plane_and_sphere_shadow, triangle,
              nonuniform_scale, union, intersection, subtraction, smooth_union,
-             smooth_intersection, smooth_subtraction, rounded_box, capsule, capped_cone,
+             smooth_intersection, smooth_subtraction, blend, rounded_box, capsule, capped_cone,
              repeat_finite,
              repeat_overlapping, repeat_infinite, tiny_scale, huge_scale, far_from_origin,
              camera_inside_subtraction, camera_inside_subtraction_seam, bunny],

@@ -633,13 +633,14 @@ impl Field {
         Some(stats)
     }
 
-    /// Whether the program holds a smooth union (which the per-bundle culling keeps whole).
-    pub fn has_smooth_unions(&self) -> bool {
+    /// Whether the program holds a smooth union or a blend (which the per-bundle culling
+    /// keeps whole).
+    pub fn has_smooth_unions_or_blends(&self) -> bool {
         self.p64.instrs.iter().any(|i| {
             matches!(
                 i.op,
                 program::Op::Smooth {
-                    op: marchmesh_scene::SmoothOp::Union,
+                    op: marchmesh_scene::SmoothOp::Union | marchmesh_scene::SmoothOp::Blend,
                     ..
                 }
             )

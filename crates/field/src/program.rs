@@ -31,6 +31,7 @@ use marchmesh_scene::SmoothOp;
 use crate::leaf::{GridList, Leaf};
 use crate::shapes::{self, TriData};
 
+mod blend;
 pub mod segment;
 
 /// Most copies evaluated per repeated axis: the scene's
@@ -302,27 +303,28 @@ impl<S: Scalar> Program<S> {
         self.child::<T, M>(0, p, Ctx::Plain, grids)
     }
 
-    /// Whether the root is a smooth union, so [`Program::eval_root_subset`] applies.
-    pub fn root_is_smooth_union(&self) -> bool {
+    /// Whether the root is a smooth union or a blend, so [`Program::eval_root_subset`]
+    /// applies.
+    pub fn root_is_smooth_union_or_blend(&self) -> bool {
         self.instrs.first().is_some_and(|n| {
             matches!(
                 n.op,
                 Op::Smooth {
-                    op: SmoothOp::Union,
+                    op: SmoothOp::Union | SmoothOp::Blend,
                     ..
                 }
             )
         })
     }
 
-    /// [`Program::eval`] of the program whose root (a smooth union: see
-    /// [`Program::root_is_smooth_union`]) keeps only its children `kids` (their node
+    /// [`Program::eval`] of the program whose root (a smooth union or a blend: see
+    /// [`Program::root_is_smooth_union_or_blend`]) keeps only its children `kids` (their node
     /// indices, in fold order, at least one), each whole: bit for bit what that restricted
     /// program evaluates to, without copying it (a region's pruned cell stores 4 bytes a
     /// child). Another root is evaluated whole. `spheres` is this program's
     /// [`Program::sphere_table`] (or empty: the nodes are read instead; same values) and
     /// `blocks` is [`KidBlock::table`] of `kids` (or empty: every child is tested on its
-    /// own; same values). `blocks` is read only by an f32 program and only when it holds
+    /// own; same values). `blocks` is read only by an f32 smooth union and only when it holds
     /// `kids` (one block per eight); otherwise the children are tested one by one.
     #[inline]
     pub fn eval_root_subset<T: Lane<S = S>, const M: bool>(
@@ -336,7 +338,7 @@ impl<S: Scalar> Program<S> {
         let Some(ins) = self.instrs.first() else {
             return (T::c(BIG), T::mat_splat(0));
         };
-        if kids.is_empty() || !self.root_is_smooth_union() {
+        if kids.is_empty() || !self.root_is_smooth_union_or_blend() {
             return self.eval::<T, M>(p, grids);
         }
         if !ins.has_bound {
@@ -369,10 +371,17 @@ impl<S: Scalar> Program<S> {
         grids: &[Box<dyn GridSampler>],
     ) -> (T, T::Mat) {
         let ins = &self.instrs[0];
-        let Op::Smooth { k, inv_k, .. } = &ins.op else {
+        let Op::Smooth { k, inv_k, op } = &ins.op else {
             return self.node::<T, M>(0, p, None, grids);
         };
         let q = ins.to_local.apply(p);
+        if *op == SmoothOp::Blend {
+            let kids = kids
+                .iter()
+                .map(|&j| (j as usize, spheres.get(j as usize).copied()));
+            let (v, m) = self.blend::<T, M, _>(kids, q, *k, grids);
+            return (v * T::splat(ins.dscale), m);
+        }
         let k = T::splat(*k);
         let inv_k = T::splat(*inv_k);
         let (mut best, mut bm) = self.child::<T, M>(kids[0] as usize, q, Ctx::Plain, grids);
@@ -629,6 +638,11 @@ impl<S: Scalar> Program<S> {
                 }
                 (best, bm)
             }
+            Op::Smooth {
+                op: SmoothOp::Blend,
+                k,
+                ..
+            } => self.blend::<T, M, _>(blend::Children::of(self, i), q, *k, grids),
             Op::Smooth { op, k, inv_k } => {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);
@@ -662,6 +676,7 @@ impl<S: Scalar> Program<S> {
                             best = shapes::smax(best, nd, k, inv_k);
                             (m, take)
                         }
+                        SmoothOp::Blend => unreachable!("a blend is not a fold: matched above"),
                     };
                     bm = msel::<T, M>(take, m, bm);
                     j = self.instrs[j].end as usize;

@@ -193,7 +193,7 @@ pub fn prune_indexed(
 /// some of its children each copied whole (`source`: the restricted nodes' indices in
 /// `prog`), else `None`.
 fn root_subset(prog: &Program<f64>, source: &[u32]) -> Option<Box<[u32]>> {
-    if source.len() < 2 || source[0] != 0 || !prog.root_is_smooth_union() {
+    if source.len() < 2 || source[0] != 0 || !prog.root_is_smooth_union_or_blend() {
         return None;
     }
     let root_end = prog.instrs[0].end;
@@ -231,7 +231,7 @@ fn survey_root(
     let slack = match root.op {
         Op::Union => 0.0,
         Op::Smooth {
-            op: SmoothOp::Union,
+            op: SmoothOp::Union | SmoothOp::Blend,
             k,
             ..
         } => k,
@@ -756,6 +756,20 @@ impl<'a> Pruner<'a> {
                     k,
                     inv_k,
                 } => return self.smooth_union_keep_indexed(tree, q, rq, depth, *k, *inv_k),
+                Op::Smooth {
+                    op: SmoothOp::Blend,
+                    k,
+                    ..
+                } => {
+                    let mut least = f64::INFINITY;
+                    self.least_upper(tree, 0, q, rq, depth, &mut least);
+                    let mut kids = Vec::new();
+                    self.children_below(tree, 0, 0, q, rq, depth, least + k, &mut kids);
+                    // The blend's sums add in stored order (`program::blend`).
+                    let mut kids: Vec<usize> = kids.into_iter().map(|c| c.0).collect();
+                    kids.sort_unstable();
+                    return kids;
+                }
                 _ => {}
             }
         }
@@ -794,6 +808,19 @@ impl<'a> Pruner<'a> {
                 chain.links[chain.cut_start(self.cut_error)..]
                     .iter()
                     .map(|l| l.node)
+                    .collect()
+            }
+            // A blend: a child at least `k` above the least upper bound is at least `k` above
+            // the blend everywhere in the ball and adds an exact `+0` (`program::blend`).
+            Op::Smooth {
+                op: SmoothOp::Blend,
+                k,
+                ..
+            } => {
+                let min_hi = kids.iter().map(|k| k.2).fold(f64::INFINITY, f64::min);
+                kids.iter()
+                    .filter(|c| c.1 < min_hi + k)
+                    .map(|c| c.0)
                     .collect()
             }
             // A smooth maximum fold `f_j = smax(f_{j-1}, b_j)` (`b_j` the child, negated for a

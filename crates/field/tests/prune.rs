@@ -53,6 +53,15 @@ fn molecule(n: usize, seed: u64, k: f64) -> Node {
     )
 }
 
+/// [`molecule`] blended at once ([`SmoothOp::Blend`]) instead of folded.
+fn blend_molecule(n: usize, seed: u64, k: f64) -> Node {
+    let mut mol = molecule(n, seed, k);
+    if let NodeKind::Smooth { op, .. } = &mut mol.kind {
+        *op = SmoothOp::Blend;
+    }
+    mol
+}
+
 fn compile(n: &Node) -> Field {
     Field::compile_node(n, DAffine3::IDENTITY, &FieldOptions::default()).expect("compiles")
 }
@@ -129,6 +138,11 @@ fn check_cells(n: &Node, depth: u32) {
 #[test]
 fn a_pruned_molecule_is_the_whole_molecule_where_surfaces_are() {
     check_cells(&molecule(300, 7, 0.026), 5);
+}
+
+#[test]
+fn a_pruned_blend_molecule_is_the_whole_molecule_where_surfaces_are() {
+    check_cells(&blend_molecule(300, 7, 0.026), 5);
 }
 
 #[test]
@@ -209,7 +223,7 @@ fn arb_tree() -> impl Strategy<Value = Node> {
         .prop_map(|(r, x, y, z)| sphere(r, DVec3::new(x, y, z)));
     leaf.prop_recursive(4, 48, 8, |inner| {
         (
-            0u8..6,
+            0u8..7,
             proptest::collection::vec(inner, 2..8),
             0.005f64..0.2,
             -0.1f64..0.1,
@@ -229,8 +243,13 @@ fn arb_tree() -> impl Strategy<Value = Node> {
                         children,
                         blend_radius: k,
                     },
-                    _ => NodeKind::Smooth {
+                    5 => NodeKind::Smooth {
                         op: SmoothOp::Union,
+                        children,
+                        blend_radius: k,
+                    },
+                    _ => NodeKind::Smooth {
+                        op: SmoothOp::Blend,
                         children,
                         blend_radius: k,
                     },
@@ -711,11 +730,19 @@ fn an_octree_cut_short_by_its_budget_falls_back_to_one_cell_when_asked() {
 /// (coarse cells that split a bundle, the case the merged fold is for) and the whole octree.
 #[test]
 fn eight_lanes_over_several_cells_fold_the_union_of_their_children() {
+    eight_lanes_over_several_cells_read_the_union_of_their_children(molecule(400, 13, 0.026));
+}
+
+#[test]
+fn eight_lanes_over_several_cells_blend_the_union_of_their_children() {
+    eight_lanes_over_several_cells_read_the_union_of_their_children(blend_molecule(400, 13, 0.026));
+}
+
+fn eight_lanes_over_several_cells_read_the_union_of_their_children(mut mol: Node) {
     use marchmesh_field::V3;
     use marchmesh_field::lane::F32x8;
     use marchmesh_field::prune::{Cell, Cells, PruneIndex};
     use std::collections::BTreeSet;
-    let mut mol = molecule(400, 13, 0.026);
     if let NodeKind::Smooth { children, .. } = &mut mol.kind {
         for (i, c) in children.iter_mut().enumerate() {
             c.material = (i % 3) as u32;

@@ -227,11 +227,30 @@ pub fn smooth_fold_deficit(blend_radius: f64, children: usize) -> f64 {
     (d * (1.0 + 1e-12)).min(k)
 }
 
+/// How far below its children's minimum `m` a blend ([`crate::SmoothOp::Blend`]) of
+/// `children` values with blend radius `blend_radius` (`k`) can lie: `k (1 - 1/sqrt(n))`,
+/// below `k` whatever the count, and exact when all `n` children are equal.
+///
+/// The blend is the `f` with `sum_i max(0, 1 - (a_i - f) / k)^2 = 1`. The nearest child's
+/// term is 1 at `f = m` and the sum falls as `f` falls, so `f <= m`; a child `k` or more
+/// above `f` adds nothing. Each of the at most `n` terms is at most `((m - f + k) / k)^2`,
+/// so `n ((m - f + k) / k)^2 >= 1`, i.e. `m - f <= k (1 - 1/sqrt(n))`. Beyond `2^32`
+/// children the bound returned is `k` (always safe).
+pub fn blend_deficit(blend_radius: f64, children: usize) -> f64 {
+    let k = blend_radius;
+    if children == 0 || children as u64 > 1 << 32 {
+        return k;
+    }
+    let d = k * (1.0 - 1.0 / (children as f64).sqrt());
+    // One part in 1e12 for rounding; never above the limit k.
+    (d + 1e-12 * k).min(k)
+}
+
 /// A composite's box in its own frame from its children's boxes in that frame (each child's
 /// own transform applied; [`Aabb::INFINITE`] for an unbounded child). Leaves give `None`.
 ///
-/// Union: the hull. Smooth union: the hull grown by [`smooth_fold_deficit`] (at most the blend
-/// radius, whatever the child count): every child is at least its box's distance away from
+/// Union: the hull. Smooth union: the hull grown by [`smooth_fold_deficit`] (blend:
+/// [`blend_deficit`]; at most the blend radius, whatever the child count): every child is at least its box's distance away from
 /// a point outside the hull grown by that much, so the fold is positive there (children
 /// whose values are bounds of this kind, as every composite's box makes them). Intersection
 /// (hard or smooth): the common part. Subtraction (hard or smooth): the first child. Repetition: the child's box spread over the
@@ -248,6 +267,10 @@ pub fn combine(kind: &NodeKind, children: &[Aabb]) -> Option<Aabb> {
         } => match op {
             crate::SmoothOp::Union => {
                 let deficit = smooth_fold_deficit(*blend_radius, children.len());
+                hull().map(|h| h.grown(deficit))
+            }
+            crate::SmoothOp::Blend => {
+                let deficit = blend_deficit(*blend_radius, children.len());
                 hull().map(|h| h.grown(deficit))
             }
             // A smooth maximum never lies below either argument, so the fold is at least

@@ -328,7 +328,8 @@ impl ObjectSpec {
             }
             ShapeSpec::SmoothUnion(s)
             | ShapeSpec::SmoothIntersection(s)
-            | ShapeSpec::SmoothSubtraction(s) => std::mem::take(&mut s.children),
+            | ShapeSpec::SmoothSubtraction(s)
+            | ShapeSpec::Blend(s) => std::mem::take(&mut s.children),
             ShapeSpec::Repeat(r) => {
                 let leaf = ObjectSpec {
                     name: None,
@@ -418,6 +419,11 @@ pub enum ShapeSpec {
     SmoothIntersection(SmoothUnionSpec),
     /// The first child minus the others, the cuts rounded with a polynomial smooth maximum.
     SmoothSubtraction(SmoothUnionSpec),
+    /// A union of all children blended at once, whatever their order: the value `f` with
+    /// `sum_i max(0, 1 - (c_i - f) / k)^2 = 1`. Unlike `smooth_union` it is not a fold (a
+    /// nested `blend` is not flattened), and the sdf backend evaluates it from the children
+    /// near each point only.
+    Blend(SmoothUnionSpec),
     /// Domain repetition of one child on a grid.
     Repeat(RepeatSpec),
 }

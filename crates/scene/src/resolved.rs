@@ -272,7 +272,8 @@ pub enum NodeKind {
     Subtraction(Vec<Node>),
     /// A smooth union, intersection or subtraction of >= 1 children: the children's values
     /// folded left to right by the polynomial smooth minimum (or maximum) of `blend_radius`,
-    /// so a flat node gives the same value as a left-deep binary tree of the same operator.
+    /// so a flat node gives the same value as a left-deep binary tree of the same operator;
+    /// or a blend ([`SmoothOp::Blend`]) of all children at once.
     Smooth {
         /// Which boolean operation is blended.
         op: SmoothOp,
@@ -301,6 +302,10 @@ pub enum SmoothOp {
     Intersection,
     /// `smax(first, -child)` fold: the first child minus the others, cuts rounded.
     Subtraction,
+    /// Not a fold: the union of all children blended at once, the same value in any child
+    /// order: `f` with `sum_i max(0, 1 - (c_i - f) / k)^2 = 1` (see
+    /// [`crate::bounds::blend_deficit`]).
+    Blend,
 }
 
 /// A primitive in its local frame, with validated parameters.

@@ -491,6 +491,7 @@ impl Ctx<'_> {
                 material,
                 depth,
             ),
+            ShapeSpec::Blend(s) => self.smooth(path, "blend", SmoothOp::Blend, s, material, depth),
             ShapeSpec::Repeat(r) => {
                 let p = format!("{path}.repeat");
                 let mut period = DVec3::ZERO;
@@ -608,7 +609,9 @@ fn merge_first_child(mut kind: NodeKind) -> NodeKind {
             children,
             blend_radius,
         } => children.first().is_some_and(|f| {
-            plain(f)
+            // A blend is not a fold: blend(blend(a, b), c) is not blend(a, b, c).
+            *op != SmoothOp::Blend
+                && plain(f)
                 && matches!(&f.kind, NodeKind::Smooth { op: o, blend_radius: k, .. }
                     if o == op && k.to_bits() == blend_radius.to_bits())
         }),

@@ -3,7 +3,9 @@
 use std::path::Path;
 
 use glam::DVec3;
-use marchmesh_scene::{Background, Light, NodeKind, SceneError, Shape, load, parse_scene};
+use marchmesh_scene::{
+    Background, Light, NodeKind, SceneError, Shape, SmoothOp, load, parse_scene,
+};
 
 fn parse(json: &str) -> Result<marchmesh_scene::Scene, SceneError> {
     parse_scene(json, "test.json", Path::new("/scenes"))
@@ -241,6 +243,7 @@ fn schema_lists_every_shape() {
         "intersection",
         "subtraction",
         "smooth_union",
+        "blend",
         "repeat",
     ] {
         assert!(schema.contains(&format!("\"{shape}\"")), "{shape} missing");
@@ -322,6 +325,43 @@ fn merging_keeps_transforms_other_operations_and_blend_radii_apart() {
     .expect("valid");
     let counts: Vec<usize> = scene.objects.iter().map(|o| o.children().len()).collect();
     assert_eq!(counts, [2, 2, 3]);
+}
+
+#[test]
+fn a_blend_checks_its_parameters_and_nested_blends_are_not_merged() {
+    // blend(blend(a, b), c) is not blend(a, b, c): unlike a fold, the nesting is kept.
+    let scene = parse(
+        r#"{"objects": [{"shape": {"blend": {"blend_radius": 0.1, "children": [
+            {"shape": {"blend": {"blend_radius": 0.1, "children": [
+              {"shape": {"sphere": {}}}, {"shape": {"box": {}}}]}}},
+            {"shape": {"sphere": {}}}]}}}]}"#,
+    )
+    .expect("valid");
+    let NodeKind::Smooth {
+        op: SmoothOp::Blend,
+        children,
+        ..
+    } = &scene.objects[0].kind
+    else {
+        panic!("a blend");
+    };
+    assert_eq!(children.len(), 2);
+    assert!(matches!(
+        &children[0].kind,
+        NodeKind::Smooth { op: SmoothOp::Blend, children, .. } if children.len() == 2
+    ));
+    let p = problems(
+        r#"{"objects": [
+        {"shape": {"blend": {"blend_radius": 0, "children": []}}},
+        {"shape": {"blend": {"blend_radius": -1, "children": [{"shape": {"sphere": {}}}]}}}]}"#,
+    );
+    let paths: Vec<&str> = p.iter().map(|(path, _)| path.as_str()).collect();
+    assert!(
+        paths.contains(&"objects[0].shape.blend.blend_radius"),
+        "{p:?}"
+    );
+    assert!(paths.contains(&"objects[0].shape.blend.children"), "{p:?}");
+    assert!(paths.iter().any(|p| p.starts_with("objects[1]")), "{p:?}");
 }
 
 #[test]

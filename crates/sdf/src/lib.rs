@@ -391,7 +391,10 @@ fn build_part(
     };
     field.set_kernels(opts.kernels);
     field.set_jit(opts.jit);
-    if opts.prune_depth > 0 && field.node_count() >= PRUNE_MIN_NODES && field.has_smooth_unions() {
+    if opts.prune_depth > 0
+        && field.node_count() >= PRUNE_MIN_NODES
+        && field.has_smooth_unions_or_blends()
+    {
         let whole = Cells::max_work(field.node_count());
         let (work, root_if_cut) = match opts.prune_cells {
             PruneCells::Octree => (whole, false),

@@ -118,7 +118,8 @@ fn absolute_paths(file: &mut SceneFile, base: &Path) {
             }
             ShapeSpec::SmoothUnion(s)
             | ShapeSpec::SmoothIntersection(s)
-            | ShapeSpec::SmoothSubtraction(s) => {
+            | ShapeSpec::SmoothSubtraction(s)
+            | ShapeSpec::Blend(s) => {
                 s.children.iter_mut().for_each(|c| visit(c, fix));
             }
             ShapeSpec::Repeat(r) => visit(&mut r.child, fix),

@@ -64,7 +64,7 @@ impl<S: Scalar> Program<S> {
         len: S,
         grids: &[Box<dyn GridSampler>],
     ) -> (S, S) {
-        if self.instrs.is_empty() || kids.is_empty() || !self.root_is_smooth_union() {
+        if self.instrs.is_empty() || kids.is_empty() || !self.root_is_smooth_union_or_blend() {
             return self.segment(p, d, len, grids);
         }
         // A blend has the global bound (`seg_node`'s last arm), under the root's box.

@@ -66,7 +66,7 @@ impl PruneIndex {
                 Op::Union
                     | Op::Subtraction
                     | Op::Smooth {
-                        op: SmoothOp::Union,
+                        op: SmoothOp::Union | SmoothOp::Blend,
                         ..
                     }
             );

@@ -1,0 +1,207 @@
+//! The blend ([`SmoothOp::Blend`](marchmesh_scene::SmoothOp::Blend)): a smooth union of all
+//! children at once, the same value whatever their order, so a point's value needs only the
+//! children near it (`docs/decisions/0031-an-order-free-blend.md`).
+//!
+//! # The value
+//! With the children's values `a_i`, their minimum `m` and the blend radius `k`, the blend is
+//! the `f` with `sum_i max(0, 1 - (a_i - f) / k)^2 = 1`. Writing `b_i = a_i - m >= 0` and
+//! `x = f - m + k`, that is `g(x) = sum_i max(0, x - b_i)^2 = k^2`:
+//! - `g` is 0 below the least `b` (which is 0), then continuous, convex and increasing, so the
+//!   root `x*` is unique and lies in `(0, k]`: `f` is at most `m` and a child `k` or more
+//!   above `f` adds nothing (it can be dropped exactly);
+//! - over the active children `A = {b_i < x*}`, `|A| x^2 - 2 S1 x + S2 = k^2` (`S1`, `S2` the
+//!   sums of `b` and `b^2` over `A`): `x*` is its larger root;
+//! - by the implicit function theorem `df/da_i = w_i / sum_j w_j` with
+//!   `w_i = max(0, x* - b_i) >= 0`: the gradient is a convex combination of the children's,
+//!   so the blend is 1-Lipschitz and non-decreasing in every child (interval arithmetic on it
+//!   is exact at the interval's ends), and C1 (`g` is C1);
+//! - `f >= m - k (1 - 1/sqrt(n))` ([`marchmesh_scene::bounds::blend_deficit`]); one child gives
+//!   `f = a`, two equal children `f = a - 0.29 k` (the left fold's `smin`: `a - k/4`).
+//!
+//! # The solve
+//! Start from `x = k` (at or above the root) with `A = {b < x}`; compute `|A|`, `S1`, `S2`
+//! and the largest `b` in `A`, and the larger root `r` of `A`'s quadratic. If no `b` in `A`
+//! exceeds `r`, every child of `A` is active at `r` and none outside is (they are at or above
+//! `x >= r`), so `r = x*`. Otherwise `x` moves to the lower of the largest `b` (whose child is
+//! then inactive: were `x* > b_max`, `A` would be exactly the active set and `r = x*`) and
+//! Newton's step on `g` from `x` (never below `x*`: `g` is convex and `g(x) >= k^2`), and the
+//! pass repeats with the smaller `A`. Each pass drops at least one child; near a surface of
+//! the sculpted molecules a point needs 1-2 passes. After [`BLEND_PASSES`] a lane not yet
+//! settled gets the lower bound `m + k / sqrt(|A|) - k` (from `|A| x*^2 >= k^2`): a safe
+//! step, never above the blend.
+//!
+//! # Bit for bit in every evaluator
+//! The sums add, in the children's stored order, `b` for the children with `b < x` and an
+//! exact `+0` for the others. A child skipped (its box, or its sphere's squared distance,
+//! proves it at least the threshold above `m`) or pruned away (at least `k` above the least
+//! upper bound over a region) would have added `+0`: the whole program, a pruned one, a
+//! region's subset of the children and the merged subsets of 8-lane queries all give the
+//! same bits.
+
+use crate::lane::{Lane, Scalar, V3};
+
+use super::{BIG, Ctx, GridSampler, Program, msel};
+
+/// Most values of children within `k` of the running minimum at some lane a blend keeps
+/// between its passes; a blend with more evaluates its children again in each pass (the
+/// same values, more slowly).
+pub(crate) const BLEND_BUFFER: usize = 32;
+
+/// Most passes of a blend's solve; each drops at least one child, so a blend of at most
+/// this many children within `k` of their minimum always settles.
+pub(crate) const BLEND_PASSES: usize = 24;
+
+/// The children of node `i`: `(index, None)` in stored order.
+#[derive(Clone)]
+pub(crate) struct Children<'a, S> {
+    prog: &'a Program<S>,
+    next: usize,
+    end: usize,
+}
+
+impl<'a, S: Scalar> Children<'a, S> {
+    pub(crate) fn of(prog: &'a Program<S>, i: usize) -> Self {
+        Children {
+            prog,
+            next: i + 1,
+            end: prog.instrs[i].end as usize,
+        }
+    }
+}
+
+impl<S: Scalar> Iterator for Children<'_, S> {
+    type Item = (usize, Option<[S; 4]>);
+    #[inline(always)]
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.next >= self.end {
+            return None;
+        }
+        let j = self.next;
+        self.next = self.prog.instrs[j].end as usize;
+        Some((j, None))
+    }
+}
+
+/// Running sums of one pass over the children with `b = a - m < x`.
+struct Sums<T> {
+    count: T,
+    s1: T,
+    s2: T,
+    most: T,
+}
+
+impl<S: Scalar> Program<S> {
+    /// Child `j`'s value at `q` (its parent's frame) when it is below `thr` at a lane, else
+    /// some value at or above `thr` there; the material when `M`. `sphere` is its
+    /// [`Program::sphere_table`] entry when known (read instead of the node when the material
+    /// is not needed; the same value).
+    #[inline(always)]
+    fn blend_child<T: Lane<S = S>, const M: bool>(
+        &self,
+        j: usize,
+        sphere: Option<[S; 4]>,
+        q: V3<T>,
+        thr: T,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
+        match sphere {
+            Some(e) if !M && !e[3].to_f64().is_nan() => (
+                crate::shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
+                T::mat_splat(0),
+            ),
+            _ => self.child::<T, M>(j, q, Ctx::Below(thr), grids),
+        }
+    }
+
+    /// The blend of blend radius `k` of the children `kids` (`(node, sphere table entry)`,
+    /// in stored order) at `q`, their parent's frame, and the nearest child's material when
+    /// `M` (see the [module docs](self)). `kids` is read again when more than
+    /// [`BLEND_BUFFER`] children come within `k` of the minimum.
+    #[inline(always)]
+    pub(crate) fn blend<T: Lane<S = S>, const M: bool, I>(
+        &self,
+        kids: I,
+        q: V3<T>,
+        k: S,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat)
+    where
+        I: Iterator<Item = (usize, Option<[S; 4]>)> + Clone,
+    {
+        let zero = T::c(0.0);
+        let k = T::splat(k);
+        // Pass 1: the minimum, its material, and the values that may come within `k` of it.
+        let mut best = T::c(BIG);
+        let mut bm = T::mat_splat(0);
+        let mut kept = [zero; BLEND_BUFFER];
+        let mut n = 0;
+        let mut spilled = false;
+        for (j, sphere) in kids.clone() {
+            if self.sphere_no_op(j, sphere.as_ref(), q, best, k) {
+                continue;
+            }
+            let (d, m) = self.blend_child::<T, M>(j, sphere, q, best + k, grids);
+            if T::any(T::lt(d, best + k)) {
+                if n < BLEND_BUFFER {
+                    kept[n] = d;
+                    n += 1;
+                } else {
+                    spilled = true;
+                }
+            }
+            let take = T::lt(d, best);
+            best = best.min(d);
+            bm = msel::<T, M>(take, m, bm);
+        }
+        let m = best;
+        let kk = k * k;
+        let mut x = k;
+        let mut value = m;
+        let mut settled = T::lt(zero, zero);
+        let mut count = T::c(1.0);
+        for _ in 0..BLEND_PASSES {
+            let mut s = Sums {
+                count: zero,
+                s1: zero,
+                s2: zero,
+                most: zero,
+            };
+            let mut add = |a: T| {
+                let b = a - m;
+                let inside = T::lt(b, x);
+                let bz = T::select(inside, b, zero);
+                s.count = s.count + T::select(inside, T::c(1.0), zero);
+                s.s1 = s.s1 + bz;
+                s.s2 = s.s2 + bz * bz;
+                s.most = s.most.max(bz);
+            };
+            if spilled {
+                for (j, sphere) in kids.clone() {
+                    if self.sphere_no_op(j, sphere.as_ref(), q, m, x) {
+                        continue;
+                    }
+                    add(self.blend_child::<T, false>(j, sphere, q, m + x, grids).0);
+                }
+            } else {
+                for &a in &kept[..n] {
+                    add(a);
+                }
+            }
+            count = s.count.max(T::c(1.0));
+            let disc = (s.s1 * s.s1 - s.count * (s.s2 - kk)).max(zero);
+            let r = (s.s1 + disc.sqrt()) / count;
+            let done = T::and(T::le(s.most, r), T::not(settled));
+            value = T::select(done, m - (k - r), value);
+            settled = T::or(settled, done);
+            if T::all(settled) {
+                return (value, bm);
+            }
+            // Newton's step on g from x, or the largest b (its child is inactive).
+            let g = (s.count * x - s.s1 - s.s1) * x + s.s2 - kk;
+            let slope = (s.count * x - s.s1) * T::c(2.0);
+            let newton = x - g / slope;
+            x = T::select(settled, x, newton.min(s.most));
+        }
+        (T::select(settled, value, m - (k - k / count.sqrt())), bm)
+    }
+}
