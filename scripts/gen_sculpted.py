@@ -13,6 +13,11 @@ Series:
                      of radius 0.7 so the chain folds into a compact molecule), the camera
                      2.6 units from the centroid of the n centres, looking at it.
 
+  molecule_blend_<n>.json
+                     the same n spheres in one blend (`blend`, the same blend radius): the union
+                     of all children blended at once, the same value in any order, which the sdf
+                     backend evaluates from the children near each point only.
+
   molecule_1000_deep.json
                      the same 1000 spheres as a left-deep binary tree of two-child smooth
                      unions (999 levels), the form modelling tools export: it must render as
@@ -70,15 +75,16 @@ def random_walk(n, seed):
     return out
 
 
-def molecule(centres):
+def molecule(centres, op="smooth_union"):
     n = len(centres)
     centroid = [sum(c[i] for c in centres) / n for i in range(3)]
     norm = math.sqrt(sum(c * c for c in CAMERA_DIR))
     eye = [centroid[i] + CAMERA_DISTANCE * CAMERA_DIR[i] / norm for i in range(3)]
     r5 = lambda v: round(v, 5)
     return {
-        "description": f"Sculpted series: a molecule of {n} spheres (radius {RADIUS}) in one smooth "
-        f"union (blend radius {BLEND}), a random walk of step {STEP} (scripts/gen_sculpted.py).",
+        "description": f"Sculpted series: a molecule of {n} spheres (radius {RADIUS}) in one "
+        + ("smooth union" if op == "smooth_union" else "blend of all children at once")
+        + f" (blend radius {BLEND}), a random walk of step {STEP} (scripts/gen_sculpted.py).",
         "camera": camera(eye, centroid),
         "background": {"color": [0.6, 0.75, 0.9]},
         "lights": LIGHTS,
@@ -86,7 +92,7 @@ def molecule(centres):
             {
                 "name": "molecule",
                 "shape": {
-                    "smooth_union": {
+                    op: {
                         "blend_radius": BLEND,
                         "children": [
                             {
@@ -225,13 +231,14 @@ def main():
     args = ap.parse_args()
     os.makedirs(OUT, exist_ok=True)
     walk = random_walk(max(SIZES), args.seed)
-    for n in SIZES:
-        path = os.path.join(OUT, f"molecule_{n}.json")
+    for n, op in [(n, op) for op in ["smooth_union", "blend"] for n in SIZES]:
+        name = f"molecule_{n}.json" if op == "smooth_union" else f"molecule_blend_{n}.json"
+        path = os.path.join(OUT, name)
         with open(path, "w") as f:
             # One child a line: readable, and a tenth of the size of an indented dump.
-            scene = molecule(walk[:n])
-            kids = scene["objects"][0]["shape"]["smooth_union"]["children"]
-            scene["objects"][0]["shape"]["smooth_union"]["children"] = "@CHILDREN@"
+            scene = molecule(walk[:n], op)
+            kids = scene["objects"][0]["shape"][op]["children"]
+            scene["objects"][0]["shape"][op]["children"] = "@CHILDREN@"
             text = json.dumps(scene, indent=2)
             lines = ",\n".join(" " * 10 + json.dumps(c, separators=(",", ":")) for c in kids)
             f.write(text.replace('"@CHILDREN@"', "[\n" + lines + "\n        ]") + "\n")

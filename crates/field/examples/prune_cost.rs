@@ -189,7 +189,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
         let agree = w.hits.iter().zip(&p.hits).filter(|(a, b)| a == b).count();
         println!(
-            "{}: nodes {}, cells (program, far, largest program, whole, subset, subset children) {:?} built in {:.0} ms; whole {:.1} ns/step ({} steps a trace, {} hits); pruned {:.1} ns/step ({} steps a trace, {} hits); hit/miss agree on {}/{} rays",
+            "{}: nodes {}, cells (program, far, largest program, whole, subset, subset children, fine lists, fine children) {:?} built in {:.0} ms; whole {:.1} ns/step ({} steps a trace, {} hits); pruned {:.1} ns/step ({} steps a trace, {} hits); hit/miss agree on {}/{} rays",
             path.display(),
             whole.node_count(),
             stats.map(|s| (
@@ -198,7 +198,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 s.max_program_nodes,
                 s.whole_cells,
                 s.subset_cells,
-                s.subset_children
+                s.subset_children,
+                s.fine_lists,
+                s.fine_children
             )),
             build_ms,
             median(cw),

@@ -142,7 +142,12 @@ fn a_pruned_molecule_is_the_whole_molecule_where_surfaces_are() {
 
 #[test]
 fn a_pruned_blend_molecule_is_the_whole_molecule_where_surfaces_are() {
-    check_cells(&blend_molecule(300, 7, 0.026), 5);
+    let mol = blend_molecule(300, 7, 0.026);
+    check_cells(&mol, 5);
+    // Its subset cells list the children near each finest cell: shorter lists, the same bits.
+    let stats = compile(&mol).build_cells(5, 0.0).expect("built");
+    assert!(stats.fine_lists > 0, "{stats:?}");
+    assert!(stats.fine_children < stats.subset_children, "{stats:?}");
 }
 
 #[test]

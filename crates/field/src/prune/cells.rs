@@ -82,7 +82,30 @@ pub struct Cells {
     /// The whole program's [`Program::sphere_table`] in f32 when some cell is a
     /// [`Cell::Subset`] (empty otherwise): subset folds rule far spheres out from it.
     spheres32: Vec<[f32; 4]>,
+    /// A blend root's children per finest cell ([`FineLists`]; empty otherwise).
+    fine: FineLists,
 }
+
+/// For a root blend ([`marchmesh_scene::SmoothOp::Blend`]): per finest cell of the octree
+/// inside a subset cell listing more than [`FINE_MIN_KIDS`] children, the ones that can
+/// come within `k` of the blend's minimum in that finest cell (the others add an exact `+0`
+/// to the blend's sums there, `program::blend`), deduplicated. A blend's value at a point
+/// needs only the children near it, so lists over finest cells, not over the cells the
+/// octree's work budget stops at, set a step's cost. A fold has no such lists: its value
+/// depends on the children before the near ones.
+#[derive(Debug, Clone, Default)]
+struct FineLists {
+    /// Per finest cell (as [`Cells`]' index): its list in `spans`, `u32::MAX` for none
+    /// (the cell's own list applies). Empty when there are no lists.
+    entry: Vec<u32>,
+    /// `(start, len)` of each distinct list in `kids`.
+    spans: Vec<(u32, u32)>,
+    /// The lists, each in stored order.
+    kids: Vec<u32>,
+}
+
+/// Subset cells of a root blend listing more children than this get [`FineLists`].
+const FINE_MIN_KIDS: usize = 16;
 
 thread_local! {
     /// The merged kept children of an 8-lane query over several subset cells.
@@ -151,6 +174,10 @@ pub struct CellStats {
     /// The work budget stopped the refinement: some cells settled where they would have
     /// been split further (at a coarser level than `depth`).
     pub budget_cut: bool,
+    /// Distinct lists of a root blend's children per finest cell (`FineLists`).
+    pub fine_lists: usize,
+    /// Children listed by those lists.
+    pub fine_children: usize,
 }
 
 /// Cells with at most this many nodes are not subdivided further.
@@ -234,6 +261,7 @@ impl Cells {
             by_source: super::FastMap::default(),
             work_left: work,
             spheres32: Vec::new(),
+            fine: FineLists::default(),
         };
         let budget = Self::max_nodes(prog.instrs.len());
         let mut level = vec![Region {
@@ -273,8 +301,104 @@ impl Cells {
                     *blocks = KidBlock::table(&cells.spheres32, kids).into();
                 }
             }
+            cells.fine = cells.fine_lists(prog, lo, size);
+            cells.stats.fine_lists = cells.fine.spans.len();
+            cells.stats.fine_children = cells.fine.kids.len();
         }
         Some(cells)
+    }
+
+    /// [`FineLists`] of a root blend over the finest cells of size `size` from `lo` (empty
+    /// for any other root). A child is dropped from a finest cell's list when it is a sphere
+    /// whose least value over the cell's bounding ball is at least `k` (and a slack for the
+    /// f32 evaluation's rounding) above the least upper bound of the listed spheres there.
+    fn fine_lists(&self, prog: &Program<f64>, lo: DVec3, size: DVec3) -> FineLists {
+        let Some(root) = prog.instrs.first() else {
+            return FineLists::default();
+        };
+        let Op::Smooth {
+            op: marchmesh_scene::SmoothOp::Blend,
+            k,
+            ..
+        } = root.op
+        else {
+            return FineLists::default();
+        };
+        let spheres = prog.sphere_table::<f64>();
+        let res = self.res as usize;
+        let rq = 0.5 * size.length() * super::stretch(&root.to_local);
+        let mut fine = FineLists {
+            entry: vec![u32::MAX; self.index.len()],
+            ..FineLists::default()
+        };
+        let mut seen: super::FastMap<Vec<u32>, u32> = super::FastMap::default();
+        let mut list = Vec::new();
+        let mut near = Vec::new();
+        for (e, &id) in self.index.iter().enumerate() {
+            let Some(Cell::Subset { kids, .. }) = self.cells.get(id as usize) else {
+                continue;
+            };
+            if kids.len() <= FINE_MIN_KIDS {
+                continue;
+            }
+            let at = DVec3::new(
+                (e % res) as f64,
+                (e / res % res) as f64,
+                (e / (res * res)) as f64,
+            );
+            let c = lo + size * (at + 0.5);
+            let q = root.to_local.apply(V3::new(c.x, c.y, c.z));
+            near.clear();
+            let mut least_upper = f64::INFINITY;
+            for &j in kids.iter() {
+                let s = spheres[j as usize];
+                let d = if s[3].is_nan() {
+                    f64::NEG_INFINITY
+                } else {
+                    let (x, y, z) = (q.x + s[0], q.y + s[1], q.z + s[2]);
+                    (x * x + y * y + z * z).sqrt() - s[3]
+                };
+                if d.is_finite() {
+                    least_upper = least_upper.min(d + rq);
+                }
+                near.push((j, d));
+            }
+            let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + rq + k;
+            let reach = least_upper + k + super::SLACK_REL * (1.0 + least_upper.abs() + scale);
+            list.clear();
+            list.extend(near.iter().filter(|c| c.1 - rq < reach).map(|c| c.0));
+            if list.len() == kids.len() {
+                continue;
+            }
+            let span = match seen.get(&list) {
+                Some(&span) => span,
+                None => {
+                    let span = fine.spans.len() as u32;
+                    fine.spans.push((fine.kids.len() as u32, list.len() as u32));
+                    fine.kids.extend_from_slice(&list);
+                    seen.insert(list.clone(), span);
+                    span
+                }
+            };
+            fine.entry[e] = span;
+        }
+        if fine.spans.is_empty() {
+            return FineLists::default();
+        }
+        fine
+    }
+
+    /// The children to read at the finest cell `e` of a subset cell listing `kids`: its
+    /// [`FineLists`] entry when it has one, else `kids`.
+    #[inline(always)]
+    fn kids_at<'a>(&'a self, e: usize, kids: &'a [u32]) -> &'a [u32] {
+        match self.fine.entry.get(e) {
+            Some(&span) if span != u32::MAX => {
+                let (start, len) = self.fine.spans[span as usize];
+                &self.fine.kids[start as usize..(start + len) as usize]
+            }
+            _ => kids,
+        }
     }
 
     /// The most program nodes all cells of a program of `nodes` nodes may hold together:
@@ -445,13 +569,23 @@ impl Cells {
             .sum();
         (self.index.len() * 4
             + self.cells.len() * std::mem::size_of::<Cell>()
-            + self.spheres32.len() * 16) as u64
+            + self.spheres32.len() * 16
+            + self.fine.entry.len() * 4
+            + self.fine.spans.len() * 8
+            + self.fine.kids.len() * 4) as u64
             + programs
     }
 
     /// The cell holding `p`, `None` outside the octree's box.
     #[inline(always)]
     pub fn locate(&self, p: [f32; 3]) -> Option<&Cell> {
+        self.locate_finest(p).map(|(_, c)| c)
+    }
+
+    /// The finest cell holding `p` (its index) and the cell it belongs to, `None` outside the
+    /// octree's box.
+    #[inline(always)]
+    fn locate_finest(&self, p: [f32; 3]) -> Option<(usize, &Cell)> {
         let mut at = [0usize; 3];
         for a in 0..3 {
             let f = (p[a] - self.lo[a]) * self.inv_size[a];
@@ -462,8 +596,9 @@ impl Cells {
             at[a] = (f as usize).min(self.res as usize - 1);
         }
         let res = self.res as usize;
-        let id = self.index[(at[2] * res + at[1]) * res + at[0]];
-        self.cells.get(id as usize)
+        let e = (at[2] * res + at[1]) * res + at[0];
+        let id = self.index[e];
+        self.cells.get(id as usize).map(|c| (e, c))
     }
 
     /// The safe value outside the box: the distance to the box plus the pad.
@@ -515,7 +650,14 @@ impl Cells {
         let mut out = F32x8([0.0; 8]);
         let mut mat = [0u32; 8];
         let pts: [[f32; 3]; 8] = std::array::from_fn(|i| [p.x.0[i], p.y.0[i], p.z.0[i]]);
-        let cells: [Option<&Cell>; 8] = std::array::from_fn(|i| self.locate(pts[i]));
+        let found: [Option<(usize, &Cell)>; 8] =
+            std::array::from_fn(|i| self.locate_finest(pts[i]));
+        let cells: [Option<&Cell>; 8] = std::array::from_fn(|i| found[i].map(|f| f.1));
+        // Per subset lane, the children it reads (a blend's finest-cell list or its cell's).
+        let lists: [Option<&[u32]>; 8] = std::array::from_fn(|i| match found[i] {
+            Some((e, Cell::Subset { kids, .. })) => Some(self.kids_at(e, kids)),
+            _ => None,
+        });
         let mut done = 0u8;
         if M && cells.iter().any(|c| !c.is_some_and(Cell::evaluates)) {
             let (d, m) = whole.eval::<F32x8, true>(p, grids);
@@ -536,10 +678,8 @@ impl Cells {
         let mut n_subsets = 0;
         for i in 0..8 {
             if (done >> i) & 1 == 0
-                && let Some(Cell::Subset { kids, .. }) = cells[i]
-                && !subsets[..n_subsets]
-                    .iter()
-                    .any(|k| std::ptr::eq(*k, &**kids))
+                && let Some(kids) = lists[i]
+                && !subsets[..n_subsets].iter().any(|k| std::ptr::eq(*k, kids))
             {
                 subsets[n_subsets] = kids;
                 n_subsets += 1;
@@ -600,17 +740,26 @@ impl Cells {
                 }
                 Some(c) => c,
             };
-            let (d, m) = match c {
-                Cell::Program { p32, .. } => p32.eval::<F32x8, M>(p, grids),
-                Cell::Subset { kids, blocks } => {
-                    whole.eval_root_subset::<F32x8, M>(kids, &self.spheres32, blocks, p, grids)
+            let (d, m) = match (c, lists[i]) {
+                (Cell::Program { p32, .. }, _) => p32.eval::<F32x8, M>(p, grids),
+                (Cell::Subset { kids, blocks }, Some(list)) => {
+                    // The cell's blocks hold its own list only.
+                    let blocks = if std::ptr::eq(list, &**kids) {
+                        &**blocks
+                    } else {
+                        &[]
+                    };
+                    whole.eval_root_subset::<F32x8, M>(list, &self.spheres32, blocks, p, grids)
                 }
-                Cell::Whole | Cell::Far { .. } => whole.eval::<F32x8, M>(p, grids),
+                _ => whole.eval::<F32x8, M>(p, grids),
             };
-            // Every lane in the same cell (every lane of a whole cell) takes this answer.
+            // Every lane in the same cell reading the same children (every lane of a whole
+            // cell) takes this answer.
             for l in i..8 {
                 let same = cells[l].is_some_and(|o| {
-                    std::ptr::eq(o, c) || matches!((o, c), (Cell::Whole, Cell::Whole))
+                    (std::ptr::eq(o, c)
+                        && lists[l].map(<[u32]>::as_ptr) == lists[i].map(<[u32]>::as_ptr))
+                        || matches!((o, c), (Cell::Whole, Cell::Whole))
                 });
                 if same {
                     out.0[l] = d.0[l];
@@ -633,10 +782,17 @@ impl Cells {
     ) -> (f32, u32) {
         let a = p.to_array();
         let v = V3::new(p.x, p.y, p.z);
-        match self.locate(a) {
+        let found = self.locate_finest(a);
+        match found.map(|f| f.1) {
             Some(Cell::Program { p32, .. }) => p32.eval::<f32, M>(v, grids),
             Some(Cell::Subset { kids, blocks }) => {
-                whole.eval_root_subset::<f32, M>(kids, &self.spheres32, blocks, v, grids)
+                let list = found.map_or(&**kids, |(e, _)| self.kids_at(e, kids));
+                let blocks = if std::ptr::eq(list, &**kids) {
+                    &**blocks
+                } else {
+                    &[]
+                };
+                whole.eval_root_subset::<f32, M>(list, &self.spheres32, blocks, v, grids)
             }
             Some(Cell::Whole) => whole.eval::<f32, M>(v, grids),
             _ if M => whole.eval::<f32, true>(v, grids),
