@@ -376,10 +376,32 @@ impl<S: Scalar> Program<S> {
         };
         let q = ins.to_local.apply(p);
         if *op == SmoothOp::Blend {
+            // One f32 point over spheres of the table: eight children at a time.
+            if std::mem::size_of::<T>() == 4
+                && std::mem::size_of::<S>() == 4
+                && spheres.len() == self.instrs.len()
+                && let Some((v, j)) = self.blend_spheres_f32(
+                    kids,
+                    spheres,
+                    [q.x, q.y, q.z].map(|c| c.hmax() as f32),
+                    k.to_f64() as f32,
+                )
+            {
+                let v = T::splat(S::from_f64(f64::from(v)));
+                let mat = if M { self.instrs[j].material } else { 0 };
+                return (v * T::splat(ins.dscale), T::mat_splat(mat));
+            }
             let kids = kids
                 .iter()
                 .map(|&j| (j as usize, spheres.get(j as usize).copied()));
-            let (v, m) = self.blend::<T, M, _>(kids, q, *k, grids);
+            let blocks = if std::mem::size_of::<S>() == 4
+                && blocks.len() == kids.len().div_ceil(FOLD_BLOCK)
+            {
+                blocks
+            } else {
+                &[]
+            };
+            let (v, m) = self.blend::<T, M, _>(kids, blocks, q, *k, grids);
             return (v * T::splat(ins.dscale), m);
         }
         let k = T::splat(*k);
@@ -642,7 +664,7 @@ impl<S: Scalar> Program<S> {
                 op: SmoothOp::Blend,
                 k,
                 ..
-            } => self.blend::<T, M, _>(blend::Children::of(self, i), q, *k, grids),
+            } => self.blend::<T, M, _>(blend::Children::of(self, i), &[], q, *k, grids),
             Op::Smooth { op, k, inv_k } => {
                 let k = T::splat(*k);
                 let inv_k = T::splat(*inv_k);

@@ -632,9 +632,18 @@ fn a_fold_scanning_blocks_is_the_fold_child_by_child() {
 
 #[test]
 fn a_lone_root_cell_lists_every_child_and_gives_the_whole_values() {
+    lone_root_cell(molecule(300, 11, 0.026));
+}
+
+#[test]
+fn a_lone_root_cell_of_a_blend_gives_the_whole_values() {
+    // Single points read the spheres eight at a time, eight lanes skip blocks of far ones.
+    lone_root_cell(blend_molecule(300, 11, 0.026));
+}
+
+fn lone_root_cell(mol: Node) {
     // A work budget of 0 settles the octree's root: one subset cell over the whole box,
     // no far cells, no index of finest cells.
-    let mol = molecule(300, 11, 0.026);
     let whole = compile(&mol);
     let mut cells = compile(&mol);
     let stats = cells

@@ -40,7 +40,7 @@
 
 use crate::lane::{Lane, Scalar, V3};
 
-use super::{BIG, Ctx, GridSampler, Program, msel};
+use super::{BIG, Ctx, FOLD_BLOCK, GridSampler, KidBlock, Program, msel};
 
 /// Most values of children within `k` of the running minimum at some lane a blend keeps
 /// between its passes; a blend with more evaluates its children again in each pass (the
@@ -82,13 +82,75 @@ impl<S: Scalar> Iterator for Children<'_, S> {
     }
 }
 
-/// Running sums of one pass over the children with `b = a - m < x`.
-struct Sums<T> {
+/// Running sums of one pass over the children with `b = a - m < x`, added in the
+/// children's stored order (every evaluator adds the same values in the same order).
+pub(crate) struct Sums<T> {
+    m: T,
+    x: T,
     count: T,
     s1: T,
     s2: T,
     most: T,
 }
+
+impl<T: Lane> Sums<T> {
+    /// Adds a child's value `a` (an exact `+0` where `a - m >= x`).
+    #[inline(always)]
+    pub(crate) fn add(&mut self, a: T) {
+        let zero = T::c(0.0);
+        let b = a - self.m;
+        let inside = T::lt(b, self.x);
+        let bz = T::select(inside, b, zero);
+        self.count = self.count + T::select(inside, T::c(1.0), zero);
+        self.s1 = self.s1 + bz;
+        self.s2 = self.s2 + bz * bz;
+        self.most = self.most.max(bz);
+    }
+}
+
+/// The blend of blend radius `k` of children whose minimum is `m`, by the solve of the
+/// [module docs](self): `pass(x, sums)` adds (through [`Sums::add`]) the value of every
+/// child that may lie below `m + x` at some lane, in stored order (values at or above it
+/// add `+0`, so any superset gives the same bits).
+#[inline(always)]
+pub(crate) fn settle<T: Lane>(m: T, k: T, mut pass: impl FnMut(T, &mut Sums<T>)) -> T {
+    let zero = T::c(0.0);
+    let kk = k * k;
+    let mut x = k;
+    let mut value = m;
+    let mut settled = T::lt(zero, zero);
+    let mut count = T::c(1.0);
+    for _ in 0..BLEND_PASSES {
+        let mut s = Sums {
+            m,
+            x,
+            count: zero,
+            s1: zero,
+            s2: zero,
+            most: zero,
+        };
+        pass(x, &mut s);
+        count = s.count.max(T::c(1.0));
+        let disc = (s.s1 * s.s1 - s.count * (s.s2 - kk)).max(zero);
+        let r = (s.s1 + disc.sqrt()) / count;
+        let done = T::and(T::le(s.most, r), T::not(settled));
+        value = T::select(done, m - (k - r), value);
+        settled = T::or(settled, done);
+        if T::all(settled) {
+            return value;
+        }
+        // Newton's step on g from x, or the largest b (its child is inactive).
+        let g = (s.count * x - s.s1 - s.s1) * x + s.s2 - kk;
+        let slope = (s.count * x - s.s1) * T::c(2.0);
+        let newton = x - g / slope;
+        x = T::select(settled, x, newton.min(s.most));
+    }
+    T::select(settled, value, m - (k - k / count.sqrt()))
+}
+
+/// Most children [`Program::blend_spheres_f32`] computes once and keeps; a longer list is
+/// computed again in its second pass.
+const SPHERE_VALUES: usize = 64;
 
 impl<S: Scalar> Program<S> {
     /// Child `j`'s value at `q` (its parent's frame) when it is below `thr` at a lane, else
@@ -116,11 +178,13 @@ impl<S: Scalar> Program<S> {
     /// The blend of blend radius `k` of the children `kids` (`(node, sphere table entry)`,
     /// in stored order) at `q`, their parent's frame, and the nearest child's material when
     /// `M` (see the [module docs](self)). `kids` is read again when more than
-    /// [`BLEND_BUFFER`] children come within `k` of the minimum.
+    /// [`BLEND_BUFFER`] children come within `k` of the minimum. `blocks` is empty or
+    /// [`KidBlock::table`] of exactly `kids` (f32 programs only): the same values.
     #[inline(always)]
     pub(crate) fn blend<T: Lane<S = S>, const M: bool, I>(
         &self,
         kids: I,
+        blocks: &[KidBlock],
         q: V3<T>,
         k: S,
         grids: &[Box<dyn GridSampler>],
@@ -136,7 +200,29 @@ impl<S: Scalar> Program<S> {
         let mut kept = [zero; BLEND_BUFFER];
         let mut n = 0;
         let mut spilled = false;
-        for (j, sphere) in kids.clone() {
+        // With `blocks` (the kids' spheres eight at a time, in the same order), one vector
+        // test per eight children rules out those at least `k` above every lane's running
+        // value over the lanes' ball, as `sphere_no_op` rules out one.
+        let ball = (!blocks.is_empty()).then(|| super::lanes_ball(q));
+        let k32 = k.hmax() as f32;
+        let mut near = u8::MAX;
+        for (i, (j, sphere)) in kids.clone().enumerate() {
+            if let Some((c, rho)) = ball {
+                if i % FOLD_BLOCK == 0 {
+                    // NaN when a lane's running value is not finite: nothing is ruled out.
+                    let most = if best.hsum().is_finite() {
+                        best.hmax() as f32
+                    } else {
+                        f32::NAN
+                    };
+                    near = blocks
+                        .get(i / FOLD_BLOCK)
+                        .map_or(u8::MAX, |b| b.near(c, rho, most, k32));
+                }
+                if (near >> (i % FOLD_BLOCK)) & 1 == 0 {
+                    continue;
+                }
+            }
             if self.sphere_no_op(j, sphere.as_ref(), q, best, k) {
                 continue;
             }
@@ -154,54 +240,113 @@ impl<S: Scalar> Program<S> {
             bm = msel::<T, M>(take, m, bm);
         }
         let m = best;
-        let kk = k * k;
-        let mut x = k;
-        let mut value = m;
-        let mut settled = T::lt(zero, zero);
-        let mut count = T::c(1.0);
-        for _ in 0..BLEND_PASSES {
-            let mut s = Sums {
-                count: zero,
-                s1: zero,
-                s2: zero,
-                most: zero,
-            };
-            let mut add = |a: T| {
-                let b = a - m;
-                let inside = T::lt(b, x);
-                let bz = T::select(inside, b, zero);
-                s.count = s.count + T::select(inside, T::c(1.0), zero);
-                s.s1 = s.s1 + bz;
-                s.s2 = s.s2 + bz * bz;
-                s.most = s.most.max(bz);
-            };
+        let value = settle(m, k, |x, s| {
             if spilled {
                 for (j, sphere) in kids.clone() {
                     if self.sphere_no_op(j, sphere.as_ref(), q, m, x) {
                         continue;
                     }
-                    add(self.blend_child::<T, false>(j, sphere, q, m + x, grids).0);
+                    s.add(self.blend_child::<T, false>(j, sphere, q, m + x, grids).0);
                 }
             } else {
                 for &a in &kept[..n] {
-                    add(a);
+                    s.add(a);
                 }
             }
-            count = s.count.max(T::c(1.0));
-            let disc = (s.s1 * s.s1 - s.count * (s.s2 - kk)).max(zero);
-            let r = (s.s1 + disc.sqrt()) / count;
-            let done = T::and(T::le(s.most, r), T::not(settled));
-            value = T::select(done, m - (k - r), value);
-            settled = T::or(settled, done);
-            if T::all(settled) {
-                return (value, bm);
-            }
-            // Newton's step on g from x, or the largest b (its child is inactive).
-            let g = (s.count * x - s.s1 - s.s1) * x + s.s2 - kk;
-            let slope = (s.count * x - s.s1) * T::c(2.0);
-            let newton = x - g / slope;
-            x = T::select(settled, x, newton.min(s.most));
+        });
+        (value, bm)
+    }
+
+    /// [`Program::blend`] at one f32 point `q` of the children `kids`, when every one is a
+    /// sphere of this program's [`Program::sphere_table`] `spheres` (cast to f32): their
+    /// values eight at a time, the same operations as the node's (`|q + t| - r`), then the
+    /// same solve over the ones within `k` of the minimum in stored order: the same bits
+    /// and the nearest child's node. `None` (nothing computed that matters) when a child is
+    /// not such a sphere, `q` is not finite, or more than [`BLEND_BUFFER`] children come
+    /// within `k` of the minimum.
+    pub(crate) fn blend_spheres_f32(
+        &self,
+        kids: &[u32],
+        spheres: &[[S; 4]],
+        q: [f32; 3],
+        k: f32,
+    ) -> Option<(f32, usize)> {
+        const W: usize = 8;
+        if !q.iter().all(|v| v.is_finite()) {
+            return None;
         }
-        (T::select(settled, value, m - (k - k / count.sqrt())), bm)
+        let f = |v: S| v.to_f64() as f32;
+        let values = |chunk: &[u32]| -> [f32; W] {
+            let mut t = [[f32::INFINITY; W]; 3];
+            let mut r = [0.0f32; W];
+            for (l, &j) in chunk.iter().enumerate() {
+                // A missing entry reads as NaN, as a non-sphere's does.
+                let e = spheres.get(j as usize).map_or([f32::NAN; 4], |e| e.map(f));
+                t[0][l] = e[0];
+                t[1][l] = e[1];
+                t[2][l] = e[2];
+                r[l] = e[3];
+            }
+            std::array::from_fn(|l| {
+                let (x, y, z) = (q[0] + t[0][l], q[1] + t[1][l], q[2] + t[2][l]);
+                (x * x + y * y + z * z).sqrt() - r[l]
+            })
+        };
+        let mut kept = [0.0f32; SPHERE_VALUES];
+        let mut best = [f32::INFINITY; W];
+        let mut at = [usize::MAX; W];
+        let mut nan = false;
+        for (c, chunk) in kids.chunks(W).enumerate() {
+            let d = values(chunk);
+            for l in 0..W {
+                nan |= d[l].is_nan();
+                if d[l] < best[l] {
+                    best[l] = d[l];
+                    at[l] = c * W + l;
+                }
+            }
+            if let Some(out) = kept.get_mut(c * W..c * W + chunk.len()) {
+                out.copy_from_slice(&d[..chunk.len()]);
+            }
+        }
+        if nan {
+            return None;
+        }
+        // The first child at the least value (as a fold of `d < best` takes it).
+        let m = best.iter().copied().fold(f32::INFINITY, f32::min);
+        let first = (0..W)
+            .filter(|&l| best[l] == m)
+            .map(|l| at[l])
+            .min()?;
+        let mut near = [0.0f32; BLEND_BUFFER];
+        let mut n = 0;
+        let mut note = |a: f32| {
+            if a - m < k {
+                if n == BLEND_BUFFER {
+                    return false;
+                }
+                near[n] = a;
+                n += 1;
+            }
+            true
+        };
+        if kids.len() <= SPHERE_VALUES {
+            if !kept[..kids.len()].iter().all(|&a| note(a)) {
+                return None;
+            }
+        } else {
+            for chunk in kids.chunks(W) {
+                let d = values(chunk);
+                if !d[..chunk.len()].iter().all(|&a| note(a)) {
+                    return None;
+                }
+            }
+        }
+        let value = settle(m, k, |_, s| {
+            for &a in &near[..n] {
+                s.add(a);
+            }
+        });
+        Some((value, kids[first] as usize))
     }
 }
