@@ -19,7 +19,9 @@
 //!   exactly 0) and is dropped; a child with `a_j <= P.lo - k` replaces the fold exactly
 //!   (`smin = a_j`), so every child before it is dropped. This is the paper's rule for
 //!   binary smooth nodes (children differing by more than `k` across the cell collapse to
-//!   the nearer one) applied along the fold, which is what keeps the fold order.
+//!   the nearer one) applied along the fold, which is what keeps the fold order;
+//! - blend (`program::blend`, order-free): a child whose lower bound is at least the least
+//!   upper bound plus `k` adds an exact `+0` and is dropped, wherever it stands.
 //!
 //! Intervals carry a slack for f32 rounding, so the f32 program pruned from the f64 one
 //! drops only children that are exact no-ops in f32 as well.
@@ -189,9 +191,9 @@ pub fn prune_indexed(
     }
 }
 
-/// The children a restricted program keeps when it is `prog`'s root, a smooth union, with
-/// some of its children each copied whole (`source`: the restricted nodes' indices in
-/// `prog`), else `None`.
+/// The children a restricted program keeps when it is `prog`'s root, a smooth union or a
+/// blend, with some of its children each copied whole (`source`: the restricted nodes'
+/// indices in `prog`), else `None`.
 fn root_subset(prog: &Program<f64>, source: &[u32]) -> Option<Box<[u32]>> {
     if source.len() < 2 || source[0] != 0 || !prog.root_is_smooth_union_or_blend() {
         return None;

@@ -314,10 +314,7 @@ impl<S: Scalar> Program<S> {
         }
         // The first child at the least value (as a fold of `d < best` takes it).
         let m = best.iter().copied().fold(f32::INFINITY, f32::min);
-        let first = (0..W)
-            .filter(|&l| best[l] == m)
-            .map(|l| at[l])
-            .min()?;
+        let first = (0..W).filter(|&l| best[l] == m).map(|l| at[l]).min()?;
         let mut near = [0.0f32; BLEND_BUFFER];
         let mut n = 0;
         let mut note = |a: f32| {

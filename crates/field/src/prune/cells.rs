@@ -30,10 +30,10 @@ pub enum Cell {
     },
     /// No program of its own: the whole program is evaluated (the node budget was spent).
     Whole,
-    /// The program restricted to the cell when that keeps the root (a smooth union) and
-    /// some of its children whole: those children's node indices, in fold order, read
-    /// through [`Program::eval_root_subset`] on the whole program (4 bytes a child instead
-    /// of a copied node; the same values).
+    /// The program restricted to the cell when that keeps the root (a smooth union or a
+    /// blend) and some of its children whole: those children's node indices, in stored
+    /// order, read through [`Program::eval_root_subset`] on the whole program (4 bytes a
+    /// child instead of a copied node; the same values).
     Subset {
         /// Node indices of the kept children (at least one).
         kids: Box<[u32]>,
