@@ -77,8 +77,11 @@ fn rng(seed: u64) -> impl FnMut() -> f64 {
     }
 }
 
+/// Spheres (centre, radius), a blend radius and points to evaluate at.
+type Case = (Vec<(DVec3, f64)>, f64, Vec<DVec3>);
+
 /// Random clusters of 1-12 spheres with random blend radii, and points around them.
-fn cases(seed: u64, count: usize) -> Vec<(Vec<(DVec3, f64)>, f64, Vec<DVec3>)> {
+fn cases(seed: u64, count: usize) -> Vec<Case> {
     let mut r = rng(seed);
     (0..count)
         .map(|_| {
