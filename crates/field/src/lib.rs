@@ -610,6 +610,7 @@ impl Field {
         if fell_back {
             cells = build(0)?;
         }
+        cells.list_blend_children(&self.p64);
         let stats = cells.stats();
         self.report
             .phases_ms

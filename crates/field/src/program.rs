@@ -31,7 +31,7 @@ use marchmesh_scene::SmoothOp;
 use crate::leaf::{GridList, Leaf};
 use crate::shapes::{self, TriData};
 
-mod blend;
+pub(crate) mod blend;
 pub mod segment;
 
 /// Most copies evaluated per repeated axis: the scene's
@@ -311,6 +311,19 @@ impl<S: Scalar> Program<S> {
                 n.op,
                 Op::Smooth {
                     op: SmoothOp::Union | SmoothOp::Blend,
+                    ..
+                }
+            )
+        })
+    }
+
+    /// Whether the root is a blend ([`SmoothOp::Blend`]).
+    pub fn root_is_blend(&self) -> bool {
+        self.instrs.first().is_some_and(|n| {
+            matches!(
+                n.op,
+                Op::Smooth {
+                    op: SmoothOp::Blend,
                     ..
                 }
             )

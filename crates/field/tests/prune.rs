@@ -781,8 +781,10 @@ fn eight_lanes_over_several_cells_read_the_union_of_their_children(mut mol: Node
         1 << 16,
         Cells::max_work(whole.instrs.len()),
     ] {
-        let cells = Cells::build_within(&whole, &index, &[], (lo, hi), 0.01, 6, 0.0, budget)
+        let mut cells = Cells::build_within(&whole, &index, &[], (lo, hi), 0.01, 6, 0.0, budget)
             .expect("built");
+        // A blend's lists per finest cell (nothing for a fold).
+        cells.list_blend_children(&whole);
         assert!(cells.stats().subset_cells > 1, "{:?}", cells.stats());
         for _ in 0..600 {
             // Bundles near the walk (within 0.35 of the origin), spread across cells.

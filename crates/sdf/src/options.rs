@@ -142,12 +142,13 @@ pub struct SdfOptions {
     /// Cells of the pruning per region: auto (default), octree or root.
     ///
     /// `auto` gives the octree its whole work budget when the camera's samples times the
-    /// field's nodes reach [`crate::PRUNE_OCTREE_MIN_SAMPLE_NODES`]; below, a small budget
+    /// field's nodes reach [`crate::PRUNE_OCTREE_MIN_SAMPLE_NODES`] (a quarter of it,
+    /// [`crate::PRUNE_OCTREE_MIN_SAMPLE_NODES_BLEND`], for a root `blend`); below, a small budget
     /// ([`crate::PRUNE_TRIAL_WORK`]), and one cell over the whole box where that does not
     /// finish the octree: the whole budget's build (up to about 0.7 s) would cost more
     /// than it saves on one image that small. `octree` is the fastest per ray, for renders
     /// that reuse one build (benchmark repeats, the viewer); `root` never refines. Measured:
-    /// `docs/decisions/0030`.
+    /// `docs/decisions/0030` and `0031`.
     pub prune_cells: PruneCells,
     /// In lockstep batches, march one cone per run of four camera rays and start the rays
     /// where it stops (false: every ray from its origin).

@@ -107,6 +107,127 @@ struct FineLists {
 /// Subset cells of a root blend listing more children than this get [`FineLists`].
 const FINE_MIN_KIDS: usize = 16;
 
+/// The descent [`Cells::list_blend_children`] makes.
+struct Lists<'a> {
+    prog: &'a Program<f64>,
+    /// The program's [`Program::sphere_table`].
+    spheres: Vec<[f64; 4]>,
+    /// Stretch of the root's frame (a ball's radius in it).
+    stretch: f64,
+    k: f64,
+    lo: DVec3,
+    /// A finest cell's size.
+    size: DVec3,
+    /// Finest cells per axis.
+    res: usize,
+    /// Per finest cell: whether its cell gets a list.
+    wants: &'a [bool],
+    /// Each distinct list's span.
+    seen: super::FastMap<Vec<u32>, u32>,
+}
+
+impl Lists<'_> {
+    /// Whether a finest cell of the block at `at` (finest cells) of side `span` wants a list.
+    fn wanted(&self, at: [usize; 3], span: usize) -> bool {
+        (at[2]..at[2] + span).any(|z| {
+            (at[1]..at[1] + span).any(|y| {
+                let row = (z * self.res + y) * self.res;
+                self.wants[row + at[0]..row + at[0] + span].contains(&true)
+            })
+        })
+    }
+
+    /// Of `parent` (stored order), the children that can come within `k` of the blend's
+    /// minimum in the ball around the block at `at` of side `span`.
+    fn keep(&self, at: [usize; 3], span: usize, parent: &[u32]) -> Vec<u32> {
+        let corner = |o: usize| {
+            self.lo
+                + self.size * DVec3::new((at[0] + o) as f64, (at[1] + o) as f64, (at[2] + o) as f64)
+        };
+        let (a, b) = (corner(0), corner(span));
+        let c = 0.5 * (a + b);
+        let root = &self.prog.instrs[0];
+        let q = root.to_local.apply(V3::new(c.x, c.y, c.z));
+        let rq = 0.5 * (b - a).length() * self.stretch;
+        let value = |j: u32| {
+            let s = self.spheres[j as usize];
+            if s[3].is_nan() {
+                return f64::NEG_INFINITY;
+            }
+            let (x, y, z) = (q.x + s[0], q.y + s[1], q.z + s[2]);
+            (x * x + y * y + z * z).sqrt() - s[3]
+        };
+        let least_upper = parent
+            .iter()
+            .map(|&j| value(j))
+            .filter(|d| d.is_finite())
+            .fold(f64::INFINITY, |m, d| m.min(d + rq));
+        let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + rq + self.k;
+        let reach =
+            least_upper + self.k + super::SLACK_REL * (1.0 + least_upper.abs().min(1e300) + scale);
+        parent
+            .iter()
+            .copied()
+            .filter(|&j| value(j) - rq < reach)
+            .collect()
+    }
+
+    fn descend(
+        &mut self,
+        index: &[u32],
+        cells: &[Cell],
+        at: [usize; 3],
+        span: usize,
+        parent: &[u32],
+        fine: &mut FineLists,
+    ) {
+        if !self.wanted(at, span) {
+            return;
+        }
+        let list = self.keep(at, span, parent);
+        if span > 1 {
+            let half = span / 2;
+            for o in 0..8 {
+                let sub = [0, 1, 2].map(|a| at[a] + ((o >> a) & 1) * half);
+                self.descend(index, cells, sub, half, &list, fine);
+            }
+            return;
+        }
+        let e = (at[2] * self.res + at[1]) * self.res + at[0];
+        let Some(Cell::Subset { kids, .. }) = cells.get(index[e] as usize) else {
+            return;
+        };
+        // Both lists are in stored order: their intersection, in it.
+        let mut both = Vec::with_capacity(list.len().min(kids.len()));
+        let (mut i, mut j) = (0, 0);
+        while i < list.len() && j < kids.len() {
+            match list[i].cmp(&kids[j]) {
+                std::cmp::Ordering::Less => i += 1,
+                std::cmp::Ordering::Greater => j += 1,
+                std::cmp::Ordering::Equal => {
+                    both.push(list[i]);
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        if both.len() >= kids.len() || both.is_empty() {
+            return;
+        }
+        let span = match self.seen.get(&both) {
+            Some(&span) => span,
+            None => {
+                let span = fine.spans.len() as u32;
+                fine.spans.push((fine.kids.len() as u32, both.len() as u32));
+                fine.kids.extend_from_slice(&both);
+                self.seen.insert(both, span);
+                span
+            }
+        };
+        fine.entry[e] = span;
+    }
+}
+
 thread_local! {
     /// The merged kept children of an 8-lane query over several subset cells.
     static MERGED: std::cell::RefCell<(Vec<u32>, Vec<u32>)> =
@@ -301,20 +422,24 @@ impl Cells {
                     *blocks = KidBlock::table(&cells.spheres32, kids).into();
                 }
             }
-            cells.fine = cells.fine_lists(prog, lo, size);
-            cells.stats.fine_lists = cells.fine.spans.len();
-            cells.stats.fine_children = cells.fine.kids.len();
         }
         Some(cells)
     }
 
-    /// [`FineLists`] of a root blend over the finest cells of size `size` from `lo` (empty
-    /// for any other root). A child is dropped from a finest cell's list when it is a sphere
-    /// whose least value over the cell's bounding ball is at least `k` (and a slack for the
-    /// f32 evaluation's rounding) above the least upper bound of the listed spheres there.
-    fn fine_lists(&self, prog: &Program<f64>, lo: DVec3, size: DVec3) -> FineLists {
+    /// Lists a root blend's children per finest cell ([`FineLists`]) for its subset cells
+    /// listing more than [`FINE_MIN_KIDS`] children: call it once the octree is final (a
+    /// trial build does not need them). `prog` is the program the cells were built from.
+    /// Does nothing for any other root. The lists come from a descent of the octree's
+    /// blocks from the whole box down to the finest cells, each block keeping of its
+    /// parent's list the children that can come within `k` of the blend's minimum in its
+    /// bounding ball: a sphere whose least value there is at least `k` (and a slack for the
+    /// f32 evaluation's rounding) above the least upper bound of the listed spheres is
+    /// dropped (it adds an exact `+0` there and in every block below); any other child is
+    /// kept. A finest cell's list is then intersected with its cell's own.
+    pub fn list_blend_children(&mut self, prog: &Program<f64>) {
+        self.fine = FineLists::default();
         let Some(root) = prog.instrs.first() else {
-            return FineLists::default();
+            return;
         };
         let Op::Smooth {
             op: marchmesh_scene::SmoothOp::Blend,
@@ -322,70 +447,53 @@ impl Cells {
             ..
         } = root.op
         else {
-            return FineLists::default();
+            return;
         };
-        let spheres = prog.sphere_table::<f64>();
         let res = self.res as usize;
-        let rq = 0.5 * size.length() * super::stretch(&root.to_local);
+        let wants: Vec<bool> = self
+            .index
+            .iter()
+            .map(|&id| {
+                matches!(self.cells.get(id as usize),
+                    Some(Cell::Subset { kids, .. }) if kids.len() > FINE_MIN_KIDS)
+            })
+            .collect();
+        if !wants.contains(&true) {
+            return;
+        }
+        let lo = DVec3::from_array(self.lo.map(f64::from));
+        let size = DVec3::from_array(self.inv_size.map(|v| 1.0 / f64::from(v)));
+        let all: Vec<u32> = crate::program::blend::Children::of(prog, 0)
+            .map(|(j, _)| j as u32)
+            .collect();
         let mut fine = FineLists {
             entry: vec![u32::MAX; self.index.len()],
             ..FineLists::default()
         };
-        let mut seen: super::FastMap<Vec<u32>, u32> = super::FastMap::default();
-        let mut list = Vec::new();
-        let mut near = Vec::new();
-        for (e, &id) in self.index.iter().enumerate() {
-            let Some(Cell::Subset { kids, .. }) = self.cells.get(id as usize) else {
-                continue;
-            };
-            if kids.len() <= FINE_MIN_KIDS {
-                continue;
-            }
-            let at = DVec3::new(
-                (e % res) as f64,
-                (e / res % res) as f64,
-                (e / (res * res)) as f64,
-            );
-            let c = lo + size * (at + 0.5);
-            let q = root.to_local.apply(V3::new(c.x, c.y, c.z));
-            near.clear();
-            let mut least_upper = f64::INFINITY;
-            for &j in kids.iter() {
-                let s = spheres[j as usize];
-                let d = if s[3].is_nan() {
-                    f64::NEG_INFINITY
-                } else {
-                    let (x, y, z) = (q.x + s[0], q.y + s[1], q.z + s[2]);
-                    (x * x + y * y + z * z).sqrt() - s[3]
-                };
-                if d.is_finite() {
-                    least_upper = least_upper.min(d + rq);
-                }
-                near.push((j, d));
-            }
-            let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + rq + k;
-            let reach = least_upper + k + super::SLACK_REL * (1.0 + least_upper.abs() + scale);
-            list.clear();
-            list.extend(near.iter().filter(|c| c.1 - rq < reach).map(|c| c.0));
-            if list.len() == kids.len() {
-                continue;
-            }
-            let span = match seen.get(&list) {
-                Some(&span) => span,
-                None => {
-                    let span = fine.spans.len() as u32;
-                    fine.spans.push((fine.kids.len() as u32, list.len() as u32));
-                    fine.kids.extend_from_slice(&list);
-                    seen.insert(list.clone(), span);
-                    span
-                }
-            };
-            fine.entry[e] = span;
+        let mut lists = Lists {
+            prog,
+            spheres: prog.sphere_table::<f64>(),
+            stretch: super::stretch(&root.to_local),
+            k,
+            lo,
+            size,
+            res,
+            wants: &wants,
+            seen: super::FastMap::default(),
+        };
+        lists.descend(
+            &self.index,
+            &self.cells,
+            [0; 3],
+            self.res as usize,
+            &all,
+            &mut fine,
+        );
+        if !fine.spans.is_empty() {
+            self.stats.fine_lists = fine.spans.len();
+            self.stats.fine_children = fine.kids.len();
+            self.fine = fine;
         }
-        if fine.spans.is_empty() {
-            return FineLists::default();
-        }
-        fine
     }
 
     /// The children to read at the finest cell `e` of a subset cell listing `kids`: its
