@@ -149,17 +149,20 @@ impl Lists<'_> {
         let root = &self.prog.instrs[0];
         let q = root.to_local.apply(V3::new(c.x, c.y, c.z));
         let rq = 0.5 * (b - a).length() * self.stretch;
-        let value = |j: u32| {
-            let s = self.spheres[j as usize];
-            if s[3].is_nan() {
-                return f64::NEG_INFINITY;
-            }
-            let (x, y, z) = (q.x + s[0], q.y + s[1], q.z + s[2]);
-            (x * x + y * y + z * z).sqrt() - s[3]
-        };
-        let least_upper = parent
+        // Each child's value at the centre (`-inf` for a child that is not a sphere).
+        let values: Vec<f64> = parent
             .iter()
-            .map(|&j| value(j))
+            .map(|&j| {
+                let s = self.spheres[j as usize];
+                if s[3].is_nan() {
+                    return f64::NEG_INFINITY;
+                }
+                let (x, y, z) = (q.x + s[0], q.y + s[1], q.z + s[2]);
+                (x * x + y * y + z * z).sqrt() - s[3]
+            })
+            .collect();
+        let least_upper = values
+            .iter()
             .filter(|d| d.is_finite())
             .fold(f64::INFINITY, |m, d| m.min(d + rq));
         let scale = q.x.abs().max(q.y.abs()).max(q.z.abs()) + rq + self.k;
@@ -167,8 +170,9 @@ impl Lists<'_> {
             least_upper + self.k + super::SLACK_REL * (1.0 + least_upper.abs().min(1e300) + scale);
         parent
             .iter()
-            .copied()
-            .filter(|&j| value(j) - rq < reach)
+            .zip(&values)
+            .filter(|(_, d)| **d - rq < reach)
+            .map(|(&j, _)| j)
             .collect()
     }
 
