@@ -126,6 +126,87 @@ fn a_ten_thousand_level_left_deep_tree_renders_on_every_backend_alike() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// Renders `scene` (in `dir`) on every backend at 24x24 and returns each one's mask, the
+/// reference's first.
+fn masks_of_every_backend(dir: &Path, scene: &str) -> Vec<(&'static str, Vec<f32>)> {
+    let mut masks = Vec::new();
+    for backend in ["reference", "sdf", "mesh"] {
+        let aov = format!("aov-{backend}");
+        let png = format!("{backend}.png");
+        let out = marchmesh(
+            &[
+                "render",
+                scene,
+                "--backend",
+                backend,
+                "--out",
+                &png,
+                "--aov",
+                &aov,
+                "--threads",
+                "2",
+            ],
+            dir,
+        );
+        assert!(
+            out.status.success(),
+            "{backend}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mask = read_mask(&dir.join(&aov));
+        assert_eq!(mask.len(), 24 * 24, "{backend}");
+        masks.push((backend, mask));
+    }
+    masks
+}
+
+#[test]
+fn a_blend_of_two_thousand_spheres_renders_on_every_backend_alike() {
+    let dir = tmp("blend");
+    // The helix of `left_deep_chain`, its spheres children of one flat blend.
+    let chain = left_deep_chain(1999, "smooth_union");
+    let leaves: Vec<&str> = chain
+        .match_indices(r#"{"shape":{"sphere""#)
+        .map(|(i, _)| {
+            let end = chain[i..].find("]}}").expect("a leaf's end") + i + 3;
+            &chain[i..end]
+        })
+        .collect();
+    assert_eq!(leaves.len(), 2000);
+    let scene = format!(
+        r#"{{"camera":{{"position":[0,0,-3.2],"look_at":[0,0,0],"vfov_deg":45,"width":24,"height":24}},
+"lights":[{{"ambient":{{"intensity":1}}}}],"objects":[{{"shape":{{"blend":{{"blend_radius":0.03,"children":[{}]}}}}}}]}}"#,
+        leaves.join(",")
+    );
+    std::fs::write(dir.join("blend.json"), scene).expect("write scene");
+    let masks = masks_of_every_backend(&dir, "blend.json");
+    let (_, truth) = &masks[0];
+    let hits = truth.iter().filter(|&&m| m > 0.5).count();
+    assert!(hits > 20 && hits < 24 * 24 - 20, "{hits} hits");
+    for (backend, mask) in &masks[1..] {
+        let differ = truth
+            .iter()
+            .zip(mask)
+            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
+            .count();
+        assert!(
+            differ <= 12,
+            "{backend}: {differ} of {} pixels differ from the reference",
+            truth.len()
+        );
+    }
+    // A blend is not a fold: nested blends are kept as written, so a deep chain of them is
+    // refused at the nesting limit, naming it.
+    std::fs::write(dir.join("nested.json"), left_deep_chain(100, "blend")).expect("write");
+    let out = marchmesh(&["validate", "nested.json"], &dir);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("nest deeper than"),
+        "{err}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn every_scene_of_the_sculpted_suite_validates() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../scenes/generated/sculpted");
