@@ -128,7 +128,7 @@ pub const PRUNE_OCTREE_MIN_SAMPLE_NODES: u64 = 1 << 27;
 /// ([`marchmesh_scene::SmoothOp::Blend`]): 2^25. One cell over the box reads every child at
 /// every step of a blend (no fold skips far blocks wholesale there), while the octree's
 /// cells list the children near each finest cell: 1000 blended spheres at 256x256 render in
-/// 0.48-0.51 s with the octree against 1.1-1.4 s with one cell, 100 in 40 ms with one cell
+/// 0.48-0.59 s with the octree against 1.1-1.4 s with one cell, 100 in 40 ms with one cell
 /// against 0.3-0.4 s with the octree; see `docs/decisions/0031-an-order-free-blend.md`.
 pub const PRUNE_OCTREE_MIN_SAMPLE_NODES_BLEND: u64 = 1 << 25;
 
