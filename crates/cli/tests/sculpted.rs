@@ -78,51 +78,7 @@ fn a_ten_thousand_level_left_deep_tree_renders_on_every_backend_alike() {
         "validate: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let mut masks = Vec::new();
-    for backend in ["reference", "sdf", "mesh"] {
-        let aov = format!("aov-{backend}");
-        let png = format!("{backend}.png");
-        let out = marchmesh(
-            &[
-                "render",
-                "chain.json",
-                "--backend",
-                backend,
-                "--out",
-                &png,
-                "--aov",
-                &aov,
-                "--threads",
-                "2",
-            ],
-            &dir,
-        );
-        assert!(
-            out.status.success(),
-            "{backend}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let mask = read_mask(&dir.join(&aov));
-        assert_eq!(mask.len(), 24 * 24, "{backend}");
-        let hits = mask.iter().filter(|&&m| m > 0.5).count();
-        // The helix covers part of the image, not all of it.
-        assert!(hits > 20 && hits < 24 * 24 - 20, "{backend}: {hits} hits");
-        masks.push((backend, mask));
-    }
-    let (_, truth) = &masks[0];
-    for (backend, mask) in &masks[1..] {
-        let differ = truth
-            .iter()
-            .zip(mask)
-            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
-            .count();
-        // Silhouette pixels may differ where a pixel centre grazes the blend; no more.
-        assert!(
-            differ <= 12,
-            "{backend}: {differ} of {} pixels differ from the reference",
-            truth.len()
-        );
-    }
+    assert_masks_agree(&masks_of_every_backend(&dir, "chain.json"));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -160,6 +116,29 @@ fn masks_of_every_backend(dir: &Path, scene: &str) -> Vec<(&'static str, Vec<f32
     masks
 }
 
+/// Every mask covers part of the image, not all of it, and each backend's silhouette
+/// differs from the reference's (the first) in at most 12 pixels, where a pixel centre
+/// grazes the blend.
+fn assert_masks_agree(masks: &[(&str, Vec<f32>)]) {
+    for (backend, mask) in masks {
+        let hits = mask.iter().filter(|&&m| m > 0.5).count();
+        assert!(hits > 20 && hits < 24 * 24 - 20, "{backend}: {hits} hits");
+    }
+    let (_, truth) = &masks[0];
+    for (backend, mask) in &masks[1..] {
+        let differ = truth
+            .iter()
+            .zip(mask)
+            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
+            .count();
+        assert!(
+            differ <= 12,
+            "{backend}: {differ} of {} pixels differ from the reference",
+            truth.len()
+        );
+    }
+}
+
 #[test]
 fn a_blend_of_two_thousand_spheres_renders_on_every_backend_alike() {
     let dir = tmp("blend");
@@ -179,22 +158,7 @@ fn a_blend_of_two_thousand_spheres_renders_on_every_backend_alike() {
         leaves.join(",")
     );
     std::fs::write(dir.join("blend.json"), scene).expect("write scene");
-    let masks = masks_of_every_backend(&dir, "blend.json");
-    let (_, truth) = &masks[0];
-    let hits = truth.iter().filter(|&&m| m > 0.5).count();
-    assert!(hits > 20 && hits < 24 * 24 - 20, "{hits} hits");
-    for (backend, mask) in &masks[1..] {
-        let differ = truth
-            .iter()
-            .zip(mask)
-            .filter(|(a, b)| (**a > 0.5) != (**b > 0.5))
-            .count();
-        assert!(
-            differ <= 12,
-            "{backend}: {differ} of {} pixels differ from the reference",
-            truth.len()
-        );
-    }
+    assert_masks_agree(&masks_of_every_backend(&dir, "blend.json"));
     // A blend is not a fold: nested blends are kept as written, so a deep chain of them is
     // refused at the nesting limit, naming it.
     std::fs::write(dir.join("nested.json"), left_deep_chain(100, "blend")).expect("write");

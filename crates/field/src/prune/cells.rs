@@ -430,9 +430,10 @@ impl Cells {
         Some(cells)
     }
 
-    /// Lists a root blend's children per finest cell ([`FineLists`]) for its subset cells
-    /// listing more than [`FINE_MIN_KIDS`] children: call it once the octree is final (a
-    /// trial build does not need them). `prog` is the program the cells were built from.
+    /// Lists a root blend's children per finest cell for its subset cells listing more than
+    /// 16 children (read by the queries in place of the cell's list): call it once the
+    /// octree is final (a trial build does not need them). `prog` is the program the cells
+    /// were built from.
     /// Does nothing for any other root. The lists come from a descent of the octree's
     /// blocks from the whole box down to the finest cells, each block keeping of its
     /// parent's list the children that can come within `k` of the blend's minimum in its
