@@ -484,15 +484,31 @@ impl<S: Scalar> Program<S> {
             return (best, bm);
         }
         // A child at least k above the running value leaves it unchanged.
-        let (d, m) = match sphere {
-            Some(e) if !M && !e[3].to_f64().is_nan() => (
-                shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
-                bm,
-            ),
-            _ => self.child::<T, M>(j as usize, q, Ctx::Below(best + k), grids),
-        };
+        let (d, m) = self.child_or_sphere::<T, M>(j as usize, sphere, q, best + k, grids);
         let take = T::lt(d, best);
         (shapes::smin(best, d, k, inv_k), msel::<T, M>(take, m, bm))
+    }
+
+    /// Child `j`'s value at `q` (its parent's frame) when it is below `thr` at a lane, else
+    /// some value at or above `thr` there; the material when `M`. `sphere` is its
+    /// [`Program::sphere_table`] entry when known (read instead of the node when the material
+    /// is not needed; the same value).
+    #[inline(always)]
+    fn child_or_sphere<T: Lane<S = S>, const M: bool>(
+        &self,
+        j: usize,
+        sphere: Option<[S; 4]>,
+        q: V3<T>,
+        thr: T,
+        grids: &[Box<dyn GridSampler>],
+    ) -> (T, T::Mat) {
+        match sphere {
+            Some(e) if !M && !e[3].to_f64().is_nan() => (
+                shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
+                T::mat_splat(0),
+            ),
+            _ => self.child::<T, M>(j, q, Ctx::Below(thr), grids),
+        }
     }
 
     /// Per node, `[tx, ty, tz, r]` when the node is a sphere placed by a translation alone

@@ -40,7 +40,7 @@
 
 use crate::lane::{Lane, Scalar, V3};
 
-use super::{BIG, Ctx, FOLD_BLOCK, GridSampler, KidBlock, Program, msel};
+use super::{BIG, FOLD_BLOCK, GridSampler, KidBlock, Program, msel};
 
 /// Most values of children within `k` of the running minimum at some lane a blend keeps
 /// between its passes; a blend with more evaluates its children again in each pass (the
@@ -153,28 +153,6 @@ pub(crate) fn settle<T: Lane>(m: T, k: T, mut pass: impl FnMut(T, &mut Sums<T>))
 const SPHERE_VALUES: usize = 64;
 
 impl<S: Scalar> Program<S> {
-    /// Child `j`'s value at `q` (its parent's frame) when it is below `thr` at a lane, else
-    /// some value at or above `thr` there; the material when `M`. `sphere` is its
-    /// [`Program::sphere_table`] entry when known (read instead of the node when the material
-    /// is not needed; the same value).
-    #[inline(always)]
-    fn blend_child<T: Lane<S = S>, const M: bool>(
-        &self,
-        j: usize,
-        sphere: Option<[S; 4]>,
-        q: V3<T>,
-        thr: T,
-        grids: &[Box<dyn GridSampler>],
-    ) -> (T, T::Mat) {
-        match sphere {
-            Some(e) if !M && !e[3].to_f64().is_nan() => (
-                crate::shapes::sphere(q + V3::<T>::splat3([e[0], e[1], e[2]]), T::splat(e[3])),
-                T::mat_splat(0),
-            ),
-            _ => self.child::<T, M>(j, q, Ctx::Below(thr), grids),
-        }
-    }
-
     /// The blend of blend radius `k` of the children `kids` (`(node, sphere table entry)`,
     /// in stored order) at `q`, their parent's frame, and the nearest child's material when
     /// `M` (see the [module docs](self)). `kids` is read again when more than
@@ -226,7 +204,7 @@ impl<S: Scalar> Program<S> {
             if self.sphere_no_op(j, sphere.as_ref(), q, best, k) {
                 continue;
             }
-            let (d, m) = self.blend_child::<T, M>(j, sphere, q, best + k, grids);
+            let (d, m) = self.child_or_sphere::<T, M>(j, sphere, q, best + k, grids);
             if T::any(T::lt(d, best + k)) {
                 if n < BLEND_BUFFER {
                     kept[n] = d;
@@ -246,7 +224,10 @@ impl<S: Scalar> Program<S> {
                     if self.sphere_no_op(j, sphere.as_ref(), q, m, x) {
                         continue;
                     }
-                    s.add(self.blend_child::<T, false>(j, sphere, q, m + x, grids).0);
+                    s.add(
+                        self.child_or_sphere::<T, false>(j, sphere, q, m + x, grids)
+                            .0,
+                    );
                 }
             } else {
                 for &a in &kept[..n] {
