@@ -95,13 +95,14 @@ pub struct Cells {
 /// depends on the children before the near ones.
 #[derive(Debug, Clone, Default)]
 struct FineLists {
-    /// Per finest cell (as [`Cells`]' index): its list in `spans`, `u32::MAX` for none
-    /// (the cell's own list applies). Empty when there are no lists.
+    /// Per finest cell (as [`Cells`]' index): where its list starts in `kids`, `u32::MAX` for
+    /// none (the cell's own list applies). Empty when there are no lists.
     entry: Vec<u32>,
-    /// `(start, len)` of each distinct list in `kids`.
-    spans: Vec<(u32, u32)>,
-    /// The lists, each in stored order.
+    /// The lists, each its length and then its children in stored order: a step reads its
+    /// entry and then one run of memory, not a table of spans between them.
     kids: Vec<u32>,
+    /// Distinct lists in `kids`.
+    lists: usize,
 }
 
 /// Subset cells of a root blend listing more children than this get [`FineLists`].
@@ -221,11 +222,12 @@ impl Lists<'_> {
         let span = match self.seen.get(&both) {
             Some(&span) => span,
             None => {
-                let span = fine.spans.len() as u32;
-                fine.spans.push((fine.kids.len() as u32, both.len() as u32));
+                let start = fine.kids.len() as u32;
+                fine.kids.push(both.len() as u32);
                 fine.kids.extend_from_slice(&both);
-                self.seen.insert(both, span);
-                span
+                fine.lists += 1;
+                self.seen.insert(both, start);
+                start
             }
         };
         fine.entry[e] = span;
@@ -494,9 +496,9 @@ impl Cells {
             &all,
             &mut fine,
         );
-        if !fine.spans.is_empty() {
-            self.stats.fine_lists = fine.spans.len();
-            self.stats.fine_children = fine.kids.len();
+        if fine.lists > 0 {
+            self.stats.fine_lists = fine.lists;
+            self.stats.fine_children = fine.kids.len() - fine.lists;
             self.fine = fine;
         }
     }
@@ -505,13 +507,15 @@ impl Cells {
     /// [`FineLists`] entry when it has one, else `kids`.
     #[inline(always)]
     fn kids_at<'a>(&'a self, e: usize, kids: &'a [u32]) -> &'a [u32] {
-        match self.fine.entry.get(e) {
-            Some(&span) if span != u32::MAX => {
-                let (start, len) = self.fine.spans[span as usize];
-                &self.fine.kids[start as usize..(start + len) as usize]
-            }
-            _ => kids,
-        }
+        self.fine_list(e).unwrap_or(kids)
+    }
+
+    /// The [`FineLists`] list of the finest cell `e`, `None` when it has none.
+    #[inline(always)]
+    fn fine_list(&self, e: usize) -> Option<&[u32]> {
+        let start = *self.fine.entry.get(e)? as usize;
+        let len = *self.fine.kids.get(start)? as usize;
+        self.fine.kids.get(start + 1..start + 1 + len)
     }
 
     /// The most program nodes all cells of a program of `nodes` nodes may hold together:
@@ -684,7 +688,6 @@ impl Cells {
             + self.cells.len() * std::mem::size_of::<Cell>()
             + self.spheres32.len() * 16
             + self.fine.entry.len() * 4
-            + self.fine.spans.len() * 8
             + self.fine.kids.len() * 4) as u64
             + programs
     }
@@ -699,6 +702,14 @@ impl Cells {
     /// octree's box.
     #[inline(always)]
     fn locate_finest(&self, p: [f32; 3]) -> Option<(usize, &Cell)> {
+        let e = self.finest(p)?;
+        let id = self.index[e];
+        self.cells.get(id as usize).map(|c| (e, c))
+    }
+
+    /// The finest cell holding `p` (its index), `None` outside the octree's box.
+    #[inline(always)]
+    fn finest(&self, p: [f32; 3]) -> Option<usize> {
         let mut at = [0usize; 3];
         for a in 0..3 {
             let f = (p[a] - self.lo[a]) * self.inv_size[a];
@@ -709,9 +720,7 @@ impl Cells {
             at[a] = (f as usize).min(self.res as usize - 1);
         }
         let res = self.res as usize;
-        let e = (at[2] * res + at[1]) * res + at[0];
-        let id = self.index[e];
-        self.cells.get(id as usize).map(|c| (e, c))
+        Some((at[2] * res + at[1]) * res + at[0])
     }
 
     /// The safe value outside the box: the distance to the box plus the pad.
@@ -895,7 +904,13 @@ impl Cells {
     ) -> (f32, u32) {
         let a = p.to_array();
         let v = V3::new(p.x, p.y, p.z);
-        let found = self.locate_finest(a);
+        let e = self.finest(a);
+        // A blend's finest-cell list first: one entry and one run of memory, without the
+        // cell between them.
+        if let Some(list) = e.and_then(|e| self.fine_list(e)) {
+            return whole.eval_root_subset::<f32, M>(list, &self.spheres32, &[], v, grids);
+        }
+        let found = e.and_then(|e| self.cells.get(self.index[e] as usize).map(|c| (e, c)));
         match found.map(|f| f.1) {
             Some(Cell::Program { p32, .. }) => p32.eval::<f32, M>(v, grids),
             Some(Cell::Subset { kids, blocks }) => {
