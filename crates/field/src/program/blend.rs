@@ -257,45 +257,50 @@ impl<S: Scalar> Program<S> {
             return None;
         }
         let f = |v: S| v.to_f64() as f32;
-        let values = |chunk: &[u32]| -> [f32; W] {
-            let mut t = [[f32::INFINITY; W]; 3];
-            let mut r = [0.0f32; W];
-            for (l, &j) in chunk.iter().enumerate() {
-                // A missing entry reads as NaN, as a non-sphere's does.
-                let e = spheres.get(j as usize).map_or([f32::NAN; 4], |e| e.map(f));
-                t[0][l] = e[0];
-                t[1][l] = e[1];
-                t[2][l] = e[2];
-                r[l] = e[3];
-            }
-            std::array::from_fn(|l| {
-                let (x, y, z) = (q[0] + t[0][l], q[1] + t[1][l], q[2] + t[2][l]);
-                (x * x + y * y + z * z).sqrt() - r[l]
-            })
-        };
-        let mut kept = [0.0f32; SPHERE_VALUES];
-        let mut best = [f32::INFINITY; W];
-        let mut at = [usize::MAX; W];
-        let mut nan = false;
-        for (c, chunk) in kids.chunks(W).enumerate() {
-            let d = values(chunk);
-            for l in 0..W {
-                nan |= d[l].is_nan();
-                if d[l] < best[l] {
-                    best[l] = d[l];
-                    at[l] = c * W + l;
+        // A lane past the list's end: `|q| + inf`, so `+inf`, never near the minimum.
+        const PAD: [f32; 4] = [0.0, 0.0, 0.0, f32::NEG_INFINITY];
+        // The values of a chunk of at most eight children; `None` for a child missing from
+        // the table. Every lane is read at a constant index (the chunk's length only picks
+        // the padding), so the lanes are assembled in registers, not stored one by one and
+        // read back as a vector (a store-forwarding stall per vector).
+        let values = |chunk: &[u32]| -> Option<[f32; W]> {
+            let mut e = [PAD; W];
+            for (l, lane) in e.iter_mut().enumerate() {
+                if let Some(&j) = chunk.get(l) {
+                    *lane = spheres.get(j as usize)?.map(f);
                 }
             }
-            if let Some(out) = kept.get_mut(c * W..c * W + chunk.len()) {
-                out.copy_from_slice(&d[..chunk.len()]);
+            Some(std::array::from_fn(|l| {
+                let (x, y, z) = (q[0] + e[l][0], q[1] + e[l][1], q[2] + e[l][2]);
+                (x * x + y * y + z * z).sqrt() - e[l][3]
+            }))
+        };
+        let mut kept = [[0.0f32; W]; SPHERE_VALUES / W];
+        let mut best = [f32::INFINITY; W];
+        let mut at = [0u32; W];
+        let mut nan = [false; W];
+        for (c, chunk) in kids.chunks(W).enumerate() {
+            let d = values(chunk)?;
+            for l in 0..W {
+                nan[l] |= d[l].is_nan();
+                let nearer = d[l] < best[l];
+                best[l] = if nearer { d[l] } else { best[l] };
+                at[l] = if nearer { (c * W + l) as u32 } else { at[l] };
+            }
+            if let Some(out) = kept.get_mut(c) {
+                *out = d;
             }
         }
-        if nan {
+        // A missing table entry reads as NaN (a non-sphere's radius), as in the node.
+        if nan.contains(&true) {
             return None;
         }
         // The first child at the least value (as a fold of `d < best` takes it).
         let m = best.iter().copied().fold(f32::INFINITY, f32::min);
-        let first = (0..W).filter(|&l| best[l] == m).map(|l| at[l]).min()?;
+        let first = (0..W)
+            .filter(|&l| best[l] == m)
+            .map(|l| at[l] as usize)
+            .min()?;
         let mut near = [0.0f32; BLEND_BUFFER];
         let mut n = 0;
         let mut note = |a: f32| {
@@ -309,12 +314,24 @@ impl<S: Scalar> Program<S> {
             true
         };
         if kids.len() <= SPHERE_VALUES {
-            if !kept[..kids.len()].iter().all(|&a| note(a)) {
-                return None;
+            // The near lanes of each chunk as bits (compared eight at a time; padding lanes
+            // are `+inf`), then only those read, in stored order.
+            for d in &kept[..kids.len().div_ceil(W)] {
+                let mut bits = 0u32;
+                for (l, &a) in d.iter().enumerate() {
+                    bits |= u32::from(a - m < k) << l;
+                }
+                while bits != 0 {
+                    let l = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    if !note(d[l & (W - 1)]) {
+                        return None;
+                    }
+                }
             }
         } else {
             for chunk in kids.chunks(W) {
-                let d = values(chunk);
+                let d = values(chunk)?;
                 if !d[..chunk.len()].iter().all(|&a| note(a)) {
                     return None;
                 }
@@ -325,6 +342,6 @@ impl<S: Scalar> Program<S> {
                 s.add(a);
             }
         });
-        Some((value, kids[first] as usize))
+        Some((value, *kids.get(first)? as usize))
     }
 }
