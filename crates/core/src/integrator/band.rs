@@ -12,10 +12,10 @@ use crate::framebuffer::{Framebuffer, NO_HIT_DEPTH};
 use crate::geometry::{BatchPolicy, Geometry, Hit, RayWork, Termination, TraceResult};
 use crate::stats::RenderStats;
 
-/// One worker's copy of a band's pixel planes (see [`run_bands`](super::run_bands)).
+/// One worker's copy of a band's AOV planes (see [`run_bands`](super::run_bands)); the
+/// colour is written into the framebuffer once per band ([`Band::set_colors`]).
 #[derive(Default)]
 pub(super) struct Planes {
-    color: Vec<Vec3>,
     depth: Vec<f32>,
     normal: Vec<Vec3>,
     material: Vec<u32>,
@@ -107,11 +107,10 @@ impl<'a> Band<'a> {
         bands
     }
 
-    /// A band of the same rows over `planes` (resized to the band's pixels).
-    pub(super) fn staged<'p>(&self, planes: &'p mut Planes) -> Band<'p> {
-        let n = self.color.len();
+    /// A band of the same rows and colour over `planes` (resized to the band's pixels) for
+    /// its AOVs.
+    pub(super) fn staged<'p>(&'p mut self, planes: &'p mut Planes) -> Band<'p> {
         let m = self.depth.len();
-        planes.color.resize(n, Vec3::ZERO);
         planes.depth.resize(m, NO_HIT_DEPTH);
         planes.normal.resize(m, Vec3::ZERO);
         planes.material.resize(m, u32::MAX);
@@ -122,7 +121,7 @@ impl<'a> Band<'a> {
             y: self.y,
             rows: self.rows,
             aovs: self.aovs,
-            color: &mut planes.color[..n],
+            color: &mut *self.color,
             depth: &mut planes.depth[..m],
             normal: &mut planes.normal[..m],
             material: &mut planes.material[..m],
@@ -131,11 +130,10 @@ impl<'a> Band<'a> {
         }
     }
 
-    /// Copies the pixels [`Band::staged`] traced into `planes` into this band, with
+    /// Copies the AOVs [`Band::staged`] traced into `planes` into this band, with
     /// non-temporal stores (the framebuffer is not read again during the render).
     pub(super) fn copy_from(&mut self, planes: &Planes) {
-        let (n, m) = (self.color.len(), self.depth.len());
-        crate::stream::copy_streaming(self.color, &planes.color[..n]);
+        let m = self.depth.len();
         crate::stream::copy_streaming(self.depth, &planes.depth[..m]);
         crate::stream::copy_streaming(self.normal, &planes.normal[..m]);
         crate::stream::copy_streaming(self.material, &planes.material[..m]);
@@ -196,26 +194,19 @@ impl<'a> Band<'a> {
     /// band (`sums` indexed like the band's pixels, each pixel's sum complete), counting
     /// (and blackening) a non-finite result in `stats`. One pass over the whole band, after
     /// its last tile: contiguous, so it vectorises (per tile row it cost 23 instructions a
-    /// pixel, most of them per-row setup).
+    /// pixel, most of them per-row setup), with non-temporal stores (the colour is the
+    /// framebuffer's, not read again during the render).
     ///
     /// # Panics
     /// If `sums` is shorter than the band (a programming error).
     pub(crate) fn set_colors(&mut self, sums: &[Vec3], samples: u32, stats: &mut RenderStats) {
-        const EXPONENT: u32 = 0x7f80_0000;
         let scale = 1.0 / samples as f32;
         let sums = &sums[..self.color.len()];
-        // Whether any channel's exponent field is all ones (infinite or NaN): a compare and
-        // an or per channel, which vectorise with baseline SSE2.
-        let mut non_finite = false;
-        let channels: &mut [f32] = bytemuck::cast_slice_mut(self.color);
-        for (c, s) in channels
-            .iter_mut()
-            .zip(bytemuck::cast_slice::<Vec3, f32>(sums))
-        {
-            let v = *s * scale;
-            *c = v;
-            non_finite |= v.to_bits() & EXPONENT == EXPONENT;
-        }
+        let non_finite = crate::stream::scale_streaming(
+            bytemuck::cast_slice_mut(self.color),
+            bytemuck::cast_slice(sums),
+            scale,
+        );
         if non_finite {
             for c in self.color.iter_mut().filter(|c| !c.is_finite()) {
                 *c = Vec3::ZERO;

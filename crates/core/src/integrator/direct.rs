@@ -6,7 +6,7 @@
 //! loop, and the same shadow rays in the same order, so the same bits; a hit it does not take
 //! (a reflecting surface, a non-finite hit) is left to that loop.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::band::Band;
 use super::shading::{DirectLight, Shading, phong};
@@ -207,25 +207,31 @@ struct Queued {
     amount: [[f32; LANES]; 3],
 }
 
-/// Eight hits as structure of arrays: what shading reads of each (gathered from the
-/// wavefront), and the colour sums and facing normals it leaves.
+/// Eight hits: what shading reads of each, gathered from the wavefront one vector a lane
+/// (one 16-byte store each, turned into structure of arrays in registers by
+/// [`shade_lanes_avx`]), and the colour sums and facing normals it leaves as structure of
+/// arrays.
 #[derive(Default)]
 struct Lanes {
     /// Wavefront index of each lane's hit.
     index: [usize; LANES],
     /// Band pixel of each lane.
     pixel: [usize; LANES],
-    /// The hit's normal as traced; the facing unit normal after shading.
+    /// The hit's normal as traced, a lane each.
+    traced_normal: [Vec3A; LANES],
+    dir: [Vec3A; LANES],
+    position: [Vec3A; LANES],
+    color: [Vec3A; LANES],
+    /// The pixel's colour sum before shading, a lane each.
+    sum_before: [Vec3A; LANES],
+    /// The facing unit normal after shading.
     normal: [[f32; LANES]; 3],
-    dir: [[f32; LANES]; 3],
-    position: [[f32; LANES]; 3],
     weight: [f32; LANES],
-    color: [[f32; LANES]; 3],
     /// Specular exponent, for lanes with a bit in `specular_lanes`.
     specular: [f32; LANES],
     specular_lanes: u8,
-    /// The pixel's colour sum before shading; after, with the hit's colour added (but for
-    /// the contributions queued behind shadow rays).
+    /// After shading, the pixel's colour sum with the hit's colour added (but for the
+    /// contributions queued behind shadow rays).
     sum: [[f32; LANES]; 3],
     /// Where the hit's shadow rays start (set when a light casts shadows).
     origin: [[f32; LANES]; 3],
@@ -258,13 +264,11 @@ impl Lanes {
             let px = path.pixel as usize;
             let s = sum[px];
             (l.index[i], l.pixel[i], l.weight[i]) = (pi, px, path.throughput);
-            for c in 0..3 {
-                l.normal[c][i] = hit.normal[c];
-                l.dir[c][i] = ray.dir[c];
-                l.position[c][i] = hit.position[c];
-                l.color[c][i] = m.color[c];
-                l.sum[c][i] = s[c];
-            }
+            l.traced_normal[i] = hit.normal.into();
+            l.dir[i] = ray.dir.into();
+            l.position[i] = hit.position.into();
+            l.color[i] = m.color.into();
+            l.sum_before[i] = s.into();
             if let Some(e) = m.specular_exponent {
                 l.specular[i] = e;
                 l.specular_lanes |= 1 << i;
@@ -346,12 +350,27 @@ fn shade_lanes_avx(l: &mut Lanes, sh: &Shading) {
     let sign = _mm256_set1_ps(-0.0);
     // `x.is_finite()` per lane: |x| < infinity (false for NaN).
     let finite = |x: __m256| _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_andnot_ps(sign, x), inf);
-    let d = l.dir.each_ref().map(load);
+    // Eight lanes' (x, y, z, _) vectors as three vectors of x, y and z: lanes 0-3 in the low
+    // halves, 4-7 in the high ones, transposed 4 x 4 in each half.
+    let soa = |a: &[Vec3A; LANES]| -> [__m256; 3] {
+        let v: [__m256; 4] =
+            std::array::from_fn(|i| _mm256_set_m128(__m128::from(a[i + 4]), __m128::from(a[i])));
+        let lo01 = _mm256_unpacklo_ps(v[0], v[1]);
+        let lo23 = _mm256_unpacklo_ps(v[2], v[3]);
+        let hi01 = _mm256_unpackhi_ps(v[0], v[1]);
+        let hi23 = _mm256_unpackhi_ps(v[2], v[3]);
+        [
+            _mm256_shuffle_ps::<0b01_00_01_00>(lo01, lo23),
+            _mm256_shuffle_ps::<0b11_10_11_10>(lo01, lo23),
+            _mm256_shuffle_ps::<0b01_00_01_00>(hi01, hi23),
+        ]
+    };
+    let d = soa(&l.dir);
     let weight = load(&l.weight);
-    let color = l.color.each_ref().map(load);
+    let color = soa(&l.color);
     // `normalize_or_zero`: `v * (1 / sqrt(v.v))` where that reciprocal is finite and
     // positive, else zero; then turned to face the ray (`-v` where `v.d > 0`).
-    let v = l.normal.each_ref().map(load);
+    let v = soa(&l.traced_normal);
     let rcp = _mm256_div_ps(one, _mm256_sqrt_ps(dot(v, v)));
     let ok = _mm256_and_ps(
         _mm256_cmp_ps::<_CMP_GT_OQ>(rcp, zero),
@@ -362,10 +381,11 @@ fn shade_lanes_avx(l: &mut Lanes, sh: &Shading) {
     let n = n.map(|c| _mm256_xor_ps(c, flip));
     // Ambient: `sum + weight * ambient * colour`.
     let aw = _mm256_mul_ps(weight, _mm256_set1_ps(sh.ambient));
+    let sum = soa(&l.sum_before);
     let mut s: [__m256; 3] =
-        std::array::from_fn(|c| _mm256_add_ps(load(&l.sum[c]), _mm256_mul_ps(aw, color[c])));
+        std::array::from_fn(|c| _mm256_add_ps(sum[c], _mm256_mul_ps(aw, color[c])));
     let neg_d = d.map(|c| _mm256_xor_ps(c, sign));
-    let position = l.position.each_ref().map(load);
+    let position = soa(&l.position);
     // Shadow rays' start: `offset = ray_offset * max(|p|, 1e-30)` (`max` returns its second
     // operand for a NaN first, as `f32::max` does), `origin = p + n * offset`.
     let offset = if sh.spawns {

@@ -255,9 +255,11 @@ fn run_bands<S: Default + Send>(
     on_row: &(dyn Fn() + Sync),
     trace: impl Fn(&mut S, &mut Band<'_>) -> RenderStats + Sync,
 ) -> RenderStats {
-    // Tiles write a band's pixels into a worker's own planes (which stay in cache from
-    // band to band), copied into the framebuffer row-contiguously once the band is done:
-    // scattered tile-row stores straight into the framebuffer cost more than the copy.
+    // Tiles write a band's AOVs into a worker's own planes (which stay in cache from band
+    // to band), copied into the framebuffer row-contiguously once the band is done:
+    // scattered tile-row stores straight into the framebuffer cost more than the copy. The
+    // colour, averaged from the worker's sums once the band is done, is streamed straight
+    // into the framebuffer.
     let one = |(scratch, planes): &mut (S, Planes), mut band: Band<'_>| {
         let stats = trace(scratch, &mut band.staged(planes));
         band.copy_from(planes);

@@ -280,8 +280,13 @@ pub(super) fn miss_span<const RECORD: bool, const FRESH: bool, P: MissPath>(
 ) -> MissTally {
     let n = if RECORD { aov.depth.len() } else { sum.len() };
     let sum = &mut sum[..n];
+    // The hits are listed into slots made for every path (a `memset`), counted in a local
+    // and cut to that count after: a `Vec::push` kept the vector's length in memory and
+    // checked its capacity per hit.
     let hits_before = hits.len();
-    hits.reserve(paths.len());
+    hits.resize(hits_before + paths.len(), 0);
+    let slots = &mut hits[hits_before..];
+    let mut listed = 0;
     // The counters in locals (never borrowed, so they stay in registers); hits are counted
     // by how many were listed: an indexed counter per termination made every ray wait on
     // the previous one's store.
@@ -299,7 +304,8 @@ pub(super) fn miss_span<const RECORD: bool, const FRESH: bool, P: MissPath>(
         primitive_tests += w.primitive_tests as u64;
         match ended {
             Termination::Hit => {
-                hits.push((first + k) as u32);
+                slots[listed] = (first + k) as u32;
+                listed += 1;
                 continue;
             }
             Termination::Miss => {}
@@ -323,8 +329,9 @@ pub(super) fn miss_span<const RECORD: bool, const FRESH: bool, P: MissPath>(
             sum[px] += r;
         }
     }
+    hits.truncate(hits_before + listed);
     MissTally {
-        hits: (hits.len() - hits_before) as u64,
+        hits: listed as u64,
         max_steps_ended,
         max_distance_ended,
         steps,
