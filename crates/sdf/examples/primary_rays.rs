@@ -7,7 +7,8 @@
 //!
 //! `cargo run --release -p marchmesh-sdf --example primary_rays -- SCENE [side=512]
 //! [repeats=9] [spheres=N] [lockstep=true|false] [cull=true|false] [segment=true|false]
-//! [beams=true|false] [recede=true|false] [relaxation=OMEGA] [versus=KEY=VALUE]`
+//! [beams=true|false] [recede=true|false] [relaxation=OMEGA] [prune_cells=auto|octree|root]
+//! [versus=KEY=VALUE]`
 //!
 //! `versus=cull=false` (or `lockstep=false`, `segment=false`, `beams=false`, `recede=false`,
 //! `kernels=false`, `jit=true` (built with `--features jit`), `relaxation=1.5`) builds a second geometry with that option
@@ -22,7 +23,7 @@ use glam::DVec2;
 use marchmesh_core::camera::primary_ray_on;
 use marchmesh_core::{Geometry, Termination, TraceResult};
 use marchmesh_scene::{Node, NodeKind, Scene, Shape};
-use marchmesh_sdf::{SdfOptions, build};
+use marchmesh_sdf::{PruneCells, SdfOptions, build};
 
 fn main() {
     if let Err(e) = run() {
@@ -57,6 +58,12 @@ fn run() -> Result<(), String> {
         None => SdfOptions::DEFAULT.relaxation,
         Some(v) => v.parse().map_err(|e| format!("relaxation: {e}"))?,
     };
+    let prune_cells = match kv("prune_cells") {
+        None | Some("auto") => PruneCells::Auto,
+        Some("octree") => PruneCells::Octree,
+        Some("root") => PruneCells::Root,
+        Some(v) => return Err(format!("prune_cells: {v}: expected auto, octree or root")),
+    };
     let mut scene = marchmesh_scene::load(Path::new(path))
         .map_err(|e| e.to_string())?
         .with_image_size(side, side)
@@ -71,6 +78,7 @@ fn run() -> Result<(), String> {
         beams,
         recede,
         relaxation,
+        prune_cells,
         ..SdfOptions::DEFAULT
     };
     let g = build(&scene, &options).map_err(|e| e.to_string())?;
