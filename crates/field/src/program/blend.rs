@@ -291,7 +291,7 @@ impl<S: Scalar> Program<S> {
                 *out = d;
             }
         }
-        // A missing table entry reads as NaN (a non-sphere's radius), as in the node.
+        // A child that is not a sphere has NaN in the table: the node computes it instead.
         if nan.contains(&true) {
             return None;
         }

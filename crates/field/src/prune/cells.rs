@@ -219,8 +219,8 @@ impl Lists<'_> {
         if both.len() >= kids.len() || both.is_empty() {
             return;
         }
-        let span = match self.seen.get(&both) {
-            Some(&span) => span,
+        let start = match self.seen.get(&both) {
+            Some(&start) => start,
             None => {
                 let start = fine.kids.len() as u32;
                 fine.kids.push(both.len() as u32);
@@ -230,7 +230,7 @@ impl Lists<'_> {
                 start
             }
         };
-        fine.entry[e] = span;
+        fine.entry[e] = start;
     }
 }
 
